@@ -1,0 +1,70 @@
+"""Hook specifications: the one place that says what a workbench plugin can provide.
+
+A plugin is a module named by an entry point in the group ``workbench``::
+
+    [project.entry-points.workbench]
+    alpha_beta = "my_package.alpha_beta"
+
+The module implements any of the hooks below with the :data:`workbench.hookimpl` marker.  Each hook
+takes no arguments and returns a list of specs (:mod:`workbench.specs`).  Built-in plugins register
+exactly the same way.  The host calls every hook once at start-up; a plugin that raises, returns the
+wrong type or reuses a name is reported as broken by ``workbench plugins`` and the rest keep working.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import pluggy
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from .specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
+
+PROJECT = "workbench"
+ENTRY_POINT_GROUP = "workbench"
+
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+# -- components ---------------------------------------------------------------------------------------
+
+
+@hookspec
+def workbench_filters() -> list["FilterSpec"]:
+    """Return the filters/trackers this plugin provides.
+
+    Each :class:`~workbench.specs.FilterSpec` bundles ``init``, ``predict``, ``update`` and ``estimate``
+    functions that work on a batch (leading axis ``B``) and never mutate their inputs, plus the
+    capabilities the test kit uses to choose its checks.  Names must be unique across plugins.
+    """
+
+
+@hookspec
+def workbench_sensors() -> list["SensorSpec"]:
+    """Return the sensor models this plugin provides.
+
+    A :class:`~workbench.specs.SensorSpec` simulates target detections from a truth trajectory and
+    publishes the :class:`~workbench.models.MeasurementModel` (``h``, Jacobian, ``R``, angular
+    components) that filters use.
+    """
+
+
+@hookspec
+def workbench_clutter_generators() -> list["ClutterGeneratorSpec"]:
+    """Return the clutter generators this plugin provides (detections labelled as clutter)."""
+
+
+@hookspec
+def workbench_clutter_removers() -> list["ClutterRemoverSpec"]:
+    """Return the clutter removers this plugin provides (each narrows the ``valid`` mask of a scan
+    series, causally, without reading the origin labels)."""
+
+
+# -- reports ------------------------------------------------------------------------------------------
+
+
+@hookspec
+def workbench_report_recipes() -> list["RecipeSpec"]:
+    """Return report recipes: one per paper, each declaring its tasks, figures, tables, quick and
+    full sizes, the published values it compares against and its 'reproduced if' criteria."""

@@ -1,0 +1,304 @@
+"""Batch-first records that flow between sensors, clutter plugins, filters and metrics.
+
+Every numerical field carries a leading batch axis ``B`` (Monte Carlo runs, or live tracks in a
+multi-target tracker).  Records are frozen dataclasses that validate their shapes once, when they
+are built, so a malformed array is reported where it enters rather than deep inside a filter.
+
+Shapes
+------
+- ``Gaussian``: ``mean (B, n)``, ``cov (B, n, n)``
+- ``Particles``: ``particles (B, N, n)``, ``log_weights (B, N)`` (normalised in the log domain)
+- ``Scan``: one scan, measurements padded to ``(B, M, m)`` with a ``valid (B, M)`` mask
+- ``Scans``: a whole scenario's scans, ``(B, T, M, m)`` with ``valid (B, T, M)``
+- ``Truth``: ``states (B, T, n)`` at ``times (T,)``
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+__all__ = [
+    "CLUTTER",
+    "Gaussian",
+    "Particles",
+    "Scan",
+    "Scans",
+    "Truth",
+    "InputError",
+]
+
+#: Origin label of a detection that came from clutter (metrics only; filters never see it).
+CLUTTER = -1
+
+
+class InputError(ValueError):
+    """Bad input handed to the workbench: the message names the record, the field and the problem."""
+
+
+def _array(name: str, value, ndim: int, dtype=float) -> np.ndarray:
+    arr = np.asarray(value, dtype=dtype)
+    if arr.ndim != ndim:
+        raise InputError(f"{name} must have {ndim} dimensions, got shape {arr.shape}")
+    return arr
+
+
+def _require_finite(name: str, arr: np.ndarray) -> None:
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise InputError(f"{name} holds a non-finite value (NaN or inf) at index {tuple(int(i) for i in bad)}")
+
+
+@dataclass(frozen=True)
+class Gaussian:
+    """A batch of Gaussian beliefs ``N(mean[b], cov[b])``.
+
+    Shapes
+    ------
+    mean : (B, n)
+    cov : (B, n, n)
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    def __post_init__(self) -> None:
+        mean = _array("Gaussian.mean", self.mean, 2)
+        cov = _array("Gaussian.cov", self.cov, 3)
+        if cov.shape != (mean.shape[0], mean.shape[1], mean.shape[1]):
+            raise InputError(f"Gaussian.cov must have shape {(mean.shape[0], mean.shape[1], mean.shape[1])} "
+                             f"to match mean {mean.shape}, got {cov.shape}")
+        _require_finite("Gaussian.mean", mean)
+        _require_finite("Gaussian.cov", cov)
+        object.__setattr__(self, "mean", mean)
+        object.__setattr__(self, "cov", cov)
+
+    @property
+    def batch(self) -> int:
+        return self.mean.shape[0]
+
+    @property
+    def dim(self) -> int:
+        return self.mean.shape[1]
+
+    def take(self, index) -> "Gaussian":
+        """The sub-batch ``index`` (an int keeps a batch axis of one)."""
+        index = np.atleast_1d(index) if np.isscalar(index) else index
+        return Gaussian(self.mean[index], self.cov[index])
+
+    @classmethod
+    def broadcast(cls, mean, cov, batch: int) -> "Gaussian":
+        """One belief ``mean (n,)``, ``cov (n, n)`` repeated over a batch of ``batch``."""
+        mean = np.asarray(mean, dtype=float)
+        cov = np.asarray(cov, dtype=float)
+        return cls(np.broadcast_to(mean, (batch, *mean.shape)).copy(),
+                   np.broadcast_to(cov, (batch, *cov.shape)).copy())
+
+
+@dataclass(frozen=True)
+class Particles:
+    """A batch of weighted particle sets.
+
+    Shapes
+    ------
+    particles : (B, N, n)
+    log_weights : (B, N), normalised so that ``logsumexp(log_weights, axis=1) == 0``
+    """
+
+    particles: np.ndarray
+    log_weights: np.ndarray
+
+    def __post_init__(self) -> None:
+        x = _array("Particles.particles", self.particles, 3)
+        lw = _array("Particles.log_weights", self.log_weights, 2)
+        if lw.shape != x.shape[:2]:
+            raise InputError(f"Particles.log_weights must have shape {x.shape[:2]}, got {lw.shape}")
+        object.__setattr__(self, "particles", x)
+        object.__setattr__(self, "log_weights", lw)
+
+    @property
+    def weights(self) -> np.ndarray:
+        return np.exp(self.log_weights)
+
+    def to_gaussian(self) -> Gaussian:
+        """Weighted mean and covariance of each particle set."""
+        w = self.weights
+        mean = np.einsum("bi,bij->bj", w, self.particles)
+        d = self.particles - mean[:, None, :]
+        cov = np.einsum("bi,bij,bik->bjk", w, d, d)
+        return Gaussian(mean, cov)
+
+
+def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):
+    z = _array(f"{cls_name}.z", z, lead + 2)
+    valid = _array(f"{cls_name}.valid", valid, lead + 1, dtype=bool)
+    if valid.shape != z.shape[:-1]:
+        raise InputError(f"{cls_name}.valid must have shape {z.shape[:-1]} to match z {z.shape}, got {valid.shape}")
+    if not np.all(np.isfinite(z[valid])):
+        rows = np.argwhere(valid & ~np.all(np.isfinite(z), axis=-1))
+        raise InputError(f"{cls_name}.z holds NaN or inf in a valid measurement at index "
+                         f"{tuple(int(i) for i in rows[0])}; mark padding rows invalid instead")
+    out = {"z": np.where(valid[..., None], z, 0.0), "valid": valid}
+    for key, value in extra.items():
+        if value is None:
+            out[key] = None
+            continue
+        dtype = int if key == "origin" else float
+        arr = np.asarray(value, dtype=dtype)
+        if arr.shape != valid.shape:
+            raise InputError(f"{cls_name}.{key} must have shape {valid.shape}, got {arr.shape}")
+        out[key] = arr
+    return out
+
+
+@dataclass(frozen=True)
+class Scan:
+    """The detections of one scan for a batch, padded to a common count ``M``.
+
+    ``origin`` says which truth object produced each detection (``CLUTTER`` = -1 for clutter). It is
+    for metrics only: :meth:`for_filter` strips it before a filter sees the scan.
+
+    Shapes
+    ------
+    z : (B, M, m); invalid (padding) rows are zeroed
+    valid : (B, M) bool
+    snr, doppler : (B, M) or None (SNR in dB, Doppler as the sensor defines it)
+    origin : (B, M) int or None
+    """
+
+    z: np.ndarray
+    valid: np.ndarray
+    snr: np.ndarray | None = None
+    doppler: np.ndarray | None = None
+    origin: np.ndarray | None = None
+    time: float = 0.0
+
+    def __post_init__(self) -> None:
+        fields_ = _scan_fields("Scan", self.z, self.valid,
+                               {"snr": self.snr, "doppler": self.doppler, "origin": self.origin}, 1)
+        for key, value in fields_.items():
+            object.__setattr__(self, key, value)
+
+    @property
+    def batch(self) -> int:
+        return self.z.shape[0]
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Number of valid detections per batch item, ``(B,)``."""
+        return self.valid.sum(axis=1)
+
+    def for_filter(self) -> "Scan":
+        """The same scan without the origin labels."""
+        return replace(self, origin=None)
+
+    @classmethod
+    def empty(cls, batch: int, dim: int, time: float = 0.0) -> "Scan":
+        return cls(np.zeros((batch, 0, dim)), np.zeros((batch, 0), dtype=bool), time=time)
+
+    @classmethod
+    def single(cls, z, present=None, time: float = 0.0) -> "Scan":
+        """One measurement per batch item, ``z (B, m)``; ``present (B,)`` marks missed detections."""
+        z = np.asarray(z, dtype=float)
+        present = np.ones(z.shape[0], dtype=bool) if present is None else np.asarray(present, dtype=bool)
+        return cls(z[:, None, :], present[:, None], time=time)
+
+
+@dataclass(frozen=True)
+class Scans:
+    """A scenario's scans for a batch: the time axis ``T`` after the batch axis.
+
+    Shapes
+    ------
+    z : (B, T, M, m)
+    valid : (B, T, M)
+    snr, doppler, origin : (B, T, M) or None
+    times : (T,)
+    """
+
+    z: np.ndarray
+    valid: np.ndarray
+    times: np.ndarray
+    snr: np.ndarray | None = None
+    doppler: np.ndarray | None = None
+    origin: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        fields_ = _scan_fields("Scans", self.z, self.valid,
+                               {"snr": self.snr, "doppler": self.doppler, "origin": self.origin}, 2)
+        for key, value in fields_.items():
+            object.__setattr__(self, key, value)
+        times = _array("Scans.times", self.times, 1)
+        if times.shape[0] != self.z.shape[1]:
+            raise InputError(f"Scans.times must have length {self.z.shape[1]}, got {times.shape[0]}")
+        object.__setattr__(self, "times", times)
+
+    @property
+    def batch(self) -> int:
+        return self.z.shape[0]
+
+    @property
+    def steps(self) -> int:
+        return self.z.shape[1]
+
+    def scan(self, k: int) -> Scan:
+        """Scan ``k`` as a :class:`Scan`."""
+        pick = lambda a: None if a is None else a[:, k]  # noqa: E731
+        return Scan(self.z[:, k], self.valid[:, k], pick(self.snr), pick(self.doppler), pick(self.origin),
+                    time=float(self.times[k]))
+
+    def with_valid(self, valid) -> "Scans":
+        """The same detections with a narrower mask (what a clutter remover returns)."""
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != self.valid.shape:
+            raise InputError(f"a clutter remover must return a mask of shape {self.valid.shape}, got {valid.shape}")
+        return replace(self, valid=valid & self.valid)
+
+    def merge(self, other: "Scans") -> "Scans":
+        """Concatenate the detections of two scan series along the detection axis ``M``."""
+        if other.z.shape[:2] != self.z.shape[:2] or other.z.shape[3] != self.z.shape[3]:
+            raise InputError(f"cannot merge scans of shapes {self.z.shape} and {other.z.shape}")
+
+        def cat(a, b, fill):
+            if a is None and b is None:
+                return None
+            a = np.full(self.valid.shape, fill) if a is None else a
+            b = np.full(other.valid.shape, fill) if b is None else b
+            return np.concatenate([a, b], axis=2)
+
+        return Scans(np.concatenate([self.z, other.z], axis=2), np.concatenate([self.valid, other.valid], axis=2),
+                     self.times, cat(self.snr, other.snr, np.nan), cat(self.doppler, other.doppler, np.nan),
+                     cat(self.origin, other.origin, CLUTTER))
+
+
+@dataclass(frozen=True)
+class Truth:
+    """True object states over time.
+
+    Shapes
+    ------
+    states : (B, T, n)
+    times : (T,)
+    """
+
+    states: np.ndarray
+    times: np.ndarray
+    labels: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        states = _array("Truth.states", self.states, 3)
+        times = _array("Truth.times", self.times, 1)
+        if times.shape[0] != states.shape[1]:
+            raise InputError(f"Truth.times must have length {states.shape[1]}, got {times.shape[0]}")
+        _require_finite("Truth.states", states)
+        object.__setattr__(self, "states", states)
+        object.__setattr__(self, "times", times)
+
+    @property
+    def batch(self) -> int:
+        return self.states.shape[0]
+
+    @property
+    def steps(self) -> int:
+        return self.states.shape[1]
