@@ -41,6 +41,9 @@ CAPABILITIES = {
     "stochastic": "the filter draws random numbers (particle filters); checked for same-seed reproducibility",
     "multi_measurement": "update accepts several measurements per scan; otherwise at most one valid row",
     "needs_jacobian": "the filter needs MeasurementModel.jacobian",
+    "linear_only": "the filter needs a linear measurement model (MeasurementModel.H)",
+    "position_doppler_3d": "the filter takes 3-D position + radial-velocity detections [x, y, z, vr] with SNR "
+                           "(a 6-D constant-velocity state), as a track-before-detect radar filter does",
     "range_bearing_input": "the filter takes range-bearing measurements only (e.g. a converted-measurement KF)",
 }
 

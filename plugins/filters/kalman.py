@@ -74,7 +74,7 @@ KF = FilterSpec(
     name="kf",
     summary="Kalman filter (linear models), Joseph-form update",
     init=init, predict=predict, update=kf_update, estimate=estimate,
-    capabilities=frozenset({"gaussian", "exact_linear"}),
+    capabilities=frozenset({"gaussian", "exact_linear", "linear_only"}),
 )
 
 EKF = FilterSpec(

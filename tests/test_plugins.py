@@ -1,0 +1,87 @@
+import os
+import subprocess
+import sys
+import textwrap
+from importlib import metadata
+
+import pytest
+
+from fixtures import broken_plugins
+
+from workbench.plugins import load_host, UnknownComponent
+
+
+def test_builtins_load_through_entry_points():
+    host = load_host()
+    names = {p.name: p for p in host.plugins}
+    assert names["kalman"].status == "ok" and names["kalman"].distribution == "workbench"
+    assert {"kf", "ekf", "sir"} <= set(host.filters)
+    assert host.plugin_of("workbench_filters", "kf").name == "kalman"
+
+
+@pytest.mark.parametrize("name, obj, fragment", [
+    ("teleport", broken_plugins.UNKNOWN_HOOK, "not a workbench hook"),
+    ("raiser", broken_plugins.RAISES, "boom from a plugin"),
+    ("wrongtype", broken_plugins.WRONG_TYPE, "expected FilterSpec"),
+    ("impostor", broken_plugins.DUPLICATE, "already provided by plugin 'kalman'"),
+])
+def test_broken_plugin_is_reported_and_the_rest_work(name, obj, fragment):
+    host = load_host(extra_plugins=[(name, obj)])
+    info = next(p for p in host.plugins if p.name == name)
+    assert info.status == "broken"
+    assert fragment in info.error and name in info.error
+    assert host.filter("kf").summary.startswith("Kalman")  # the built-in is untouched
+
+
+def test_import_failure_is_reported_with_its_distribution():
+    ep = metadata.EntryPoint("ghost", "no_such_module_xyz", "workbench")
+    host = load_host(entry_points=list(metadata.entry_points(group="workbench")) + [ep])
+    info = next(p for p in host.plugins if p.name == "ghost")
+    assert info.status == "broken" and "ModuleNotFoundError" in info.error
+    assert "kf" in host.filters
+
+
+def test_block_by_argument_and_environment(monkeypatch):
+    host = load_host(block=["particle"])
+    assert next(p for p in host.plugins if p.name == "particle").status == "blocked"
+    assert "sir" not in host.filters
+    with pytest.raises(UnknownComponent, match="no filter named 'sir'.*particle \\(blocked\\)"):
+        host.filter("sir")
+    monkeypatch.setenv("WORKBENCH_BLOCK", "kalman, particle")
+    host = load_host()
+    assert "kf" not in host.filters and "sir" not in host.filters
+
+
+def _fake_distribution(tmp_path, body):
+    """A third-party distribution on disk: a module and its dist-info with a workbench entry point."""
+    (tmp_path / "fake_plugin.py").write_text(textwrap.dedent(body))
+    info = tmp_path / "fake_plugin-0.3.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: fake-plugin\nVersion: 0.3\n")
+    (info / "entry_points.txt").write_text("[workbench]\nfake = fake_plugin\n")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return env
+
+
+def test_cli_lists_builtins_and_a_broken_third_party_plugin(tmp_path):
+    env = _fake_distribution(tmp_path, "raise ImportError('missing dependency libfoo')\n")
+    out = subprocess.run([sys.executable, "-m", "workbench.cli", "plugins"], env=env, capture_output=True,
+                         text=True, check=True)
+    assert "fake-plugin" in out.stdout and "broken" in out.stdout and "libfoo" in out.stdout
+    assert "kf" in out.stdout and "ekf" in out.stdout
+    assert "plugin fake (fake-plugin 0.3) is broken" in out.stderr
+
+
+def test_cli_lists_a_working_third_party_filter(tmp_path):
+    env = _fake_distribution(tmp_path, """
+        from workbench import hookimpl
+        from workbench.specs import FilterSpec
+        @hookimpl
+        def workbench_filters():
+            return [FilterSpec("noop", "does nothing", lambda p, r: p, lambda s, m, r: s,
+                               lambda s, sc, m, r: s, lambda s: s)]
+    """)
+    out = subprocess.run([sys.executable, "-m", "workbench.cli", "plugins"], env=env, capture_output=True,
+                         text=True, check=True)
+    line = next(l for l in out.stdout.splitlines() if " noop " in l)
+    assert "fake-plugin" in line and "0.3" in line and line.rstrip().endswith("ok")
