@@ -1,0 +1,88 @@
+"""An alpha-beta filter: a fixed-gain tracker, written as a third-party workbench plugin.
+
+Per axis, with sampling time T::
+
+    predict   p- = p + T v               v- = v
+    update    p  = p- + alpha (z - p-)   v  = v- + (beta / T) (z - p-)
+
+The gain is fixed, so the filter is cheaper than a Kalman filter but not optimal.  Its covariance is
+still exact for the gain used: the Joseph form ``P = (I - K H) P- (I - K H)^T + K R K^T`` holds for any
+gain, so the reported covariance (and hence NEES) stays honest.
+
+Measurements: positions (a linear model with ``H = [I 0]``), or range and bearing, which are converted
+to a Cartesian position with the linearised conversion covariance.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+
+from workbench import hookimpl
+from workbench.filtering import keep_where, single_measurement
+from workbench.linalg import joseph_update, symmetrise
+from workbench.specs import FilterSpec
+from workbench.types import Gaussian, InputError
+
+
+def init(prior, rng=None):
+    return prior
+
+
+def predict(state, motion, rng=None):
+    return Gaussian(state.mean @ motion.F.T, symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q))
+
+
+def _position_measurement(z, model, d):
+    """Cartesian position ``(B, d)`` and its covariance ``(B, d, d)`` from the sensor's measurement."""
+    if model.H is not None:
+        if not np.allclose(model.H, np.eye(d, 2 * d)):
+            raise InputError(f"alpha-beta needs position measurements (H = [I 0]); model {model.name!r} measures "
+                             "something else")
+        return z, np.broadcast_to(model.R, (z.shape[0], d, d))
+    if d == 2 and model.angular == (False, True) and "sigma_r" in model.params:
+        r, b = z[:, 0], z[:, 1]
+        sr2, sb2 = model.params["sigma_r"] ** 2, model.params["sigma_b"] ** 2
+        sx, sy = model.params.get("sensor", (0.0, 0.0))
+        c, s = np.cos(b), np.sin(b)
+        cov = np.empty((z.shape[0], 2, 2))
+        cov[:, 0, 0] = sr2 * c * c + r * r * sb2 * s * s
+        cov[:, 1, 1] = sr2 * s * s + r * r * sb2 * c * c
+        cov[:, 0, 1] = cov[:, 1, 0] = (sr2 - r * r * sb2) * s * c
+        return np.stack([sx + r * c, sy + r * s], axis=1), cov
+    raise InputError(f"alpha-beta cannot use measurement model {model.name!r}: it takes positions or range-bearing")
+
+
+def update(state, scan, model, rng=None, alpha=0.5, beta=0.2, dt=1.0):
+    z, present = single_measurement(scan, "alpha-beta")
+    if not present.any():
+        return state
+    d = state.dim // 2
+    pos, R = _position_measurement(z, model, d)
+    H = np.eye(d, 2 * d)
+    # K = [alpha I; (beta / T) I]: the fixed gain of the alpha-beta filter
+    K = np.vstack([alpha * np.eye(d), (beta / dt) * np.eye(d)])
+    mean = state.mean + (pos - state.mean[:, :d]) @ K.T
+    cov = joseph_update(state.cov, np.broadcast_to(K, (state.batch, 2 * d, d)), H, R)
+    return Gaussian(keep_where(present, mean, state.mean), keep_where(present, cov, state.cov))
+
+
+def make_alpha_beta(alpha: float = 0.5, beta: float = 0.2, dt: float = 1.0) -> FilterSpec:
+    if not (0 < alpha < 1 and 0 < beta < 4 - 2 * alpha):
+        raise ValueError(f"alpha-beta gains outside the stable region: alpha={alpha}, beta={beta}")
+    return FilterSpec(
+        name="alpha-beta",
+        summary=f"Alpha-beta fixed-gain tracker (alpha={alpha}, beta={beta})",
+        init=init,
+        predict=predict,
+        update=partial(update, alpha=alpha, beta=beta, dt=dt),
+        estimate=lambda state: state,
+        capabilities=frozenset({"gaussian"}),
+        params={"alpha": alpha, "beta": beta, "dt": dt},
+    )
+
+
+@hookimpl
+def workbench_filters():
+    return [make_alpha_beta()]
