@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -38,6 +37,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "auto"],
                      help="Taichi backend for kernels (default cpu; auto falls back to cpu)")
     rep.add_argument("--no-progress", action="store_true", help="no progress bars")
+    rep.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="send the tasks to this Dask distributed scheduler (pip install -e '.[dask]')")
+    rep.add_argument("--workers", type=int, default=None, metavar="N",
+                     help="start a local Dask cluster of N worker processes for the tasks")
 
     run = sub.add_parser("run", help="run one scenario file: a results file and its plots")
     run.add_argument("scenario", help="scenario TOML file")
@@ -89,8 +92,18 @@ def cmd_report(args) -> int:
 
         args.arch = select_arch(args.arch)
     command = "workbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    report = run_report(host, Path(args.out), papers=args.paper or None, size=args.size, seed=args.seed,
-                        filters=args.filters, arch=args.arch, progress=not args.no_progress, command=command)
+    executor = None
+    if args.scheduler or args.workers:
+        from .report.engine import dask_executor
+
+        executor = dask_executor(host, args.scheduler, args.workers, block=args.block)
+    try:
+        report = run_report(host, Path(args.out), papers=args.paper or None, size=args.size, seed=args.seed,
+                            filters=args.filters, arch=args.arch, progress=not args.no_progress, command=command,
+                            executor=executor)
+    finally:
+        if executor is not None:
+            executor.close()
     for p in report.papers:
         met = sum(c.met for c in p.criteria)
         print(f"paper {p.paper}: {len(p.figures)} figures, {len(p.tables)} tables, "

@@ -27,7 +27,8 @@ from ..specs import Criterion, RecipeOptions, RecipeSpec, Table, TaskContext
 from ..types import InputError
 from .cache import TaskCache, code_version, save_arrays, task_key
 
-__all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv"]
+__all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
+           "InProcess", "DaskExecutor", "dask_executor"]
 
 
 def resolve_filters(default: Sequence[str], request: str | None, host: PluginHost) -> tuple[str, ...]:
@@ -105,7 +106,7 @@ def _write_table(table: Table, path: Path) -> None:
 
 def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "quick", seed: int = 0,
                filters: str | None = None, arch: str = "cpu", progress: bool = True,
-               on_task: Callable[[str], None] | None = None) -> PaperOutcome:
+               on_task: Callable[[str], None] | None = None, executor: "Executor | None" = None) -> PaperOutcome:
     """Run one recipe into ``out/paperNNN`` using the cache in ``out/cache``."""
     import matplotlib
 
@@ -131,32 +132,31 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
         raise InputError(f"recipe {recipe.paper} declares duplicate task keys: {sorted({k for k in keys if keys.count(k) > 1})}")
     results: dict[str, dict[str, np.ndarray]] = {}
     bar = _progress_bar(len(tasks), f"paper {recipe.paper} ({size})", progress)
+    pending = []
     for task in tasks:
         digest = task_key(recipe.paper, task.key, task.params, seed, version)
-        t0 = time.perf_counter()
         cached = cache.get(recipe.paper, task.key, digest)
         if cached is not None:
             results[task.key] = cached
             outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": ""})
             bar.update(1)
-            continue
-        if on_task is not None:
-            on_task(task.key)
-        try:
-            ctx = TaskContext(params=task.params, seed=seed, host=host, arch=arch)
-            arrays = dict(task.run(ctx))
-            cache.put(recipe.paper, task.key, digest, arrays)
+        else:
+            pending.append((task, digest))
+    run = executor if executor is not None else InProcess(host)
+    for task, arrays, seconds, error in run.execute([t for t, _ in pending], seed, arch, on_task):
+        digest = next(d for t, d in pending if t.key == task.key)
+        if error is None:
+            cache.put(recipe.paper, task.key, digest, arrays)  # saved the moment it finishes
             results[task.key] = {k: np.asarray(v) for k, v in arrays.items()}
-            outcome.tasks.append({"key": task.key, "seconds": time.perf_counter() - t0, "cached": False, "error": ""})
-        except (KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as exc:  # noqa: BLE001 - a failed task is reported, the others carry on
-            msg = f"task {task.key!r} failed: {type(exc).__name__}: {exc}"
+            outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": ""})
+        else:
+            msg = f"task {task.key!r} failed: {error[0]}"
             outcome.errors.append(msg)
-            outcome.tasks.append({"key": task.key, "seconds": time.perf_counter() - t0, "cached": False,
-                                  "error": msg, "traceback": traceback.format_exc()})
+            outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": msg,
+                                  "traceback": error[1]})
         bar.update(1)
     bar.close()
+    outcome.tasks.sort(key=lambda t: keys.index(t["key"]))
 
     for spec in recipe.figures:
         try:
@@ -188,6 +188,103 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     return outcome
 
 
+def _call_task(run, params, seed, host, arch) -> dict:
+    return {k: np.asarray(v) for k, v in dict(run(TaskContext(params=params, seed=seed, host=host, arch=arch))).items()}
+
+
+class InProcess:
+    """Run tasks one after another in this process (the default; results are batched inside tasks).
+
+    A task that raises is tried ``retries`` more times before it is reported as failed.
+    """
+
+    def __init__(self, host: PluginHost, retries: int = 1):
+        self.host, self.retries = host, retries
+
+    def execute(self, tasks, seed, arch, on_task=None):
+        for task in tasks:
+            if on_task is not None:
+                on_task(task.key)
+            t0 = time.perf_counter()
+            for attempt in range(self.retries + 1):
+                try:
+                    arrays = _call_task(task.run, task.params, seed, self.host, arch)
+                    yield task, arrays, time.perf_counter() - t0, None
+                    break
+                except (KeyboardInterrupt, SystemExit):
+                    raise
+                except Exception as exc:  # noqa: BLE001 - reported, the others carry on
+                    if attempt == self.retries:
+                        yield task, None, time.perf_counter() - t0, (f"{type(exc).__name__}: {exc}",
+                                                                     traceback.format_exc())
+
+
+_WORKER_HOSTS: dict[tuple[str, ...], PluginHost] = {}
+
+
+def _remote_task(run, params, seed, arch, block):
+    """Runs on a Dask worker: build (once per process) the worker's own plugin host, then the task."""
+    from ..plugins import load_host
+
+    key = tuple(sorted(block))
+    if key not in _WORKER_HOSTS:
+        _WORKER_HOSTS[key] = load_host(block=block)
+    t0 = time.perf_counter()
+    arrays = _call_task(run, params, seed, _WORKER_HOSTS[key], arch)
+    return arrays, time.perf_counter() - t0
+
+
+class DaskExecutor:
+    """Send tasks to a Dask distributed scheduler; finished tasks come back as they complete.
+
+    Every task's random streams come from the seed and the task's own identity, never from the worker
+    or the order, so results are bit-identical to an in-process run.  Dask retries a failing task
+    ``retries`` times; one that fails for good is reported and the other tasks' results are kept.
+    """
+
+    def __init__(self, client, block: Sequence[str] = (), retries: int = 1, cluster=None):
+        self.client, self.block, self.retries, self.cluster = client, tuple(block), retries, cluster
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+    def execute(self, tasks, seed, arch, on_task=None):
+        from distributed import as_completed
+
+        futures = {}
+        for task in tasks:
+            fut = self.client.submit(_remote_task, task.run, dict(task.params), seed, arch, self.block,
+                                     pure=False, retries=self.retries, key=f"{task.key}-{time.time_ns()}")
+            futures[fut] = task
+        for fut in as_completed(list(futures)):
+            task = futures[fut]
+            try:
+                arrays, seconds = fut.result()
+                yield task, arrays, seconds, None
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except Exception as exc:  # noqa: BLE001
+                yield task, None, 0.0, (f"{type(exc).__name__}: {exc}", traceback.format_exc())
+
+
+Executor = InProcess | DaskExecutor
+
+
+def dask_executor(host: PluginHost, scheduler: str | None = None, workers: int | None = None,
+                  block: Sequence[str] = ()):
+    """A :class:`DaskExecutor` on ``scheduler`` (an address), or on a new local cluster of ``workers``."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError("running on Dask needs the 'distributed' package: pip install -e \".[dask]\"") from None
+    if scheduler:
+        return DaskExecutor(Client(scheduler), block)
+    cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None)
+    return DaskExecutor(Client(cluster), block, cluster=cluster)
+
+
 def _progress_bar(total: int, desc: str, enabled: bool):
     try:
         from tqdm.auto import tqdm
@@ -207,7 +304,7 @@ def _progress_bar(total: int, desc: str, enabled: bool):
 
 def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = None, size: str = "quick",
                seed: int = 0, filters: str | None = None, arch: str = "cpu", progress: bool = True,
-               command: str = "") -> ReportOutcome:
+               command: str = "", executor: "Executor | None" = None) -> ReportOutcome:
     """Run the chosen recipes (default: every registered one) and write ``index.html`` and ``summary.json``."""
     from .html import write_index, write_summary
 
@@ -222,7 +319,7 @@ def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = No
         except UnknownComponent as exc:
             raise InputError(str(exc)) from None
         outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
-                                   progress=progress))
+                                   progress=progress, executor=executor))
     report = ReportOutcome(out, outcomes, time.perf_counter() - start, command, seed, size)
     write_index(report, host)
     write_summary(report, host)

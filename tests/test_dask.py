@@ -1,0 +1,68 @@
+"""Tasks on a Dask cluster: bit-identical to in-process, retried once, failures named, others kept."""
+
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+distributed = pytest.importorskip("distributed")
+
+from fixtures import demo_plugin  # noqa: E402
+
+from workbench.report.cache import load_arrays  # noqa: E402
+from workbench.report.engine import InProcess, dask_executor, run_recipe, run_report  # noqa: E402
+from workbench.specs import Task  # noqa: E402
+
+TESTS = Path(__file__).parent
+
+
+@pytest.fixture
+def worker_path(tmp_path, monkeypatch):
+    """Workers are new processes: they find the demo plugin through an entry point on PYTHONPATH."""
+    site = tmp_path / "site"
+    info = site / "demo_fixture-1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-fixture\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text("[workbench]\ndemo = fixtures.demo_plugin\n")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_local_cluster_gives_bit_identical_results(tmp_path, demo_host, worker_path, workers):
+    run_report(demo_host, tmp_path / "inproc", papers=["demo"], filters="+sir", seed=4, progress=False)
+    executor = dask_executor(demo_host, workers=workers)
+    try:
+        report = run_report(demo_host, tmp_path / "dask", papers=["demo"], filters="+sir", seed=4, progress=False,
+                            executor=executor)
+    finally:
+        executor.close()
+    assert not report.papers[0].errors
+    a = load_arrays(tmp_path / "inproc" / "paperdemo" / "fig1.npz")
+    b = load_arrays(tmp_path / "dask" / "paperdemo" / "fig1.npz")
+    assert list(a["filters"]) == list(b["filters"]) == ["ekf", "kf", "sir"]
+    assert np.array_equal(a["mse"], b["mse"])  # bit-identical, the particle filter included
+
+
+def _recipe_with(tmp_path, *extra):
+    return replace(demo_plugin.RECIPE, tasks=lambda o: [*demo_plugin._tasks(o)[:1], *extra])
+
+
+@pytest.mark.parametrize("use_dask", [False, True])
+def test_a_task_failing_once_is_retried_and_one_failing_always_is_reported(tmp_path, demo_host, worker_path,
+                                                                            use_dask):
+    recipe = _recipe_with(tmp_path, Task("flaky", {"marker": str(tmp_path / "marker")}, demo_plugin.flaky_task),
+                          Task("doomed", {}, demo_plugin.always_fails))
+    executor = dask_executor(demo_host, workers=1) if use_dask else InProcess(demo_host)
+    try:
+        outcome = run_recipe(recipe, demo_host, tmp_path / "out", progress=False, executor=executor)
+    finally:
+        if use_dask:
+            executor.close()
+    status = {t["key"]: t["error"] for t in outcome.tasks}
+    assert status["mse-kf"] == "" and status["flaky"] == ""
+    assert "this chunk always fails" in status["doomed"]
+    assert [e for e in outcome.errors if "doomed" in e]
+    cached = sorted(p.name.split("-")[0] for p in (tmp_path / "out" / "cache" / "paperdemo").glob("*.npz"))
+    assert cached == ["flaky", "mse"]
