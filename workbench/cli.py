@@ -88,9 +88,12 @@ def cmd_report(args) -> int:
 
     host = _host(args)
     if args.arch != "cpu":
-        from .kernels.runtime import select_arch
+        from .kernels.runtime import TaichiUnavailable, ensure_taichi
 
-        args.arch = select_arch(args.arch)
+        try:
+            args.arch = ensure_taichi(args.arch)  # "auto" resolves here, with a notice if it falls back
+        except TaichiUnavailable as exc:
+            raise InputError(str(exc)) from None
     command = "workbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     executor = None
     if args.scheduler or args.workers:
