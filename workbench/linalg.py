@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+TWO_PI = 2.0 * np.pi
+
 __all__ = [
     "wrap_angle",
     "symmetrise",
@@ -22,9 +24,9 @@ __all__ = [
 
 def wrap_angle(angle):
     """Wrap angles to the interval (-pi, pi]."""
-    wrapped = np.mod(np.asarray(angle, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-    # np.mod maps +pi to -pi; the convention here keeps +pi and excludes -pi.
-    return np.where(wrapped == -np.pi, np.pi, wrapped)
+    a = np.asarray(angle, dtype=float)
+    # a - 2 pi ceil((a - pi) / 2 pi) lies in (-pi, pi]: one pass cheaper than np.mod + a fix-up.
+    return a - TWO_PI * np.ceil((a - np.pi) * (1.0 / TWO_PI))
 
 
 def symmetrise(a: np.ndarray) -> np.ndarray:

@@ -167,8 +167,9 @@ class MeasurementModel:
     def residual(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """``a - b`` with angular components wrapped to (-pi, pi]."""
         d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
-        if any(self.angular):
-            d = np.where(self.angle_mask, wrap_angle(d), d)
+        for i, is_angle in enumerate(self.angular):
+            if is_angle:
+                d[..., i] = wrap_angle(d[..., i])
         return d
 
     def mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -124,10 +124,10 @@ class Particles:
     def to_gaussian(self) -> Gaussian:
         """Weighted mean and covariance of each particle set."""
         w = self.weights
-        mean = np.einsum("bi,bij->bj", w, self.particles)
+        mean = np.matmul(w[:, None, :], self.particles)[:, 0, :]  # sum_i w_i x_i
         d = self.particles - mean[:, None, :]
-        cov = np.einsum("bi,bij,bik->bjk", w, d, d)
-        return Gaussian(mean, cov)
+        cov = np.matmul(np.swapaxes(d * w[..., None], 1, 2), d)  # sum_i w_i d_i d_i^T (one BLAS call)
+        return Gaussian(mean, 0.5 * (cov + np.swapaxes(cov, 1, 2)))
 
 
 def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):

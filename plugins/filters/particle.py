@@ -40,17 +40,20 @@ def init(prior: Gaussian, rng: np.random.Generator, particles: int) -> ParticleS
 
 def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator) -> ParticleState:
     x = state.cloud.particles
-    noise = rng.standard_normal(x.shape) @ motion.Q_sqrt.T
-    return ParticleState(Particles(x @ motion.F.T + noise, state.cloud.log_weights), state.resamples,
-                         state.underflows)
+    # x_i <- F x_i + Q_sqrt e_i, drawing e only for the non-zero columns of Q_sqrt (Q may be singular).
+    cols = np.flatnonzero(np.any(motion.Q_sqrt != 0.0, axis=0))
+    moved = x @ motion.F.T
+    if cols.size:
+        moved += rng.standard_normal((*x.shape[:2], cols.size)) @ motion.Q_sqrt[:, cols].T
+    return ParticleState(Particles(moved, state.cloud.log_weights), state.resamples, state.underflows)
 
 
 def log_likelihood(z: np.ndarray, x: np.ndarray, model: MeasurementModel) -> np.ndarray:
     """``log N(z_b; h(x_bi), R)`` up to a constant, for ``z (B, m)`` and particles ``x (B, N, n)`` -> ``(B, N)``."""
     nu = model.residual(z[:, None, :], model.h(x))
-    chol = np.linalg.cholesky(model.R)
-    white = np.linalg.solve(chol, np.moveaxis(nu, -1, 0).reshape(model.dim, -1)).reshape(model.dim, *nu.shape[:2])
-    return -0.5 * np.sum(white * white, axis=0)
+    # -1/2 nu^T R^-1 nu = -1/2 |L^-1 nu|^2 with R = L L^T
+    white = nu @ np.linalg.inv(np.linalg.cholesky(model.R)).T
+    return -0.5 * np.einsum("bnm,bnm->bn", white, white)
 
 
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
