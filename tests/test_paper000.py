@@ -1,0 +1,311 @@
+"""Paper 000 (TBD particle filter, L-band radar): radar maths, sensor, clutter, gating, filters, recipe."""
+
+import numpy as np
+import pytest
+from scipy import integrate
+from scipy.special import i0e
+
+from workbench.models import constant_velocity
+from workbench.plugins import load_host
+from workbench.radar import (RadarParameters, angle_accuracy, cartesian_to_spherical, clutter_pass_fraction,
+                             detection_probability, estimation_error, from_db, gate, log_detection_probability,
+                             lost_track, marcum_q, measurement_error, north_detection_probability,
+                             position_radial_velocity, position_radial_velocity_jacobian, radial_velocity,
+                             range_accuracy, spherical_to_cartesian, weighted_mean_measurement)
+from workbench.recipes import paper000
+from workbench.resampling import systematic_resample
+from workbench.rng import generator
+from workbench.specs import RecipeOptions, TaskContext
+from workbench.types import CLUTTER, Gaussian, Particles, Scan, Truth
+
+
+@pytest.fixture(scope="module")
+def host():
+    return load_host()
+
+
+# -- radar maths ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("snr_db", "pd", "tol"), [(3, 0.0009, 0.00005), (5, 0.0046, 0.00005), (7, 0.025, 0.0005),
+                                                   (9, 0.12, 0.005), (12, 0.68, 0.005), (13.2, 0.90, 0.005),
+                                                   (15, 0.997, 0.0005)])
+def test_detection_probability_matches_the_brief(snr_db, pd, tol):
+    assert detection_probability(from_db(snr_db), 1e-6) == pytest.approx(pd, abs=tol)
+
+
+def test_marcum_q_against_its_integral_and_north():
+    # Q1(a, b) = int_b^inf x exp(-(x^2 + a^2)/2) I0(a x) dx, with I0 scaled to avoid overflow
+    for a, b in [(0.5, 1.0), (3.0, 5.26), (6.0, 5.26), (2.0, 0.1)]:
+        integral, _ = integrate.quad(lambda x: x * np.exp(-(x - a) ** 2 / 2) * i0e(a * x), b, np.inf)
+        assert marcum_q(a, b) == pytest.approx(integral, rel=1e-8)
+    snr = from_db(np.linspace(3, 18, 31))
+    assert np.max(np.abs(north_detection_probability(snr) - detection_probability(snr))) < 0.02
+    assert north_detection_probability(from_db(13.2)) == pytest.approx(0.90, abs=0.01)
+    np.testing.assert_allclose(log_detection_probability(snr), np.log(detection_probability(snr)), rtol=1e-10,
+                               atol=1e-14)
+    assert detection_probability(0.0) == pytest.approx(1e-6, rel=1e-6)  # no signal: P_D = Pfa
+
+
+def test_snr_checkpoints_along_the_scenario(host):
+    truth = paper000.scenario_truth(1)
+    assert truth.steps == 300
+    res = paper000._scenario_task(TaskContext({"runs": 2, "thresholds": [5.0]}, seed=0, host=host))
+    want = {0: 2.3, 50: 5.7, 100: 9.9, 130: 18.0, 160: 22.0, 200: 19.6, 299: 12.5}
+    got = res["nominal_snr_db"]
+    for k, snr in want.items():
+        assert got[k] == pytest.approx(snr, abs=0.15), k
+    # the path: approach along x, descent 3.0 -> 0.6 km, 90 deg turn, exit along +y
+    s = truth.states[0]
+    assert s[100, 2] == pytest.approx(3000.0) and s[160, 2] == pytest.approx(600.0)
+    np.testing.assert_allclose(s[-1, 3:], [0.0, 200.0, 0.0], atol=1e-9)
+
+
+def test_accuracies_and_coordinates():
+    radar = RadarParameters()
+    assert np.rad2deg(radar.beamwidth) == pytest.approx(2.9, abs=0.05)
+    assert angle_accuracy(from_db(10.0), radar.beamwidth) == pytest.approx(7.1e-3, abs=1e-4)
+    assert range_accuracy(from_db(10.0), radar.pulse_width) == pytest.approx(299792458e-6 / (2 * np.sqrt(20)))
+    p = np.random.default_rng(0).normal(size=(50, 3)) * 2e4
+    np.testing.assert_allclose(spherical_to_cartesian(cartesian_to_spherical(p)), p, atol=1e-7)
+    sph = cartesian_to_spherical(np.array([[0.0, 1.0, 1.0]]))[0]
+    np.testing.assert_allclose(sph, [np.sqrt(2), np.pi / 2, np.pi / 4])
+
+
+def test_radial_velocity_sign_and_jacobian():
+    receding = np.array([10e3, 0.0, 0.0, 50.0, 0.0, 0.0])
+    approaching = np.array([10e3, 0.0, 0.0, -50.0, 3.0, 0.0])
+    assert radial_velocity(receding) == pytest.approx(50.0) and radial_velocity(approaching) == pytest.approx(-50.0)
+    x = np.random.default_rng(1).normal(size=(4, 6)) * [2e4, 2e4, 3e3, 200, 200, 20]
+    jac = position_radial_velocity_jacobian(x)
+    step = 1e-4 * np.maximum(np.abs(x), 1.0)
+    for j in range(6):
+        dx = np.zeros_like(x)
+        dx[:, j] = step[:, j]
+        fd = (position_radial_velocity(x + dx) - position_radial_velocity(x - dx)) / (2 * step[:, j:j + 1])
+        np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-9)
+
+
+# -- sensor and clutter -----------------------------------------------------------------------------------
+
+
+def test_sensor_detections_accuracy_threshold_and_doppler(host):
+    sensor = host.sensor("lband-radar")
+    state = np.array([30e3, 4e3, 2e3, -150.0, 20.0, 0.0])
+    truth = Truth(np.broadcast_to(state, (4000, 1, 6)).copy(), np.array([0.0]))
+    scans = sensor.simulate(truth, generator(0, "sensor"), threshold_db=None)
+    snr = scans.snr[:, 0, 0]
+    assert np.std(snr) == pytest.approx(2.0, rel=0.05)  # RCS fluctuation
+    sph = cartesian_to_spherical(scans.z[:, 0, 0, :3]) - cartesian_to_spherical(state[:3])
+    radar = RadarParameters()
+    # errors normalised by the SNR-dependent sigmas are standard normal
+    for err, sigma in ((sph[:, 0], range_accuracy(from_db(snr), radar.pulse_width)),
+                       (sph[:, 1], angle_accuracy(from_db(snr), radar.beamwidth)),
+                       (sph[:, 2], angle_accuracy(from_db(snr), radar.beamwidth))):
+        assert np.mean((err / sigma) ** 2) == pytest.approx(1.0, abs=0.07)
+    vr = scans.z[:, 0, 0, 3]
+    assert np.mean(vr) == pytest.approx(radial_velocity(state), abs=0.2) and np.std(vr) == pytest.approx(2.0, rel=0.06)
+    np.testing.assert_array_equal(scans.doppler[:, 0, 0], vr)
+    cut = sensor.simulate(truth, generator(0, "sensor"), threshold_db=9.0)
+    np.testing.assert_array_equal(cut.valid[:, 0, 0], snr >= 9.0)  # same draws, CFAR-style cut
+    model = sensor.measurement_model()
+    np.testing.assert_allclose(model.h(state[None])[0], [*state[:3], radial_velocity(state)])
+    assert model.jacobian(state[None]).shape == (1, 4, 6) and model.params["pfa"] == 1e-6
+    with pytest.raises(ValueError, match="unknown parameter"):
+        sensor.simulate(truth, generator(0), threshold=5)
+
+
+@pytest.mark.parametrize(("threshold", "count"), [(3.0, 370), (5.0, 206), (7.0, 82), (9.0, 19), (12.0, 0.4)])
+def test_clutter_count_per_threshold_follows_the_amplitude_law(threshold, count):
+    assert 1000 * clutter_pass_fraction(threshold) == pytest.approx(count, rel=0.02, abs=0.05)
+
+
+def test_clutter_generator_counts_power_and_doppler(host):
+    gen = host.clutter_generator("radar-clutter")
+    truth = Truth(np.broadcast_to([20e3, 0.0, 3e3, 0, 0, 0], (50, 40, 6)).copy(), np.arange(40.0))
+    wide = gen.generate(truth, generator(0, "clutter"), z_min=-1e9, z_max=1e9)
+    per_scan = wide.valid.sum(axis=2)
+    assert per_scan.mean() == pytest.approx(205.7, abs=3 * np.sqrt(205.7 / per_scan.size) + 0.5)
+    assert per_scan.var() == pytest.approx(205.7, rel=0.1)  # Poisson
+    snr = wide.snr[wide.valid]
+    assert snr.min() >= 5.0
+    # memoryless thinning: P(power >= 7 dB | power >= 5 dB) = exp(-(10^0.7 - 10^0.5) / 2)
+    assert np.mean(snr >= 7.0) == pytest.approx(np.exp(-(from_db(7.0) - from_db(5.0)) / 2), abs=0.01)
+    pos = wide.z[wide.valid][:, :3] - [20e3, 0.0, 3e3]
+    assert np.all(np.abs(pos) <= 5000.0) and np.all(wide.origin[wide.valid] == CLUTTER)
+    assert np.abs(wide.doppler[wide.valid]).max() <= 300.0
+    band = gen.generate(truth, generator(0, "clutter"))
+    kept = band.z[band.valid][:, 2]
+    assert kept.min() >= 0.0 and kept.max() <= 6000.0
+    assert band.valid.sum(axis=2).mean() == pytest.approx(205.7 * 0.6, rel=0.03)  # z in [-2, 8] km, band 0..6
+
+
+# -- gating, pseudo-measurement, metrics ------------------------------------------------------------------
+
+
+def test_gate_keeps_detections_inside_the_radius_batch_first():
+    z = np.zeros((2, 5, 4))
+    z[0, :, 0] = [0.0, 900.0, 1100.0, -2400.0, 2600.0]
+    z[1, :, 1] = [5000.0, 6000.0, 0.0, 0.0, 0.0]
+    valid = np.array([[True] * 5, [True, True, False, False, False]])
+    scan = Scan(z, valid, snr=np.full((2, 5), 6.0), origin=np.array([[0, -1, -1, -1, -1]] * 2))
+    g1 = gate(scan, np.zeros((2, 3)), 1000.0)
+    assert g1.counts.tolist() == [2, 0] and g1.z.shape == (2, 2, 4)
+    np.testing.assert_array_equal(g1.z[0, :2, 0], [0.0, 900.0])
+    g25 = gate(scan, np.zeros((2, 3)), 2500.0)
+    assert g25.counts.tolist() == [4, 0]
+    assert g25.origin[0, 0] == 0 and np.all(g25.snr[0, :4] == 6.0)
+
+
+def test_weighted_mean_measurement_eqs_9_to_11():
+    pred = np.array([[1e4, 0.0, 0.0, -100.0, 0.0, 0.0]] * 3)
+    z = np.array([[[1e4 + 300, 0.0, 0.0, -100.0], [1e4 - 300, 0.0, 0.0, -100.0]]] * 3)
+    snr = np.array([[8.0, 8.0], [8.0, 14.0], [8.0, 8.0]])
+    valid = np.array([[True, True], [True, True], [False, False]])
+    out = weighted_mean_measurement(Scan(z, valid, snr=snr), pred, 500.0, 15.0)
+    assert out.valid[:, 0].tolist() == [True, True, False]
+    np.testing.assert_allclose(out.z[0, 0], [1e4, 0.0, 0.0, -100.0])  # symmetric: the midpoint
+    w = detection_probability(from_db(np.array([8.0, 14.0])))
+    np.testing.assert_allclose(out.z[1, 0, 0], (w[0] * (1e4 + 300) + w[1] * (1e4 - 300)) / w.sum())
+    single = weighted_mean_measurement(Scan(z[:1, :1], valid[:1, :1], snr=snr[:1, :1]), pred[:1])
+    np.testing.assert_allclose(single.z[0, 0], z[0, 0])
+
+
+def test_error_metrics_and_lost_flag():
+    scan = Scan(np.array([[[3.0, 4.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]], [[0.0] * 4, [0.0] * 4]]),
+                np.array([[True, True], [False, False]]))
+    m = measurement_error(scan, np.zeros((2, 3)))
+    assert m[0] == pytest.approx(2.5) and np.isnan(m[1])
+    assert estimation_error(np.array([[3.0, 4.0, 12.0, 9.0]]), np.zeros((1, 6)))[0] == pytest.approx(13.0)
+    err = np.array([[0, 4e3, 4e3, 4e3, 4e3, 0, 0], [0, 4e3, 4e3, 4e3, 4e3, 4e3, 0], [5e3] * 7])
+    assert lost_track(err, 3000.0, 5).tolist() == [False, True, True]
+
+
+def test_systematic_resampling_counts_are_floor_or_ceil():
+    w = np.array([[0.5, 0.25, 0.125, 0.0625, 0.0625, 0.0]])
+    for seed in range(20):
+        with np.errstate(divide="ignore"):
+            idx = systematic_resample(np.log(w), np.random.default_rng(seed), count=16)
+        counts = np.bincount(idx[0], minlength=6)
+        expected = 16 * w[0]
+        assert np.all((counts == np.floor(expected)) | (counts == np.ceil(expected)))
+
+
+# -- method C filter --------------------------------------------------------------------------------------
+
+
+def _cloud(host, n=400, seed=0):
+    spec = paper000.with_particles(host.filter("tbd-pf"), n)
+    prior = Gaussian.broadcast([30e3, 2e3, 2e3, -200.0, 0.0, 0.0], np.diag([300.0, 300, 300, 20, 20, 5]) ** 2, 2)
+    return spec, spec.init(prior, generator(seed, "cloud"))
+
+
+def test_tbd_filter_moves_towards_a_consistent_detection(host):
+    spec, state = _cloud(host)
+    model = host.sensor("lband-radar").measurement_model()
+    assert "multi_measurement" in spec.capabilities and spec.params["particles"] == 400
+    target = np.array([30.2e3, 2e3, 2e3, -199.0])
+    z = np.stack([np.stack([target, [30e3, 2.5e3, 2e3, 150.0]])] * 2)  # + a Doppler-inconsistent clutter point
+    scan = Scan(z, np.array([[True, True], [False, False]]), snr=np.full((2, 2), 15.0))
+    new = spec.update(state, scan, model, generator(1))
+    before, after = spec.estimate(state).mean, spec.estimate(new).mean
+    assert after[0, 0] - before[0, 0] > 100.0  # pulled towards x = 30.2 km
+    np.testing.assert_array_equal(new.cloud.particles[1], state.cloud.particles[1])  # empty gate: unchanged
+    np.testing.assert_array_equal(new.cloud.log_weights[1], state.cloud.log_weights[1])
+    again = spec.update(state, scan, model, generator(1))
+    np.testing.assert_array_equal(again.cloud.particles, new.cloud.particles)  # same seed, same numbers
+
+
+def test_tbd_filter_weights_finite_when_every_likelihood_underflows(host):
+    spec, state = _cloud(host)
+    model = host.sensor("lband-radar").measurement_model()
+    z = np.array([[[400e3, 0.0, 0.0, 100.0]]] * 2)
+    scan = Scan(z, np.ones((2, 1), bool), snr=np.full((2, 1), 25.0))
+    for name in ("tbd-pf", "tbd-pf-eps0"):
+        spec = paper000.with_particles(host.filter(name), 400)
+        new = spec.update(state, scan, model, generator(2))
+        lw = new.cloud.log_weights
+        assert np.all(np.isfinite(lw)) and np.allclose(np.exp(lw).sum(axis=1), 1.0)
+
+
+def test_tbd_filter_backends_agree(host):
+    from workbench_filters.tbd import make_tbd_pf
+
+    model = host.sensor("lband-radar").measurement_model()
+    rng = np.random.default_rng(4)
+    z = np.concatenate([rng.normal(size=(2, 6, 3)) * 500 + [30e3, 2e3, 2e3], rng.normal(size=(2, 6, 1)) * 50 - 200],
+                       axis=2)
+    scan = Scan(z, rng.random((2, 6)) < 0.8, snr=rng.uniform(5, 15, (2, 6)))
+    _, state = _cloud(host)
+    outs = [make_tbd_pf(400, backend=be, threshold=0.0).update(state, scan, model, generator(3)).cloud.log_weights
+            for be in ("numpy", "taichi", "auto")]
+    np.testing.assert_allclose(outs[1], outs[0], rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(outs[2], outs[0], rtol=1e-10, atol=1e-10)
+
+
+# -- the report recipe ------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def results(host):
+    recipe = host.recipe("000")
+    values = {"runs": 2, "path_particles": [100, 600], "radii": [2500.0, 1000.0], "sweep_particles": [100, 600]}
+    options = RecipeOptions(size="test", values=values, seed=1, filters=recipe.default_filters)
+    tasks = recipe.tasks(options)
+    keys = [t.key for t in tasks]
+    assert len(keys) == len(set(keys))
+    return {t.key: {k: np.asarray(v) for k, v in t.run(TaskContext(t.params, seed=1, host=host)).items()}
+            for t in tasks}
+
+
+def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
+    recipe = host.recipe("000")
+    options = RecipeOptions("full", recipe.sizes["full"], 0, ("ekf", "sir", "tbd-pf", "ukf"))
+    keys = {t.key for t in recipe.tasks(options)}
+    assert "track-ukf-N600-R1000" in keys and "track-tbd-pf-N50-R1000" in keys and "track-tbd-pf-N100-R2500" in keys
+    assert recipe.sizes["full"]["runs"] == 20 and len(recipe.sizes["full"]["sweep_particles"]) == 9
+
+
+def test_report_figures_hold_the_scenario_and_the_runs(host, results):
+    recipe = host.recipe("000")
+    figs = {f.id: f.data(results) for f in recipe.figures}
+    assert {"fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "fig12",
+            "fig13"} <= set(figs)
+    np.testing.assert_allclose(figs["fig2"]["truth_km"][0], [56.0, 2.0, 3.0])
+    assert figs["fig3"]["thresholds_db"].tolist() == [12.0, 9.0, 7.0, 5.0, 3.0]
+    counts = results["scenario"]["count_per_scan"].mean(axis=1)
+    assert np.all(np.diff(counts) > 0)  # lower threshold, more detections
+    assert results["scenario"]["clutter_per_scan"][3] == pytest.approx(results["scenario"]["clutter_expected"][3],
+                                                                      rel=0.05)
+    tgt = figs["fig7"]["gated_target_R1000"]
+    assert tgt.any() and figs["fig7"]["gated_km_R2500"].shape[0] > figs["fig7"]["gated_km_R1000"].shape[0]
+    assert figs["fig9"]["estimate_km_R1000"].shape == (300, 3)
+    assert figs["fig12"]["particles"].tolist() == [100, 600] and figs["fig12"]["e_avg_mean"].shape == (2,)
+    assert set(figs["fig13"]["filters"]) == {"ekf", "sir", "tbd-pf", "tbd-pf-eps0"}
+    e = results["track-tbd-pf-N600-R1000"]["error"]
+    np.testing.assert_allclose(figs["fig10"]["e_error_R1000"], e.mean(axis=0))
+    from matplotlib.figure import Figure
+
+    for spec in recipe.figures:
+        fig = Figure()
+        spec.draw(figs[spec.id], fig)
+        assert fig.axes, spec.id
+
+
+def test_report_table3_and_criteria_are_computed(host, results):
+    recipe = host.recipe("000")
+    table = next(t for t in recipe.tables if t.id == "table3").make(results)
+    rows = {r[0]: r for r in table.rows}
+    assert rows["(A) ekf"][3:5] == (332.0, 236.0) and rows["(B) sir"][3:5] == (291.0, 214.0)
+    assert rows["(C) tbd-pf"][3:5] == (221.0, 124.0)
+    e = results["track-tbd-pf-N600-R1000"]["error"]
+    assert rows["(C) tbd-pf"][1] == pytest.approx(round(e[:, 1:101].mean(), 1))
+    assert rows["(C) tbd-pf"][2] == pytest.approx(round(e[:, 1:].mean(), 1))
+    crit = recipe.criteria(results)
+    assert [c.id for c in crit] == ["1", "2", "3", "4", "5", "6"]
+    a = results["track-ekf-N600-R1000"]["error"][:, 1:].mean()
+    ratio = a / e[:, 1:].mean()
+    assert crit[1].met == (ratio >= 1.3) and f"{ratio:.2f}" in crit[1].detail
+    clutter = next(t for t in recipe.tables if t.id == "table_clutter").make(results)
+    assert [r[1] for r in clutter.rows] == [0.4, 18.8, 81.6, 205.7, 368.8]
+    assert "sigma_a" in recipe.notes and recipe.published["table3_whole_m"]["C"] == 124.0

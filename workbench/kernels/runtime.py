@@ -1,0 +1,92 @@
+"""Lazy start-up of the Taichi runtime, shared by every Taichi kernel module of the workbench.
+
+Importing the workbench never imports or initialises Taichi.  A kernel wrapper calls
+:func:`ensure_taichi` right before its first launch; the runtime then stays up for the process.
+A runtime that someone else already started on the same arch is reused as it is (``ti.init`` would
+reset it and invalidate that code's fields and ndarrays).
+
+Arch names: ``"cpu"``, ``"cuda"``, ``"vulkan"`` or ``"auto"`` (the first GPU Taichi finds, else the CPU
+with a one-line notice on stderr).  An explicitly named GPU arch that is not available raises
+:class:`TaichiUnavailable` instead of quietly running somewhere else.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+
+__all__ = ["ARCHES", "TaichiUnavailable", "ensure_taichi", "current_arch", "taichi_available_arches"]
+
+#: The arch names :func:`ensure_taichi` accepts.
+ARCHES = ("cpu", "cuda", "vulkan", "auto")
+
+_NAMES = {"x64": "cpu", "arm64": "cpu", "cuda": "cuda", "vulkan": "vulkan"}
+
+
+class TaichiUnavailable(RuntimeError):
+    """The requested Taichi arch cannot be started on this machine."""
+
+
+def _import_taichi():
+    # Quiet the import banner and the version-check thread unless the user asked for them.
+    os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
+    os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+    import taichi as ti
+
+    return ti
+
+
+def current_arch() -> str | None:
+    """The arch of the running Taichi runtime (``"cpu"``, ``"cuda"``, ``"vulkan"``), or ``None``."""
+    if "taichi" not in sys.modules:
+        return None
+    from taichi.lang import impl
+
+    if impl.get_runtime().prog is None:
+        return None
+    from taichi._lib import core as _ti_core
+
+    name = _ti_core.arch_name(impl.current_cfg().arch)
+    return _NAMES.get(name, name)
+
+
+def taichi_available_arches() -> tuple[str, ...]:
+    """The arches Taichi can use here, CPU first (tests run kernels on each)."""
+    ti = _import_taichi()
+    found = ["cpu"]
+    for name in ("cuda", "vulkan"):
+        with contextlib.suppress(Exception):
+            if ti.lang.misc.is_arch_supported(getattr(ti, name)):
+                found.append(name)
+    return tuple(found)
+
+
+def ensure_taichi(arch: str = "cpu") -> str:
+    """Start Taichi on ``arch`` unless it already runs there; return the arch in use.
+
+    Parameters
+    ----------
+    arch : ``"cpu"``, ``"cuda"``, ``"vulkan"`` or ``"auto"``.
+
+    ``"auto"`` keeps whatever runtime is already up, else tries the GPUs and falls back to the CPU
+    with a one-line notice.  Asking for a different arch than the running one restarts Taichi
+    (``ti.init`` resets the runtime; kernels recompile on their next launch).
+    """
+    if arch not in ARCHES:
+        raise ValueError(f"unknown Taichi arch {arch!r}; expected one of {', '.join(ARCHES)}")
+    running = current_arch()
+    if running is not None and (arch == "auto" or arch == running):
+        return running
+    ti = _import_taichi()
+    if arch in ("cuda", "vulkan") and arch not in taichi_available_arches():
+        # Checked before ti.init, which would first reset a runtime that is already running.
+        raise TaichiUnavailable(f"Taichi cannot start on arch {arch!r} here (not available); use 'cpu' or 'auto'")
+    wanted = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "auto": [ti.cuda, ti.vulkan]}[arch]
+    with contextlib.redirect_stdout(io.StringIO()):  # ti.init prints "[Taichi] Starting on arch=..."
+        ti.init(arch=wanted, enable_fallback=(arch == "auto"), offline_cache=True, log_level="warn")
+    running = current_arch()
+    if arch == "auto" and running == "cpu":
+        print("workbench: no GPU available to Taichi; kernels run on the CPU", file=sys.stderr)
+    return running
