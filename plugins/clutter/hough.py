@@ -1,0 +1,465 @@
+"""Hough-transform clutter removal for active sonar (paper 001, section 3).
+
+A target on a straight leg leaves collinear detections over consecutive pings; clutter does not.  For
+every ping ``k`` the remover decides, from pings ``<= k`` only (causal) and without reading
+``origin``, which detections of ping ``k`` to keep:
+
+1. **Groups.**  ``B = pings k-W+1 .. k`` and ``A = pings k-W+1-s .. k-s`` (``W = window``,
+   ``s = shift``).  The default ``s = 1`` gives the overlapping windows of the brief; ``s = W`` gives
+   non-overlapping halves (the brief's ablation uses ``W = 3, s = 3``).  Group ``A`` at ping ``k`` is
+   group ``B`` at ping ``k - s``, so its peaks are reused, not recomputed.
+2. **Rectangular gate** (preliminary association) within a group: a detection of ping ``p`` is kept
+   if some detection of another ping ``q`` of the same group with ``0 < |p - q| <= gate_gap`` lies in
+   the box ``|dx|, |dy| <= v_max dt |p - q|``.
+3. **Hough transform** of each gated group: every point votes once in each column ``theta_j = j dtheta``
+   (``theta in [0, pi)``) at the bin ``round(rho / drho)`` of::
+
+        rho = x cos(theta) + y sin(theta)          (eq 1; rho may be negative)
+
+   Votes are counted per ping with ``np.bincount`` (vectorised); a cell's *support* is the number of
+   distinct pings that voted for it.
+4. **Peaks:** cells with support ``>= v_min`` that are maxima of ``support + votes / (max votes + 1)``
+   in their 3 x 3 neighbourhood (non-maximum suppression, ties kept).  A peak of ``B`` must also hold
+   a vote from ping ``k``.
+5. **Similarity:** a ``B`` peak is similar to an ``A`` peak when ``|rho_a - rho_b| <= sim_rho`` and
+   ``|theta_a - theta_b| <= sim_theta`` (tolerances rounded down to whole bins), comparing lines modulo
+   ``(rho, theta) == (-rho, theta + pi)``: across the ``theta = 0 / pi`` seam the neighbouring column is
+   the far column with ``rho`` negated (the grid is symmetric in ``rho``, so that is a flip).
+6. **Inverse transform:** detection ``z`` of ping ``k`` is kept when, for some similar ``B`` line
+   ``(rho_b, theta_b)``, ``|x cos theta_b + y sin theta_b - rho_b| <= eps`` and ``z`` lies within
+   ``support_reach`` (default ``2 v_max dt``) of a *latest support* of that line: a gated detection of
+   the most recent earlier ping of ``B`` that lies within ``eps`` of the line.  The ``eps`` tests are
+   made on the ``rho`` bins (``|bin(z) - bin_b| <= floor(eps / drho)`` in the line's column).
+7. **Warm-up:** pings ``k < W - 1 + s`` (group ``A`` not yet full) produce no output (``warmup="drop"``,
+   the brief's choice) or pass every detection (``warmup="keep"``).
+
+The remover only narrows ``Scans.valid`` (:meth:`workbench.types.Scans.with_valid`); it never moves a
+detection (the brief's optional "replace each point by its projection on the line" is not done).
+
+Cost per ping is ``O(n W n_theta)`` for the votes plus ``O(n_rho n_theta)`` grid filters; the inverse
+step checks (detection, nearby support) pairs in rounds of nearest neighbours, so it stays bounded in
+dense clutter.  Runs are processed one after another.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from workbench import hookimpl
+from workbench.specs import ClutterRemoverSpec
+from workbench.types import InputError, Scans
+
+DEFAULTS = {
+    "window": 5,
+    "shift": 1,
+    "v_max": 8.0,
+    "dt": 1.0,
+    "gate_gap": 2,
+    "d_rho": 1.0,
+    "d_theta_deg": 1.0,
+    "v_min": 3,
+    "sim_rho": 3.0,
+    "sim_theta_deg": 3.0,
+    "eps": 4.0,
+    "support_reach": None,
+    "support": "latest",
+    "warmup": "drop",
+}
+
+
+@dataclass(frozen=True)
+class HoughGrid:
+    """The accumulator grid: ``rho`` bins ``-off .. off`` (times ``d_rho``), ``n_theta`` columns on ``[0, pi)``.
+
+    Cell ``(i, j)`` is ``rho = (i - off) d_rho``, ``theta = j d_theta``; flat index ``i n_theta + j``.
+    """
+
+    d_rho: float
+    d_theta: float
+    n_theta: int
+    off: int
+
+    @property
+    def n_rho(self) -> int:
+        return 2 * self.off + 1
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.n_rho, self.n_theta)
+
+    @property
+    def theta(self) -> np.ndarray:
+        return np.arange(self.n_theta) * self.d_theta
+
+    @property
+    def rho(self) -> np.ndarray:
+        return (np.arange(self.n_rho) - self.off) * self.d_rho
+
+    def rho_index(self, points: np.ndarray) -> np.ndarray:
+        """Row index of each point's vote in each column, ``(n, 2) -> (n, n_theta)`` int."""
+        th = self.theta
+        # rho = x cos(theta) + y sin(theta)     (eq 1)
+        rho = points[:, :1] * np.cos(th) + points[:, 1:2] * np.sin(th)
+        return (np.rint(rho / self.d_rho) + self.off).astype(np.intp)
+
+
+def make_grid(d_rho: float, d_theta_deg: float, rho_max: float) -> HoughGrid:
+    n_theta = 180.0 / d_theta_deg
+    if not d_rho > 0 or not d_theta_deg > 0 or abs(n_theta - round(n_theta)) > 1e-9:
+        raise InputError(f"hough: need d_rho > 0 and d_theta_deg > 0 dividing 180, got {d_rho}, {d_theta_deg}")
+    return HoughGrid(float(d_rho), np.deg2rad(d_theta_deg), int(round(n_theta)), int(np.ceil(rho_max / d_rho)) + 2)
+
+
+def neighbours(rows: np.ndarray, cols: np.ndarray, grid: HoughGrid, half_rho: int = 1,
+               half_theta: int = 1) -> np.ndarray:
+    """Flat indices of the cells within ``|d row| <= half_rho``, ``|d col| <= half_theta`` of each cell
+    ``(rows, cols)`` (``-1`` outside the grid), across the ``theta = 0 / pi`` seam.
+
+    Column ``-1`` is ``theta = pi - dtheta`` with ``rho`` negated: on the symmetric ``rho`` axis that is
+    row ``n_rho - 1 - row`` of the last column; likewise column ``n_theta`` is column 0 flipped.
+    Shapes: ``(C,) -> (C, (2 half_rho + 1) (2 half_theta + 1))``.
+    """
+    dr, dc = np.meshgrid(np.arange(-half_rho, half_rho + 1), np.arange(-half_theta, half_theta + 1), indexing="ij")
+    r = rows[:, None] + dr.ravel()[None, :]
+    c = cols[:, None] + dc.ravel()[None, :]
+    wrap = (c < 0) | (c >= grid.n_theta)
+    # (rho, theta) == (-rho, theta +- pi): flip the row, shift the column by n_theta
+    r = np.where(wrap, grid.n_rho - 1 - r, r)
+    c = np.mod(c, grid.n_theta)
+    inside = (r >= 0) & (r < grid.n_rho)
+    return np.where(inside, r * grid.n_theta + c, -1)
+
+
+def find_peaks(support: np.ndarray, votes: np.ndarray, v_min: int, grid: HoughGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Peaks ``(rows, cols)``: cells with ``support >= v_min`` that are maxima of
+    ``score = support + votes / (max votes + 1)`` over their 3 x 3 neighbourhood (seam-aware, ties kept)."""
+    cand = np.flatnonzero(support.ravel() >= v_min)
+    if cand.size == 0:
+        return cand, cand
+    rows, cols = np.divmod(cand, grid.n_theta)
+    scale = 1.0 / (votes.max() + 1.0)
+    nb = neighbours(rows, cols, grid)
+    sup, vot = support.ravel(), votes.ravel()
+    score_nb = np.where(nb >= 0, sup[nb] + vot[nb] * scale, -1.0)
+    score = sup[cand] + vot[cand] * scale
+    peak = score >= score_nb.max(axis=1)
+    return rows[peak], cols[peak]
+
+
+def similar_to(rows_b, cols_b, rows_a, cols_a, grid: HoughGrid, half_rho: int, half_theta: int) -> np.ndarray:
+    """Which cells ``b`` lie within ``half_rho`` rows and ``half_theta`` columns of some cell ``a``, modulo
+    ``(rho, theta) == (-rho, theta + pi)``; ``(len(b),)`` bool (a k-d tree over the mirrored ``a`` cells)."""
+    out = np.zeros(len(rows_b), dtype=bool)
+    if len(rows_a) == 0 or len(rows_b) == 0:
+        return out
+    flip = grid.n_rho - 1 - rows_a
+    ra = np.concatenate([rows_a, flip, flip]).astype(float)
+    ca = np.concatenate([cols_a, cols_a - grid.n_theta, cols_a + grid.n_theta]).astype(float)
+    scale = np.array([half_rho + 0.5, half_theta + 0.5])
+    tree = cKDTree(np.stack([ra, ca], axis=1) / scale)
+    # integer offsets: |d| <= half  <=>  |d| / (half + 1/2) < 1
+    d, _ = tree.query(np.stack([rows_b, cols_b], axis=1) / scale, k=1, p=np.inf, distance_upper_bound=1.0)
+    return d < 1.0
+
+
+def lines_similar(rho_a, theta_a, rho_b, theta_b, tol_rho: float, tol_theta: float) -> np.ndarray:
+    """Pairwise similarity of lines ``a`` and ``b`` modulo ``(rho, theta) == (-rho, theta + pi)``.
+
+    ``theta`` in ``[0, pi)``; returns ``(len(a), len(b))`` bool.  (The remover uses the equivalent
+    cell test :func:`similar_to`; this is the closed form in ``(rho, theta)``, for tests and small sets.)
+    """
+    ra, ta = np.asarray(rho_a, float)[:, None], np.asarray(theta_a, float)[:, None]
+    rb, tb = np.asarray(rho_b, float)[None, :], np.asarray(theta_b, float)[None, :]
+    dt = ta - tb
+    direct = (np.abs(ra - rb) <= tol_rho) & (np.abs(dt) <= tol_theta)
+    # across the seam: (rho_b, theta_b) == (-rho_b, theta_b +- pi)
+    flipped = (np.abs(ra + rb) <= tol_rho) & (np.abs(np.abs(dt) - np.pi) <= tol_theta)
+    return direct | flipped
+
+
+@dataclass
+class _RunCache:
+    """Per-run memo of what earlier pings already computed (mutable, private to one ``remove`` call)."""
+
+    pts: list
+    grid: HoughGrid
+    slots: list
+    row_cache: dict = field(default_factory=dict)
+    trees: dict = field(default_factory=dict)
+    partner: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)
+    peaks: dict = field(default_factory=dict)
+
+    def rows(self, p: int) -> np.ndarray:
+        """The vote rows of ping ``p`` in every column, ``(n_p, n_theta)`` (computed once)."""
+        if p not in self.row_cache:
+            self.row_cache[p] = self.grid.rho_index(self.pts[p])
+        return self.row_cache[p]
+
+    def tree(self, p: int) -> cKDTree:
+        if p not in self.trees:
+            self.trees[p] = cKDTree(self.pts[p])
+        return self.trees[p]
+
+
+def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
+    """Points of ping ``p`` with a point of ping ``q`` in the box ``|dx|, |dy| <= box``."""
+    key = (p, q)
+    if key not in cache.partner:
+        if len(cache.pts[p]) == 0 or len(cache.pts[q]) == 0:
+            cache.partner[key] = np.zeros(len(cache.pts[p]), dtype=bool)
+        else:
+            bound = np.nextafter(box, np.inf)
+            d, _ = cache.tree(q).query(cache.pts[p], k=1, p=np.inf, distance_upper_bound=bound)
+            cache.partner[key] = np.isfinite(d)
+    return cache.partner[key]
+
+
+def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> dict:
+    kept = {}
+    for p in group:
+        mask = np.zeros(len(cache.pts[p]), dtype=bool)
+        for q in group:
+            if q != p and abs(q - p) <= gap:
+                mask |= _has_partner(cache, p, q, v_max * dt * abs(q - p))
+        kept[p] = mask
+    return kept
+
+
+def _counts(cache: _RunCache, grid: HoughGrid, p: int, mask: np.ndarray) -> np.ndarray:
+    key = (p, mask.tobytes())
+    if key not in cache.counts:
+        rows = cache.rows(p)[mask]
+        flat = (rows * grid.n_theta + np.arange(grid.n_theta)).ravel()
+        cache.counts[key] = np.bincount(flat, minlength=grid.n_rho * grid.n_theta).reshape(grid.shape)
+    return cache.counts[key]
+
+
+def _pairs_supported(rz: np.ndarray, rs: np.ndarray, slot: np.ndarray, cum: np.ndarray, cols: np.ndarray,
+                     e: int) -> np.ndarray:
+    """For pairs (detection, support): is there a similar line within ``e`` rows of both in one of the
+    columns ``cols``, counted in the support's map ``cum[slot]``?
+
+    ``rz, rs (P, len(cols))`` rows, ``slot (P,)``, ``cum (S, n_rho + 1, J)`` the cumulative count of
+    qualifying line cells down each of the ``J`` line columns (``cols`` index into those).
+    """
+    n_rho, J = cum.shape[1] - 1, cum.shape[2]
+    lo = np.maximum(np.maximum(rz, rs) - e, 0)
+    hi = np.minimum(np.minimum(rz, rs) + e, n_rho - 1)
+    ok = hi >= lo
+    hi = np.where(ok, hi, lo)
+    base = slot[:, None] * (n_rho + 1)
+    flat = cum.reshape(-1, J)
+    # line cells in rows lo..hi of each column: cum[hi + 1] - cum[lo]
+    n = flat[base + hi + 1, cols] - flat[base + lo, cols]
+    return np.any(ok & (n > 0), axis=1)
+
+
+def _check_pairs(zi: np.ndarray, si: np.ndarray, rz_all: np.ndarray, sup_rows, cum_slot: np.ndarray, cum: np.ndarray,
+                 e: int, chunk: int = 16) -> np.ndarray:
+    """:func:`_pairs_supported` for pairs (detection ``zi``, support ``si``), a few columns at a time: a
+    pair is dropped from later columns as soon as one column supports it (dense clutter settles fast)."""
+    J = cum.shape[2]
+    ok = np.zeros(zi.size, dtype=bool)
+    todo = np.arange(zi.size)
+    for start in range(0, J, chunk):
+        if todo.size == 0:
+            break
+        cols = np.arange(start, min(start + chunk, J))
+        rs = sup_rows(si[todo], cols)
+        hit = _pairs_supported(rz_all[zi[todo][:, None], cols[None, :]], rs, cum_slot[si[todo]], cum, cols, e)
+        ok[todo[hit]] = True
+        todo = todo[~hit]
+    return ok
+
+
+def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: dict, counts: dict,
+             sim_rows: np.ndarray, sim_cols: np.ndarray, eps: float, reach: np.ndarray, support: str) -> np.ndarray:
+    """Keep mask over the valid detections of ping ``k`` (step 6).
+
+    ``sim_rows, sim_cols``: the similar line cells.  ``reach (len(earlier pings),)``: the distance allowed
+    to a support of each earlier ping of B.  Only the columns holding a similar line are looked at.
+    """
+    n_k = len(cache.pts[k])
+    keep = np.zeros(n_k, dtype=bool)
+    earlier = [p for p in group_b if p < k]
+    if n_k == 0 or sim_rows.size == 0 or not earlier:
+        return keep
+    e = int(np.floor(eps / grid.d_rho + 1e-9))
+    cols, col_of = np.unique(sim_cols, return_inverse=True)
+    J = cols.size
+    similar = np.zeros((grid.n_rho, J), dtype=bool)
+    similar[sim_rows, col_of] = True
+    n_slots = len(earlier)
+    if support == "latest":
+        # latest earlier ping of B with a gated point within e rows of each line cell
+        latest = np.full((grid.n_rho, J), -1, dtype=np.int16)
+        for slot, p in enumerate(earlier):
+            latest[counts[p][:, cols] > 0] = slot
+        latest = ndimage.maximum_filter1d(latest, size=2 * e + 1, axis=0, mode="constant", cval=-1)
+        cum = np.zeros((n_slots, grid.n_rho + 1, J), dtype=np.int32)
+        for slot in range(n_slots):
+            np.cumsum(similar & (latest == slot), axis=0, out=cum[slot, 1:])
+    else:  # "any": every earlier support of the line counts; one map serves all slots
+        cum = np.zeros((1, grid.n_rho + 1, J), dtype=np.int32)
+        np.cumsum(similar, axis=0, out=cum[0, 1:])
+    # candidates: detections of ping k within e rows of some similar line at all
+    near_line = ndimage.maximum_filter1d(similar.view(np.uint8), size=2 * e + 1, axis=0, mode="constant", cval=0) > 0
+    rz_all = cache.rows(k)[:, cols]
+    cand = np.flatnonzero(near_line[rz_all, np.arange(J)].any(axis=1))
+    sup_pts = [cache.pts[p][kept[p]] for p in earlier]
+    sup_xy = np.concatenate(sup_pts, axis=0)
+    if cand.size == 0 or sup_xy.shape[0] == 0:
+        return keep
+    sup_ping = np.concatenate([np.full(len(sp), p, dtype=np.intp) for p, sp in zip(earlier, sup_pts)])
+    sup_index = np.concatenate([np.flatnonzero(kept[p]) for p in earlier])
+    sup_slot = np.concatenate([np.full(len(sp), i, dtype=np.intp) for i, sp in enumerate(sup_pts)])
+    sup_reach = reach[sup_slot]
+    cum_slot = sup_slot if support == "latest" else np.zeros_like(sup_slot)
+    ping_rows = {p: cache.rows(p)[:, cols] for p in earlier}
+
+    def sup_rows(idx: np.ndarray, sub: np.ndarray) -> np.ndarray:
+        out = np.empty((idx.size, sub.size), dtype=np.intp)
+        for p in earlier:
+            m = sup_ping[idx] == p
+            if m.any():
+                out[m] = ping_rows[p][sup_index[idx[m]][:, None], sub[None, :]]
+        return out
+
+    tree = cKDTree(sup_xy)
+    todo = cand
+    done_k = 0
+    S = sup_xy.shape[0]
+    for k_nn in (1, 4, 32, S):  # rounds of nearest supports; most detections settle in the first
+        k_nn = min(k_nn, S)
+        if todo.size == 0 or k_nn <= done_k:
+            break
+        d, idx = tree.query(cache.pts[k][todo], k=k_nn, distance_upper_bound=np.nextafter(reach.max(), np.inf))
+        d = d.reshape(todo.size, -1)[:, done_k:]
+        idx = idx.reshape(todo.size, -1)[:, done_k:]
+        found = np.isfinite(d)
+        i_loc, col = np.nonzero(found)
+        s_idx = idx[i_loc, col]
+        close = d[i_loc, col] <= sup_reach[s_idx]
+        i_loc, s_idx = i_loc[close], s_idx[close]
+        hit = np.zeros(todo.size, dtype=bool)
+        ok = _check_pairs(todo[i_loc], s_idx, rz_all, sup_rows, cum_slot, cum, e)
+        hit[i_loc[ok]] = True
+        keep[todo[hit]] = True
+        # a detection whose every support within reach has been checked is finished
+        exhausted = ~found[:, -1]
+        todo = todo[~hit & ~exhausted]
+        done_k = k_nn
+    return keep
+
+
+def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: int = 5, shift: int = 1,
+                     v_max: float = 8.0, dt: float = 1.0, gate_gap: int = 2, v_min: int = 3, sim_rho: float = 3.0,
+                     sim_theta_deg: float = 3.0, eps: float = 4.0, support_reach=None,
+                     support: str = "latest", warmup: str = "drop", trace: list | None = None,
+                     run: int = 0) -> np.ndarray:
+    """The keep mask of one run, ``z (T, M, 2)``, ``valid (T, M)`` -> ``(T, M)`` bool."""
+    if support not in ("latest", "any"):
+        raise InputError(f"hough: support must be 'latest' or 'any', got {support!r}")
+    T = z.shape[0]
+    sr = int(np.floor(sim_rho / grid.d_rho + 1e-9))
+    st = int(np.floor(np.deg2rad(sim_theta_deg) / grid.d_theta + 1e-9))
+    slots = [np.flatnonzero(valid[k]) for k in range(T)]
+    pts = [z[k][s] for k, s in enumerate(slots)]
+    cache = _RunCache(pts=pts, grid=grid, slots=slots)
+    out = np.zeros(valid.shape, dtype=bool)
+    first_output = window - 1 + shift
+    gaps = np.arange(window - 1, 0, -1)  # k - p for the earlier pings of B, oldest first
+    if support_reach is None:  # two pings at the largest speed
+        reach = np.full(gaps.shape, 2.0 * v_max * dt)
+    elif support_reach == "gap":  # the largest travel since that ping, at least two pings
+        reach = v_max * dt * np.maximum(gaps, 2).astype(float)
+    else:
+        reach = np.full(gaps.shape, float(support_reach))
+    for k in range(T):
+        if k < first_output and warmup == "keep":
+            out[k] = valid[k]
+        if k < window - 1:
+            continue
+        group_b = range(k - window + 1, k + 1)
+        kept = _gate(cache, group_b, v_max, dt, gate_gap)
+        counts = {p: _counts(cache, grid, p, kept[p]) for p in group_b}
+        n_pings = sum((counts[p] > 0).astype(np.int16) for p in group_b)
+        votes = sum(counts[p] for p in group_b)
+        cache.peaks[k] = find_peaks(n_pings, votes, v_min, grid)
+        for old in [q for q in cache.peaks if q < k - shift]:
+            del cache.peaks[old]
+        if k < first_output:
+            continue
+        ra, ca = cache.peaks[k - shift]
+        rb, cb = cache.peaks[k]
+        now = counts[k][rb, cb] > 0  # a B peak needs a vote from ping k
+        rb, cb = rb[now], cb[now]
+        sim = similar_to(rb, cb, ra, ca, grid, sr, st)
+        keep = _inverse(cache, grid, k, group_b, kept, counts, rb[sim], cb[sim], eps, reach, support)
+        out[k, slots[k][keep]] = True
+        # memo entries later pings can no longer use
+        for p in [p for p in cache.trees if p < k - window]:
+            del cache.trees[p]
+        for p in [p for p in cache.row_cache if p <= k - window]:
+            del cache.row_cache[p]
+        cache.counts = {key: v for key, v in cache.counts.items() if key[0] > k - window}
+        cache.partner = {key: v for key, v in cache.partner.items() if min(key) > k - window}
+        if trace is not None:
+            rho, theta = grid.rho, grid.theta
+            trace.append({
+                "run": np.array(run), "ping": np.array(k), "rho": rho, "theta": theta,
+                "support_b": n_pings.astype(np.int8),
+                "peaks_a": np.stack([rho[ra], theta[ca]], axis=1), "peaks_b": np.stack([rho[rb], theta[cb]], axis=1),
+                "similar": np.stack([rho[rb[sim]], theta[cb[sim]]], axis=1),
+                "kept": slots[k][keep],
+            })
+    return out
+
+
+def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt: float = 1.0, gate_gap: int = 2,
+           d_rho: float = 1.0, d_theta_deg: float = 1.0, v_min: int = 3, sim_rho: float = 3.0,
+           sim_theta_deg: float = 3.0, eps: float = 4.0, support_reach=None, support: str = "latest",
+           warmup: str = "drop", trace: list | None = None) -> Scans:
+    """Hough clutter removal of every run of ``scans`` (Cartesian ``z (B, T, M, 2)``); see the module docstring.
+
+    ``trace``: pass a list to receive one dict per output ping (accumulator support of group B, peaks of
+    A and B, the similar lines, the kept detections) for figures and debugging.
+    """
+    if scans.z.shape[-1] != 2:
+        raise InputError(f"hough: needs Cartesian (x, y) detections, got measurement dimension {scans.z.shape[-1]}")
+    if int(window) != window or window < 2 or int(shift) != shift or shift < 1 or int(gate_gap) != gate_gap \
+            or gate_gap < 1 or int(v_min) != v_min or v_min < 1 or v_min > window:
+        raise InputError(f"hough: need integers window >= 2, shift >= 1, gate_gap >= 1, 1 <= v_min <= window; got "
+                         f"window={window}, shift={shift}, gate_gap={gate_gap}, v_min={v_min}")
+    if not (v_max > 0 and dt > 0 and eps >= 0 and sim_rho >= 0 and sim_theta_deg >= 0):
+        raise InputError(f"hough: need v_max, dt > 0 and eps, sim_rho, sim_theta_deg >= 0; got {v_max}, {dt}, {eps}, "
+                         f"{sim_rho}, {sim_theta_deg}")
+    if warmup not in ("drop", "keep"):
+        raise InputError(f"hough: warmup must be 'drop' or 'keep', got {warmup!r}")
+    valid = scans.valid
+    # The grid only has to cover every point; its extent never changes a decision.
+    extent = float(np.max(np.linalg.norm(scans.z[valid], axis=-1))) if valid.any() else 1.0
+    grid = make_grid(d_rho, d_theta_deg, extent)
+    keep = np.zeros(valid.shape, dtype=bool)
+    for b in range(scans.batch):
+        keep[b] = hough_remove_run(scans.z[b], valid[b], grid, window, shift, v_max, dt, gate_gap, v_min, sim_rho,
+                                   sim_theta_deg, eps, support_reach, support, warmup, trace, b)
+    return scans.with_valid(keep)
+
+
+HOUGH = ClutterRemoverSpec(
+    name="hough",
+    summary="Hough-transform clutter removal over accumulated pings (two groups, similarity, inverse HT)",
+    remove=remove,
+    params=DEFAULTS,
+)
+
+
+@hookimpl
+def workbench_clutter_removers():
+    return [HOUGH]

@@ -1,0 +1,109 @@
+"""Converted-measurement Kalman filter with the linearised conversion covariance (CMKF-L, paper 001).
+
+Lerro and Bar-Shalom (1993).  The filter takes range-bearing measurements ``(r, b)`` from a sensor at
+``(sx, sy)``, in the **mathematical** bearing convention (angle counter-clockwise from the +x axis,
+the convention of :func:`workbench.models.range_bearing`)::
+
+    x = sx + r cos b          y = sy + r sin b
+
+converts each to Cartesian and runs a linear Kalman update with ``H = [I 0]`` and the converted
+covariance, linearised at the measurement (eqs 15-17 of paper 001)::
+
+    R11 = sigma_r^2 cos^2 b + r^2 sigma_b^2 sin^2 b
+    R22 = sigma_r^2 sin^2 b + r^2 sigma_b^2 cos^2 b
+    R12 = (sigma_r^2 - r^2 sigma_b^2) sin b cos b
+
+i.e. ``R_c = A diag(sigma_r^2, sigma_b^2) A^T`` with ``A = d(x, y)/d(r, b) = [[cos b, -r sin b],
+[sin b, r cos b]]``.  (With a compass bearing, ``x = r sin b``, ``y = r cos b``, sin and cos swap; this
+plugin does not accept that convention.)  ``sigma_r`` and ``sigma_b`` are read from
+``model.params`` (``sigma_b`` in radians), as :func:`workbench.models.range_bearing` publishes them.
+
+Predict and update are :func:`workbench.kalman_core.linear_predict` and
+:func:`workbench.kalman_core.linear_update` (the shared linear KF with a per-item ``R``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench import hookimpl
+from workbench.filtering import single_measurement
+from workbench.kalman_core import linear_predict, linear_update
+from workbench.models import MeasurementModel, MotionModel
+from workbench.specs import FilterSpec
+from workbench.types import Gaussian, InputError, Scan
+
+
+def polar_to_cartesian(z: np.ndarray, sensor=(0.0, 0.0)) -> np.ndarray:
+    """``(r, b) -> (sx + r cos b, sy + r sin b)`` for ``z (..., 2)``; math bearing convention."""
+    z = np.asarray(z, dtype=float)
+    r, b = z[..., 0], z[..., 1]
+    return np.stack([sensor[0] + r * np.cos(b), sensor[1] + r * np.sin(b)], axis=-1)
+
+
+def converted_covariance(r: np.ndarray, b: np.ndarray, sigma_r: float, sigma_b: float) -> np.ndarray:
+    """Linearised covariance of the converted measurement, ``(...,) -> (..., 2, 2)``.
+
+    ``sigma_b`` in radians; ``b`` in the math convention (from the +x axis).
+    """
+    r = np.asarray(r, dtype=float)
+    c, s = np.cos(b), np.sin(b)
+    sr2 = sigma_r * sigma_r
+    rb2 = r * r * sigma_b * sigma_b
+    out = np.empty(r.shape + (2, 2))
+    out[..., 0, 0] = sr2 * c * c + rb2 * s * s  # R11 = sr^2 cos^2 b + r^2 sb^2 sin^2 b
+    out[..., 1, 1] = sr2 * s * s + rb2 * c * c  # R22 = sr^2 sin^2 b + r^2 sb^2 cos^2 b
+    out[..., 0, 1] = out[..., 1, 0] = (sr2 - rb2) * s * c  # R12 = (sr^2 - r^2 sb^2) sin b cos b
+    return out
+
+
+def _polar_params(model: MeasurementModel) -> tuple[float, float, tuple[float, float]]:
+    params = model.params
+    if "sigma_r" not in params or "sigma_b" not in params or model.dim != 2 or tuple(model.angular) != (False, True):
+        raise InputError(f"cmkf-l takes range-bearing measurements only (a model with params sigma_r, sigma_b and "
+                         f"components (range, bearing)); got model {model.name!r} with params {sorted(params)}")
+    sensor = params.get("sensor", (0.0, 0.0))
+    return float(params["sigma_r"]), float(params["sigma_b"]), (float(sensor[0]), float(sensor[1]))
+
+
+def init(prior: Gaussian, rng=None) -> Gaussian:
+    return prior
+
+
+def predict(state: Gaussian, motion: MotionModel, rng=None) -> Gaussian:
+    return linear_predict(state, motion)
+
+
+def update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:
+    """Convert the (single) range-bearing measurement of each item and run the linear update."""
+    sigma_r, sigma_b, sensor = _polar_params(model)
+    z, present = single_measurement(scan, "cmkf-l")
+    if not present.any():
+        return state
+    if not np.all(np.isfinite(z[present])):
+        item = int(np.argmax(present & ~np.isfinite(z).all(axis=1)))
+        raise InputError(f"cmkf-l: batch item {item} has a non-finite (NaN or inf) measurement")
+    zc = polar_to_cartesian(z, sensor)
+    Rc = converted_covariance(z[:, 0], z[:, 1], sigma_r, sigma_b)
+    n = state.dim
+    H = np.zeros((2, n))
+    H[0, 0] = H[1, 1] = 1.0  # H = [I 0]: position first in the state
+    return linear_update(state, zc, present, H, Rc)
+
+
+def estimate(state: Gaussian) -> Gaussian:
+    return state
+
+
+CMKF_L = FilterSpec(
+    name="cmkf-l",
+    summary="Converted-measurement KF, linearised conversion covariance (range-bearing input, math bearing)",
+    init=init, predict=predict, update=update, estimate=estimate,
+    capabilities=frozenset({"gaussian", "range_bearing_input"}),
+    params={"bearing_convention": "math (counter-clockwise from +x)", "debiasing": "none (CMKF-L)"},
+)
+
+
+@hookimpl
+def workbench_filters():
+    return [CMKF_L]

@@ -1,0 +1,86 @@
+"""Benchmarks for paper 001 (run by ``workbench bench``; a benchmark, not a timed test).
+
+- ``ping_1e4_*``: one ping of the Hough remover plus the CMKF-L multi-target tracker when every ping holds
+  10^4 detections (clutter ``pfa = 0.16`` on the paper's [0, 250]^2 area, plus the target).  The cost of
+  one ping is measured in steady state as ``(t(T0 + n) - t(T0)) / n``: the remover and the tracker are run
+  over ``T0 = 6`` pings (the first ping with output after the warm-up) and over ``T0 + n`` pings, so the
+  figure is the time the extra pings took.  Target: < 0.1 s on 2 cores.
+- ``ping_paper_*``: the same at the paper's density (31 clutter detections per ping), for scale.
+- ``report_compute_s``: all paper-001 recipe tasks computed in this process without a cache (``full``
+  size; ``quick`` size with ``quick=True``).  Target for the full size: < 60 s.
+"""
+
+from __future__ import annotations
+
+import time
+
+from .bench import median_time
+from .plugins import load_host
+from .rng import generator
+from .specs import RecipeOptions, TaskContext
+from .tracker import TrackerConfig, run_tracker
+from .types import Scans
+
+__all__ = ["bench"]
+
+
+def _scans(host, detections: float, pings: int, seed: int = 0) -> Scans:
+    from .recipes import paper001
+
+    one = paper001.target_truth(1)
+    one = type(one)(one.states[:, :pings], one.times[:pings])
+    rng = generator(seed, "bench-paper001", detections)
+    sensor = host.sensor(paper001.SENSOR)
+    clutter = {**paper001.SIM_CLUTTER, "pfa": detections / (250.0 * 250.0)}
+    return sensor.simulate(one, rng, **paper001.SONAR).merge(
+        host.clutter_generator(paper001.CLUTTER_GEN).generate(one, rng, **clutter))
+
+
+def _per_ping(host, detections: float, extra: int, repeat: int) -> dict:
+    from .recipes import paper001
+
+    first = paper001.HOUGH["window"] - 1 + paper001.HOUGH["shift"] + 1  # pings up to the first output
+    scans = _scans(host, detections, first + extra)
+    remover = host.clutter_remover(paper001.REMOVER)
+    filt = host.filter(paper001.PAPER_FILTER)
+    model = host.sensor(paper001.SENSOR).measurement_model(**paper001.SONAR, **paper001.POLAR)
+    motion = paper001.motion_model()
+    cfg = TrackerConfig(**paper001.TRACKER)
+
+    def cut(T):
+        return Scans(scans.z[:, :T], scans.valid[:, :T], scans.times[:T], snr=scans.snr[:, :T])
+
+    removed = {T: remover.remove(cut(T), **paper001.HOUGH) for T in (first, first + extra)}
+    t_remove = {T: median_time(lambda T=T: remover.remove(cut(T), **paper001.HOUGH), repeat=repeat, warmup=0)
+                for T in (first, first + extra)}
+    t_track = {T: median_time(lambda T=T: run_tracker(removed[T], filt, motion, model, cfg), repeat=repeat, warmup=0)
+               for T in (first, first + extra)}
+    hough = (t_remove[first + extra] - t_remove[first]) / extra
+    track = (t_track[first + extra] - t_track[first]) / extra
+    kept = removed[first + extra].valid[:, first:].sum() / max(scans.valid[:, first:].sum(), 1)
+    return {"hough_s": hough, "tracker_s": track, "total_s": hough + track,
+            "detections": float(scans.valid[:, first:].sum(axis=2).mean()), "kept_fraction": float(kept)}
+
+
+def bench(quick: bool = False) -> dict:
+    host = load_host()
+    out: dict = {}
+    dense = _per_ping(host, 1e4, extra=1 if quick else 3, repeat=1 if quick else 3)
+    out.update({f"ping_1e4_{k}": v for k, v in dense.items()})
+    out["ping_1e4_target_s"] = 0.1
+    out["ping_1e4_met"] = bool(dense["total_s"] < 0.1)
+    paper = _per_ping(host, 31.25, extra=5, repeat=3 if quick else 5)
+    out.update({f"ping_paper_{k}": v for k, v in paper.items()})
+
+    recipe = host.recipe("001")
+    size = "quick" if quick else "full"
+    options = RecipeOptions(size=size, values=recipe.sizes[size], seed=0, filters=recipe.default_filters)
+    t0 = time.perf_counter()
+    for task in recipe.tasks(options):
+        task.run(TaskContext(params=task.params, seed=0, host=host))
+    out["report_size"] = size
+    out["report_compute_s"] = time.perf_counter() - t0
+    out["report_target_s"] = 60.0
+    out["report_met"] = bool(out["report_compute_s"] < 60.0)
+    out["runs"] = float(recipe.sizes[size]["runs"])
+    return out
