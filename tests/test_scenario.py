@@ -2,6 +2,7 @@
 
 import json
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -89,3 +90,35 @@ def test_cli_reports_errors_without_traceback(tmp_path, capsys):
     assert main(["run", str(path)]) == 2
     err = capsys.readouterr().err
     assert "workbench: error:" in err and "Traceback" not in err
+
+
+EXAMPLES = Path(__file__).parents[1] / "examples" / "scenarios"
+
+
+@pytest.mark.parametrize("name", ["range_bearing", "sonar_recorded", "pcl_recorded"])
+def test_example_scenarios_run(tmp_path, name):
+    from workbench.cli import main
+
+    assert main(["run", str(EXAMPLES / f"{name}.toml"), "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    data = np.load(tmp_path / "results.npz")
+    if name == "sonar_recorded":
+        # The multi-target tracker confirms tracks on the recorded file once the Hough window has filled.
+        counts = data["cmkf-l_status"]
+        assert summary["tracker"] == "multi-target" and (counts == 1).any()
+    elif name == "pcl_recorded":
+        # No truth in a recorded file: the track must follow the candidates it chose (a smooth track).
+        mean = data["mean_kf"][0]
+        assert mean.shape == (120, 2) and np.all(np.isfinite(mean))
+        assert np.std(np.diff(mean[:, 0])) < 10.0
+        assert summary["diagnostics"]["kf"]["frames_updated"] > 90
+    else:
+        assert summary["position_rmse"]["ekf"] < summary["position_rmse"]["sir"] < 50
+
+
+def test_recorded_detections_need_an_associating_tracker(tmp_path, demo_host):
+    text = (EXAMPLES / "pcl_recorded.toml").read_text().replace('tracker = "nearest-neighbour"', 'tracker = "direct"')
+    path = tmp_path / "s.toml"
+    path.write_text(text.replace("../data/", str(EXAMPLES.parent / "data") + "/"))
+    with pytest.raises(InputError, match="need a tracker that associates"):
+        load_scenario(path, demo_host)

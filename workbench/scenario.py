@@ -33,7 +33,8 @@ else:  # pragma: no cover
 __all__ = ["Component", "Scenario", "load_scenario", "run_scenario", "ScenarioResult"]
 
 MOTION_MODELS = ("constant_velocity", "random_walk_velocity", "range_rate")
-TRACKERS = ("direct",)
+TRACKERS = ("direct", "nearest-neighbour", "multi-target")
+DETECTION_FORMATS = ("sonar", "pcl")
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,9 @@ class Scenario:
     prior_std: np.ndarray
     filters: tuple[str, ...]
     tracker: str
+    gate: float | None = None
+    detections: Path | None = None
+    detections_format: str = ""
 
 
 class _Reader:
@@ -144,13 +148,15 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
         raise InputError(f"{path}: no such scenario file") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
-    known = {"scenario", "motion", "truth", "sensor", "clutter", "remover", "prior", "filters"}
+    known = {"scenario", "motion", "truth", "sensor", "clutter", "remover", "prior", "filters", "detections"}
     unknown = set(raw) - known
     if unknown:
         raise InputError(f"{path}: unknown table(s) {sorted(unknown)} (expected: {', '.join(sorted(known))})")
-    for required in ("scenario", "motion", "truth", "sensor", "prior", "filters"):
-        if required not in raw:
-            raise InputError(f"{path}: missing table [{required}]")
+    recorded = "detections" in raw
+    required = ("scenario", "motion", "sensor", "filters") + (() if recorded else ("truth", "prior"))
+    for table in required:
+        if table not in raw:
+            raise InputError(f"{path}: missing table [{table}]")
 
     sc = _Reader(path, raw["scenario"], "scenario")
     name = sc.get("name")
@@ -161,7 +167,22 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     tracker = sc.get("tracker", "direct")
     if tracker not in TRACKERS:
         raise InputError(f"{sc.where('tracker')}: expected one of {TRACKERS}, got {tracker!r}")
+    gate = sc.quantity("gate", None, None, minimum=1e-12) if "gate" in sc.table else None
     sc.done()
+
+    detections, det_format = None, ""
+    if recorded:
+        de = _Reader(path, raw["detections"], "detections")
+        detections = (path.parent / str(de.get("file"))).resolve()
+        det_format = de.get("format")
+        if det_format not in DETECTION_FORMATS:
+            raise InputError(f"{de.where('format')}: expected one of {DETECTION_FORMATS}, got {det_format!r}")
+        if not detections.exists():
+            raise InputError(f"{de.where('file')}: no such file {detections}")
+        de.done()
+        if tracker == "direct":
+            raise InputError(f"{sc.where('tracker')}: recorded detections need a tracker that associates "
+                             f"('nearest-neighbour' or 'multi-target'), not 'direct'")
 
     mo = _Reader(path, raw["motion"], "motion")
     kind = mo.get("model")
@@ -178,7 +199,7 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     mo.done()
     n = motion.dim
 
-    tr = _Reader(path, raw["truth"], "truth")
+    tr = _Reader(path, raw.get("truth", {"initial_state": [0.0] * n}), "truth")
     x0 = tr.vector("initial_state", n)
     x0_std = tr.vector("initial_std", n, [0.0] * n, nonneg=True)
     legs_raw = tr.get("legs", [])
@@ -197,10 +218,15 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     removers = tuple(_component(path, c, f"remover[{i}]", host.components["workbench_clutter_removers"],
                                 "clutter remover") for i, c in enumerate(raw.get("remover", [])))
 
-    pr = _Reader(path, raw["prior"], "prior")
-    prior_mean = pr.vector("mean", n)
-    prior_std = pr.vector("std", n, nonneg=True)
+    pr = _Reader(path, raw.get("prior", {}), "prior")
+    # Without a prior mean the nearest-neighbour tracker starts on the first scan's strongest detection;
+    # the multi-target tracker initiates its own tracks and needs no prior.
+    optional = tracker != "direct"
+    prior_mean = pr.vector("mean", n) if ("mean" in pr.table or not optional) else np.full(n, np.nan)
+    prior_std = pr.vector("std", n, nonneg=True) if ("std" in pr.table or not optional) else np.full(n, np.nan)
     pr.done()
+    if tracker == "nearest-neighbour" and np.isnan(prior_std).any():
+        raise InputError(f"{pr.where('std')}: the nearest-neighbour tracker needs the prior's standard deviations")
 
     fl = _Reader(path, raw["filters"], "filters")
     names = fl.get("names")
@@ -213,7 +239,7 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
             raise InputError(f"{fl.where('names')}: {exc}") from None
     fl.done()
     return Scenario(path, name, seed, runs, steps, dt, motion, x0, x0_std, tuple(legs), sensor, clutter,
-                    removers, prior_mean, prior_std, tuple(names), tracker)
+                    removers, prior_mean, prior_std, tuple(names), tracker, gate, detections, det_format)
 
 
 @dataclass(frozen=True)
@@ -222,16 +248,28 @@ class ScenarioResult:
     name: str
     rmse: Mapping[str, float]
     diagnostics: Mapping[str, Mapping[str, float]]
+    lines: tuple[str, ...] = ()
 
     def summary_text(self) -> str:
         lines = [f"scenario {self.name}: results in {self.out}"]
         for fname, value in self.rmse.items():
             lines.append(f"  {fname:12s} position RMSE (time-averaged) {value:.4g}")
+        lines.extend(f"  {line}" for line in self.lines)
         return "\n".join(lines)
 
 
-def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth, Scans]:
-    """Truth and detections (sensor, then clutter, then removers) for all runs."""
+def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | None, Scans]:
+    """Truth and detections (sensor, then clutter, then removers) for all runs; recorded detections
+    (no truth) when the scenario names a file."""
+    if scenario.detections is not None:
+        from .recorded import load_sonar_csv
+        from .recorded_pcl import load_pcl_candidates
+
+        loader = load_sonar_csv if scenario.detections_format == "sonar" else load_pcl_candidates
+        scans = loader(scenario.detections)
+        for comp in scenario.removers:
+            scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
+        return None, scans
     rng = generator(seed, "scenario", scenario.name)
     if scenario.legs:
         dims = scenario.motion.dim // 2
@@ -251,50 +289,102 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth, Sc
     return truth, scans
 
 
+def _position_dims(motion: MotionModel) -> int:
+    return motion.dim // 2
+
+
+def _track_single(scenario, spec, model, scans, seed) -> Estimates:
+    """Direct (one detection per scan) or nearest-neighbour tracking of one target, batched over runs."""
+    rng = generator(seed, "filter", spec.name)
+    B = scans.batch
+    if scenario.tracker == "direct":
+        prior = Gaussian.broadcast(scenario.prior_mean, np.diag(scenario.prior_std**2), B)
+        return run_filter(spec, prior, scenario.motion, model, scans, rng)
+    from .nearest_neighbour import strongest_candidate_prior, track_nearest_neighbour
+
+    cov0 = np.diag(scenario.prior_std**2)
+    if np.isnan(scenario.prior_mean).any():
+        if scans.snr is None or model.H is None or model.dim != scenario.motion.dim:
+            raise InputError(f"{scenario.path}: [prior] mean is needed: starting on the strongest detection "
+                             "needs detection strengths and a measurement of the whole state")
+        prior, index = strongest_candidate_prior(scans.scan(0), cov0, np.zeros(scenario.motion.dim))
+    else:
+        prior, index = Gaussian.broadcast(scenario.prior_mean, cov0, B), None
+    track = track_nearest_neighbour(spec, prior, scenario.motion, model, scans, rng, gate=scenario.gate,
+                                    prior_index=index)
+    return Estimates(spec.name, track.mean, track.cov, track.predicted_mean, {
+        "frames_updated": float(track.updated.sum()), "frames_coasted": float((~track.updated[:, 1:]).sum())})
+
+
 def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | None = None) -> ScenarioResult:
     """Run every filter of the scenario on the same truth and detections; write NPZ, JSON and plots."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
+    from tqdm.auto import tqdm
 
     seed = scenario.seed if seed is None else seed
     truth, scans = simulate(scenario, host, seed)
     sensor = host.sensor(scenario.sensor.plugin)
     model = sensor.measurement_model(**scenario.sensor.params)
-    prior = Gaussian.broadcast(scenario.prior_mean, np.diag(scenario.prior_std**2), scenario.runs)
-    estimates: dict[str, Estimates] = {}
-    for fname in scenario.filters:
-        spec = host.filter(fname)
-        try:
-            estimates[fname] = run_filter(spec, prior, scenario.motion, model, scans, generator(seed, "filter", fname))
-        except InputError as exc:
-            raise InputError(f"{scenario.path}: filter {fname!r}: {exc}") from None
+    dims = _position_dims(scenario.motion)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    dims = 3 if scenario.motion.dim == 6 else (1 if scenario.motion.dim == 2 and scenario.motion.name == "range-rate" else 2)
-    arrays = {"truth": truth.states, "times": truth.times, "z": scans.z, "valid": scans.valid}
-    rmse, diag = {}, {}
-    for fname, est in estimates.items():
-        arrays[f"mean_{fname}"] = est.mean
-        arrays[f"cov_{fname}"] = est.cov
-        err = position_sq_error(truth.states, est.mean, dims)
-        arrays[f"sq_error_{fname}"] = err
-        rmse[fname] = float(np.sqrt(err.mean(axis=0)).mean())
-        diag[fname] = {k: float(v) for k, v in est.diagnostics.items()}
-    np.savez_compressed(out / "results.npz", **arrays)
-    (out / "summary.json").write_text(json.dumps({"scenario": scenario.name, "seed": seed, "runs": scenario.runs,
-                                                  "steps": scenario.steps, "position_rmse": rmse,
-                                                  "diagnostics": diag}, indent=2))
+    arrays: dict[str, np.ndarray] = {"times": scans.times, "z": scans.z, "valid": scans.valid}
+    if truth is not None:
+        arrays["truth"] = truth.states
+    rmse, diag, lines = {}, {}, []
     fig = Figure(figsize=(10, 4.5), layout="constrained")
     ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    ax1.plot(truth.states[0, :, 0], truth.states[0, :, 1 if dims > 1 else 0], "k-", label="truth")
-    for fname, est in estimates.items():
+    shown = scans.valid[0]
+    ax1.plot(scans.z[0][shown][:, 0], scans.z[0][shown][:, 1 if scans.z.shape[-1] > 1 else 0], ".",
+             color="0.7", ms=3, label="detections")
+    if truth is not None:
+        ax1.plot(truth.states[0, :, 0], truth.states[0, :, 1 if dims > 1 else 0], "k-", label="truth")
+    for fname in tqdm(scenario.filters, desc=f"scenario {scenario.name}", unit="filter", leave=False,
+                      disable=None):
+        spec = host.filter(fname)
+        try:
+            if scenario.tracker == "multi-target":
+                from .tracker import CONFIRMED, TrackerConfig, run_tracker
+
+                config = TrackerConfig(gate=scenario.gate) if scenario.gate else TrackerConfig()
+                log = run_tracker(scans, spec, scenario.motion, model, config, seed=seed, key=("tracker", fname))
+                arrays.update(log.to_arrays(prefix=f"{fname}_"))
+                counts = log.confirmed_counts()
+                lines.append(f"{fname:12s} confirmed tracks per scan (run 0): {counts[0].tolist()}")
+                conf = (log.status == CONFIRMED) & (log.run == 0)
+                ax1.plot(log.mean[conf, 0], log.mean[conf, 1], "o", mfc="none", ms=5, label=f"{fname} confirmed")
+                ax2.step(np.arange(scans.steps), counts.mean(axis=0), where="mid", label=fname)
+                continue
+            est = _track_single(scenario, spec, model, scans, seed)
+        except InputError as exc:
+            raise InputError(f"{scenario.path}: filter {fname!r}: {exc}") from None
+        arrays[f"mean_{fname}"] = est.mean
+        arrays[f"cov_{fname}"] = est.cov
+        diag[fname] = {k: float(v) for k, v in est.diagnostics.items()}
         ax1.plot(est.mean[0, :, 0], est.mean[0, :, 1 if dims > 1 else 0], label=fname)
-        ax2.semilogy(truth.times, np.sqrt(arrays[f"sq_error_{fname}"].mean(axis=0)), label=fname)
-    ax1.set(title="run 0", xlabel="x", ylabel="y" if dims > 1 else "state[0]")
-    ax2.set(title=f"position RMSE over {scenario.runs} runs", xlabel="time (s)", ylabel="RMSE")
-    ax1.legend()
-    ax2.legend()
+        if truth is not None:
+            err = position_sq_error(truth.states, est.mean, dims)
+            arrays[f"sq_error_{fname}"] = err
+            rmse[fname] = float(np.sqrt(err.mean(axis=0)).mean())
+            ax2.semilogy(truth.times, np.sqrt(err.mean(axis=0)), label=fname)
+        else:
+            ax2.plot(scans.times, est.mean[0, :, 0], label=fname)
+    np.savez_compressed(out / "results.npz", **arrays)
+    (out / "summary.json").write_text(json.dumps({
+        "scenario": scenario.name, "seed": seed, "runs": scans.batch, "steps": scans.steps,
+        "tracker": scenario.tracker, "detections": str(scenario.detections or "simulated"),
+        "position_rmse": rmse, "diagnostics": diag, "notes": lines}, indent=2))
+    ax1.set(title="run 0", xlabel="z[0]", ylabel="z[1]")
+    if scenario.tracker == "multi-target":
+        ax2.set(title="confirmed tracks per scan (mean over runs)", xlabel="scan", ylabel="tracks")
+    elif truth is not None:
+        ax2.set(title=f"position RMSE over {scans.batch} runs", xlabel="time (s)", ylabel="RMSE")
+    else:
+        ax2.set(title="estimated state[0] (no truth: recorded data)", xlabel="time (s)", ylabel="state[0]")
+    ax1.legend(fontsize=7)
+    ax2.legend(fontsize=7)
     fig.savefig(out / "tracks.png", dpi=110)
-    return ScenarioResult(out, scenario.name, rmse, diag)
+    return ScenarioResult(out, scenario.name, rmse, diag, tuple(lines))
