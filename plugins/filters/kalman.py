@@ -22,6 +22,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
+from workbench.kalman_core import linear_predict
 from workbench.linalg import joseph_update, psd_solve, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.specs import FilterSpec
@@ -33,9 +34,7 @@ def init(prior: Gaussian, rng=None) -> Gaussian:
 
 
 def predict(state: Gaussian, motion: MotionModel, rng=None) -> Gaussian:
-    mean = state.mean @ motion.F.T  # x- = F x
-    cov = symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q)  # P- = F P F^T + Q
-    return Gaussian(mean, cov)
+    return linear_predict(state, motion)
 
 
 def _update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.ndarray, who: str) -> Gaussian:
