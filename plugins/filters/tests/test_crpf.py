@@ -1,0 +1,203 @@
+"""The cost-reference particle filter against hand-computed references (paper 003)."""
+
+import numpy as np
+import pytest
+
+from workbench.filtering import run_filter
+from workbench.models import MeasurementModel, linear_measurement, random_walk_velocity, range_bearing
+from workbench.plugins import load_host
+from workbench.resampling import systematic_resample
+from workbench.rng import generator
+from workbench.trajectory import sample_motion
+from workbench.types import Gaussian, InputError, Scan
+from workbench_filters.crpf import CRPFParams, incremental_cost, log_pmf, make_crpf
+
+HOST = load_host()
+
+
+def _wrap(a):
+    return np.angle(np.exp(1j * a))
+
+
+def test_selection_pmf_is_finite_with_huge_costs():
+    costs = np.array([
+        [1e300, 0.0, 1e308, 5.0],
+        [1e300, 1e300 * 1.5, 1.7e308, 1e299],  # all huge: the PMF still favours the smallest
+        [np.inf, 3.0, np.inf, 4.0],  # overflowed costs get weight zero
+        [np.inf, np.inf, np.inf, np.inf],  # nothing to choose from: uniform, not NaN
+    ])
+    lp = log_pmf(costs, beta=2.0, delta=0.01)
+    assert not np.any(np.isnan(lp))
+    w = np.exp(lp - lp.max(axis=1, keepdims=True))
+    w /= w.sum(axis=1, keepdims=True)
+    assert np.all(np.isfinite(w)) and np.allclose(w.sum(axis=1), 1.0)
+    assert np.argmax(w[0]) == 1 and np.argmax(w[1]) == 3
+    assert w[2, 0] == 0.0 and w[2, 2] == 0.0
+    assert np.allclose(w[3], 0.25)
+    # where the direct formula is representable it agrees: pi ~ (C - min C + delta)^-beta
+    direct = (np.array([0.0, 2.0, 7.0]) + 0.01) ** -2.0
+    lp2 = log_pmf(np.array([[3.0, 5.0, 10.0]]), 2.0, 0.01)[0]
+    assert np.allclose(np.exp(lp2 - lp2.max()) / np.exp(lp2 - lp2.max()).sum(), direct / direct.sum())
+    # systematic resampling of a huge-cost row never picks a zero-weight particle
+    idx = systematic_resample(lp, np.random.default_rng(0))
+    assert not np.any(np.isin(idx[2], [0, 2]))
+
+
+def test_systematic_resampling_preserves_expected_counts():
+    rng = np.random.default_rng(1)
+    costs = rng.exponential(3.0, size=(1, 50))
+    lp = log_pmf(costs, 2.0, 0.01)
+    w = np.exp(lp - lp.max())
+    w = (w / w.sum())[0]
+    N = 50
+    draws = 4000
+    idx = systematic_resample(np.repeat(lp, draws, axis=0), rng)
+    counts = np.stack([np.bincount(row, minlength=N) for row in idx])
+    # every draw gives floor(N w) or ceil(N w) copies ...
+    assert np.all(counts >= np.floor(N * w) - 1e-9) and np.all(counts <= np.ceil(N * w) + 1e-9)
+    # ... and the expected count is exactly N w: the count is floor(N w) + Bernoulli(frac(N w)), so the
+    # mean over draws lies within 5 standard errors sqrt(p (1 - p) / draws) of N w
+    frac = N * w - np.floor(N * w)
+    se = np.sqrt(frac * (1 - frac) / draws)
+    assert np.all(np.abs(counts.mean(axis=0) - N * w) <= 5 * se + 1e-12)
+
+
+def test_jitter_schedule():
+    p = CRPFParams(particles=100, kappa=1.0)
+    # sigma^2 = kappa / N^(2 / dim) = 1 / 100^(1/2)
+    assert np.allclose(p.jitter_std(4), np.sqrt(0.1))
+    q = CRPFParams(particles=500, kappa=10.0, scale=(1.0, 1.0, 0.1, 0.1))
+    assert np.allclose(q.jitter_std(4), np.sqrt(10.0 / np.sqrt(500.0)) * np.array([1, 1, 0.1, 0.1]))
+    with pytest.raises(InputError, match="scale has 4 entries"):
+        CRPFParams(scale=(1, 1, 1, 1)).jitter_std(6)
+
+
+def test_one_particle_follows_the_cost_recursion():
+    # N = 1: selection is trivial, so C_t = lam C_{t-1} + ||y_t - h(x_t)||^q can be checked by hand.
+    spec = make_crpf(particles=1, lam=0.8, q=1.5, kappa=0.5)
+    model = range_bearing(1.0, 0.1)
+    motion = random_walk_velocity(2, 1.0, 0.1)
+    rng = generator(0, "crpf-one")
+    prior = Gaussian.broadcast([100.0, 50.0, -1.0, 1.0], np.diag([1.0, 1.0, 0.1, 0.1]), 3)
+    state = spec.init(prior, rng)
+    zs = [np.array([[111.0, 0.47]] * 3), np.array([[110.0, 0.48]] * 3), np.array([[109.5, 3.1]] * 3)]
+    expected = np.zeros((3, 1))
+    for k, z in enumerate(zs):
+        if k:
+            before = state.particles.copy()
+            state = spec.predict(state, motion, rng)
+        state = spec.update(state, Scan.single(z), model, rng)
+        x = state.particles[:, 0]
+        if k:
+            moved = x - before[:, 0] @ motion.F.T
+            # propagation noise has the documented per-component std (only 3 x 4 draws: loose bound)
+            assert np.all(np.abs(moved) < 6 * np.sqrt(0.5))
+        res = z - np.stack([np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])], axis=-1)
+        res[:, 1] = _wrap(res[:, 1])
+        inc = np.sum(res ** 2, axis=1) ** 0.75
+        expected = (0.8 * expected[:, 0] + inc if k else inc)[:, None]
+        assert np.allclose(state.costs, expected, rtol=1e-12)
+
+
+def test_estimate_is_the_cost_weighted_mean_and_covariance():
+    spec = make_crpf(particles=200, beta=2.0, delta=0.01)
+    model = range_bearing(1.0, 0.1)
+    rng = generator(0, "crpf-estimate")
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 2)
+    state = spec.update(spec.init(prior, rng), Scan.single(np.array([[111.8, 0.46], [112.0, 0.45]])), model, rng)
+    est = spec.estimate(state)
+    c = state.costs
+    w = (c - c.min(axis=1, keepdims=True) + 0.01) ** -2.0
+    w /= w.sum(axis=1, keepdims=True)
+    mean = np.einsum("bn,bni->bi", w, state.particles)
+    d = state.particles - mean[:, None, :]
+    assert np.allclose(est.mean, mean)
+    assert np.allclose(est.cov, np.einsum("bn,bni,bnj->bij", w, d, d))
+
+
+def test_initial_particles_fill_the_documented_box():
+    spec = make_crpf(particles=20000)
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 1)
+    x = spec.init(prior, generator(0, "box")).particles[0]
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    assert np.allclose(lo, [100.0, 30.0, -2.0, -2.0], atol=0.05) and np.allclose(hi, [120.0, 50.0, 2.0, 2.0], atol=0.05)
+
+
+def test_noise_statistics_are_never_read():
+    # Same h, different Q and R: identical output (the CRPF uses F, h and the residual only).
+    rng = generator(0, "crpf-noise")
+    truth = sample_motion(np.tile([100.0, 50.0, -1.0, 1.0], (4, 1)), random_walk_velocity(2, 1.0, 0.1), 15, rng)
+    scans = HOST.sensor("range-bearing").simulate(truth, rng, sigma_r=1.0, sigma_theta=0.1)
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 4)
+    spec = HOST.filter("crpf-100")
+    a = run_filter(spec, prior, random_walk_velocity(2, 1.0, 0.1), range_bearing(1.0, 0.1), scans, generator(1, "f"))
+    b = run_filter(spec, prior, random_walk_velocity(2, 1.0, 5.0), range_bearing(30.0, 0.9), scans, generator(1, "f"))
+    assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
+
+
+def test_tracks_with_accurate_measurements():
+    rng = generator(0, "crpf-track")
+    B = 20
+    truth = sample_motion(np.tile([100.0, 50.0, -1.0, 1.0], (B, 1)), random_walk_velocity(2, 1.0, 0.01), 40, rng)
+    scans = HOST.sensor("range-bearing").simulate(truth, rng, sigma_r=0.1, sigma_theta=0.01)
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), B)
+    est = run_filter(HOST.filter("crpf-100-arc-k10"), prior, random_walk_velocity(2, 1.0, 0.1),
+                     range_bearing(1.0, 0.1), scans, generator(0, "crpf-track-filter"))
+    err = np.hypot(*(est.mean[..., :2] - truth.states[..., :2]).transpose(2, 0, 1))
+    assert np.median(err[:, -10:]) < 3.0  # started 14 m off
+    assert est.diagnostics["selections"] == B * 39
+
+
+def test_arc_length_cost():
+    model = range_bearing(1.0, 0.1)
+    p = CRPFParams(q=3.0, cost="arc-length")
+    z = np.array([[100.0, 0.5]])
+    x = np.array([[[np.cos(0.45) * 98.0, np.sin(0.45) * 98.0, 0.0, 0.0]]])
+    got = incremental_cost(z, x, model, p)
+    assert np.allclose(got, ((100.0 - 98.0) ** 2 + (100.0 * 0.05) ** 2) ** 1.5)
+    positions = linear_measurement(np.eye(2, 4), np.eye(2))
+    with pytest.raises(InputError, match="one range component"):
+        incremental_cost(z, x, positions, p)
+
+
+def test_missed_detection_moves_the_cloud_blindly():
+    spec = make_crpf(particles=50)
+    model = range_bearing(1.0, 0.1)
+    motion = random_walk_velocity(2, 1.0, 0.1)
+    rng = generator(0, "crpf-blind")
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 2)
+    state = spec.update(spec.init(prior, rng), Scan.single(np.array([[111.8, 0.46]] * 2)), model, rng)
+    pred = spec.predict(state, motion, rng)
+    assert spec.update(pred, Scan.single(np.zeros((2, 2)), present=np.array([False, False])), model, rng) is pred
+    missed = spec.update(pred, Scan.single(np.array([[111.0, 0.45]] * 2), present=np.array([True, False])), model, rng)
+    assert missed.pending.tolist() == [False, True]
+    again = spec.predict(missed, motion, rng)
+    assert spec.diagnostics(again)["blind_moves"] == 1
+    assert np.allclose(again.costs[1], 0.95 * state.costs[1])  # C <- lam C without a measurement
+
+
+def test_parameters_are_validated():
+    for bad in (dict(lam=0.0), dict(q=0.5), dict(beta=0.0), dict(delta=0.0), dict(kappa=-1.0), dict(cost="l1"),
+                dict(particles=0), dict(scale=(1.0, -1.0, 1.0, 1.0))):
+        with pytest.raises(InputError, match="crpf"):
+            make_crpf(**{"particles": 10, **bad})
+
+
+def test_nan_measurement_is_refused():
+    spec = make_crpf(particles=10)
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 2)
+    scan = Scan.single(np.array([[1.0, 0.1], [2.0, 0.2]]))
+    object.__setattr__(scan, "z", np.array([[[1.0, 0.1]], [[np.nan, 0.2]]]))
+    with pytest.raises(InputError, match="not finite"):
+        spec.update(spec.init(prior, generator(0, "nan")), scan, range_bearing(1.0, 0.1), generator(0, "nan"))
+
+
+def test_works_for_any_measurement_model():
+    # The plain cost needs only h and residual: a custom model with a 3-D measurement.
+    model = MeasurementModel("xyz", h=lambda x: np.concatenate([x[..., :2], x[..., 2:3] * 2], axis=-1),
+                             R=np.eye(3))
+    spec = make_crpf(particles=30)
+    prior = Gaussian.broadcast([1.0, 2.0, 0.0, 0.0], np.eye(4), 3)
+    rng = generator(0, "xyz")
+    state = spec.update(spec.init(prior, rng), Scan.single(np.ones((3, 3))), model, rng)
+    assert state.costs.shape == (3, 30) and np.all(np.isfinite(spec.estimate(state).mean))
