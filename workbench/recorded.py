@@ -52,15 +52,20 @@ def _header(path: Path, lineno: int, line: str) -> tuple[list[str], str, str]:
     return names, ("ping" if "ping" in has else "time"), ("xy" if cart else "polar")
 
 
-def _number(path: Path, lineno: int, column: str, text: str) -> float:
+def finite_number(text: str, where: str) -> float:
+    """Parse one CSV field as a finite float; ``where`` (file, line, column) goes into the error."""
     text = text.strip()
     try:
         value = float(text)
     except ValueError:
-        raise InputError(f"{path} line {lineno}, column {column!r}: expected a finite number, got {text!r}") from None
+        raise InputError(f"{where}: expected a finite number, got {text!r}") from None
     if not math.isfinite(value):
-        raise InputError(f"{path} line {lineno}, column {column!r}: expected a finite number, got {text!r}")
+        raise InputError(f"{where}: expected a finite number, got {text!r}")
     return value
+
+
+def _number(path: Path, lineno: int, column: str, text: str) -> float:
+    return finite_number(text, f"{path} line {lineno}, column {column!r}")
 
 
 def load_sonar_csv(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 0.0), pings: int | None = None) -> Scans:

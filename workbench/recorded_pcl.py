@@ -24,13 +24,13 @@ The loader returns :class:`~workbench.types.Scans` with ``z (1, T, M, 2) = [R, R
 from __future__ import annotations
 
 import csv
-import math
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
 from .bistatic import doppler_to_range_rate, range_rate_to_doppler, wavelength
+from .recorded import finite_number
 from .types import InputError, Scans
 
 __all__ = ["COLUMNS", "load_pcl_candidates", "write_pcl_candidates"]
@@ -47,13 +47,7 @@ def _where(path, line: int, column: str | None = None) -> str:
 
 
 def _number(raw: str, path, line: int, column: str) -> float:
-    try:
-        value = float(raw)
-    except ValueError:
-        raise InputError(f"{_where(path, line, column)}: expected a finite number, got {raw!r}") from None
-    if not math.isfinite(value):
-        raise InputError(f"{_where(path, line, column)}: expected a finite number, got {raw!r}")
-    return value
+    return finite_number(raw, _where(path, line, column))
 
 
 def load_pcl_candidates(path, frequency_hz: float = 701e6) -> Scans:
