@@ -1,6 +1,7 @@
 """Paper 001: sonar sensor and clutter, the multi-target tracker, track metrics, recorded CSV data and the
 report recipe's content."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from workbench.rng import generator
 from workbench.specs import RecipeOptions, TaskContext
 from workbench.track_metrics import (continuity, mean_std, pooled_rmse, removal_rate, removal_rate_per_ping,
                                      track_counts, track_truth_match)
-from workbench.tracker import (CONFIRMED, TENTATIVE, TrackerConfig, TrackLog, gated_pairs, greedy_assign,
+from workbench.tracker import (CONFIRMED, TENTATIVE, TrackerConfig, TrackLog, box_pairs, gated_pairs, greedy_assign,
                                join_items, mofn_step, position_covariance, rectangular_pairs, run_tracker,
                                take_items, two_point_prior)
 from workbench.trajectory import Leg, piecewise_trajectory
@@ -116,7 +117,7 @@ def test_greedy_assign_equals_sequential_greedy():
         assert {(int(a), int(b)) for a, b in got} == {(int(a), int(b)) for a, b in ref}
 
 
-def test_gate_dense_and_tree_paths_agree():
+def test_gate_dense_and_grid_paths_agree():
     rng = generator(5, "gate")
     K = 30
     mean = np.column_stack([rng.uniform(20, 230, (K, 2)), rng.normal(0, 3, (K, 2))])
@@ -125,15 +126,43 @@ def test_gate_dense_and_tree_paths_agree():
     pos = rng.uniform(0, 250, (400, 2))
     for model in (range_bearing(0.5, np.deg2rad(1.0)), linear_measurement(np.eye(2, 4), 4 * np.eye(2))):
         zm = model.h(np.column_stack([pos, np.zeros((400, 2))]))
-        dense = gated_pairs(est, pos, zm, model, TrackerConfig())
-        tree = gated_pairs(est, pos, zm, model, TrackerConfig(dense_limit=0))
-        a = sorted(zip(dense[0], dense[1], dense[2].round(10)))
-        b = sorted(zip(tree[0], tree[1], tree[2].round(10)))
-        assert a == b and len(a) > 0
+        for cfg in (TrackerConfig(), TrackerConfig(gate=25.0, gate_sigma=2.0)):
+            dense = gated_pairs(est, pos, zm, model, cfg)
+            grid = gated_pairs(est, pos, zm, model, dataclasses.replace(cfg, dense_limit=0))
+            a = sorted(zip(dense[0], dense[1], dense[2].round(10)))
+            b = sorted(zip(grid[0], grid[1], grid[2].round(10)))
+            assert a == b and len(a) > 0
     i, j, d = rectangular_pairs(pos[:50], pos[50:], 8.0)
     i2, j2, _ = rectangular_pairs(pos[:50], pos[50:], 8.0, dense_limit=0)
     assert sorted(zip(i, j)) == sorted(zip(i2, j2))
     assert np.all(np.max(np.abs(pos[:50][i] - pos[50:][j]), axis=1) <= 8.0)
+
+
+def test_box_pairs_equal_brute_force():
+    rng = generator(7, "box")
+    for trial in range(20):
+        na, nb = rng.integers(0, 300), rng.integers(0, 300)
+        a, b = rng.uniform(-50, 400, (na, 2)), rng.uniform(-50, 400, (nb, 2))
+        half = rng.uniform(0.5, 40.0, (na, 2)) if trial % 2 else float(rng.uniform(1, 20))
+        i, j = box_pairs(a, b, half, cell=None if trial % 3 else float(rng.uniform(0.3, 60)))
+        h = np.broadcast_to(np.asarray(half, float), (na, 2)) if np.ndim(half) == 0 else half
+        ref = np.nonzero(np.all(np.abs(a[:, None] - b[None]) <= h[:, None], axis=-1))
+        assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(ref[0].tolist(), ref[1].tolist()))
+
+
+def test_gate_sigma_uses_the_stated_position_accuracy():
+    # linear position model: gating with gate_sigma = s is gating with R = s^2 I
+    est = Gaussian(np.array([[0.0, 0.0, 1.0, 0.0]]), np.diag([1.0, 1.0, 1.0, 1.0])[None])
+    pos = np.array([[3.0, 0.0], [0.0, 4.5], [6.0, 0.0]])
+    small = linear_measurement(np.eye(2, 4), 0.25 * np.eye(2))
+    big = linear_measurement(np.eye(2, 4), 4.0 * np.eye(2))
+    _, _, d_small = gated_pairs(est, pos, pos, small, TrackerConfig(gate=1e9, gate_sigma=2.0))
+    _, _, d_big = gated_pairs(est, pos, pos, big, TrackerConfig(gate=1e9))
+    assert np.allclose(d_small, d_big)
+    # P = I, R_g = 4 I: S = 5 I;  d2 = |z - H x-|^2 / 5
+    assert np.allclose(d_small, np.sum((pos - [0.0, 0.0]) ** 2, axis=1) / 5.0)
+    with pytest.raises(InputError, match="gate_sigma"):
+        TrackerConfig(gate_sigma=0.0)
 
 
 def test_two_point_prior():

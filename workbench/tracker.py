@@ -35,12 +35,10 @@ axis is the batch size as batched (the project's batch-first rule).
 from __future__ import annotations
 
 import dataclasses
-import itertools
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .models import MeasurementModel, MotionModel
 from .rng import generator
@@ -58,6 +56,8 @@ __all__ = [
     "measurement_view",
     "position_covariance",
     "two_point_prior",
+    "box_pairs",
+    "gate_covariance",
     "gated_pairs",
     "greedy_assign",
     "rectangular_pairs",
@@ -82,7 +82,10 @@ class TrackerConfig:
     confirm_hits, confirm_window : M-of-N confirmation (3 of 5).
     delete_misses : consecutive misses that delete a track (3).
     sigma_v, sigma_c : speed (units/ping) and course (rad) standard deviations of the two-point prior.
-    dense_limit : above this many (track, detection) pairs, candidate pairs come from a k-d tree first.
+    dense_limit : above this many (track, detection) pairs, candidate pairs come from a spatial grid first.
+    gate_sigma : ``None`` (default): gate with the filter's ``R``.  A number ``s``: gate with the position
+        accuracy ``s`` instead, ``R_g = J_p (s^2 I) J_p^T`` (``J_p = dh/dp`` at the prediction), i.e.
+        ``S_g = J P- J^T + R_g``; the filter's own update still uses its ``R``.
     """
 
     gate: float = 9.21
@@ -93,8 +96,11 @@ class TrackerConfig:
     sigma_v: float = 1.0
     sigma_c: float = 1.0
     dense_limit: int = 250_000
+    gate_sigma: float | None = None
 
     def __post_init__(self) -> None:
+        if self.gate_sigma is not None and not self.gate_sigma > 0:
+            raise InputError(f"TrackerConfig: gate_sigma must be None or > 0, got {self.gate_sigma}")
         if not (self.gate > 0 and self.v_max > 0 and self.sigma_v >= 0 and self.sigma_c >= 0):
             raise InputError(f"TrackerConfig: need gate, v_max > 0 and sigma_v, sigma_c >= 0; got {self}")
         if not (1 <= self.confirm_hits <= self.confirm_window <= 30 and self.delete_misses >= 1):
@@ -267,22 +273,94 @@ def _whiten(chol: np.ndarray, nu: np.ndarray) -> np.ndarray:
     return np.stack([w1, w2], axis=-1)
 
 
+def box_pairs(a: np.ndarray, b: np.ndarray, half, cell: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs ``(i, j)`` with ``|a_i - b_j| <= half_i`` on both axes, by spatial grid hashing.
+
+    ``b`` is binned into square cells of side ``cell`` (default: the median box width, so a box covers a
+    few cells); each ``a_i`` visits the cells its box overlaps, and the candidates of those cells are
+    found with ``searchsorted`` on the sorted cell keys.  Fully vectorised, no ``(Na, Nb)`` matrix and no
+    Python loop over points; the cost is the number of (point, visited cell) and candidate pairs.
+
+    Shapes: ``a (Na, 2)``, ``b (Nb, 2)``, ``half`` scalar, ``(Na,)`` or ``(Na, 2)`` -> ``i, j (P,)``, sorted
+    by ``i``.
+    """
+    a = np.asarray(a, dtype=float).reshape(-1, 2)
+    b = np.asarray(b, dtype=float).reshape(-1, 2)
+    e = np.zeros(0, dtype=np.intp)
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        return e, e
+    half = np.asarray(half, dtype=float)
+    half = np.broadcast_to(half[..., None] if half.ndim == 1 else half, a.shape)
+    if cell is None:
+        cell = float(np.median(2.0 * half))
+    lo = b.min(axis=0)
+    extent = b.max(axis=0) - lo
+    cell = max(float(cell), float(extent.max()) / 4096.0, 1e-9)
+    nb = np.floor((b - lo) / cell).astype(np.int64)
+    ny = int(nb[:, 1].max()) + 1
+    nx = int(nb[:, 0].max()) + 1
+    keys = nb[:, 0] * ny + nb[:, 1]
+    order = np.argsort(keys, kind="stable")
+    skeys = keys[order]
+    c0 = np.floor((a - half - lo) / cell).astype(np.int64)
+    c1 = np.floor((a + half - lo) / cell).astype(np.int64)
+    c0 = np.maximum(c0, 0)
+    c1 = np.minimum(c1, [nx - 1, ny - 1])
+    ncx, ncy = np.maximum(c1[:, 0] - c0[:, 0] + 1, 0), np.maximum(c1[:, 1] - c0[:, 1] + 1, 0)
+    ncell = ncx * ncy
+    total = int(ncell.sum())
+    if total == 0:
+        return e, e
+    # (point, visited cell) pairs
+    rep = np.repeat(np.arange(a.shape[0]), ncell)
+    local = np.arange(total) - np.repeat(np.cumsum(ncell) - ncell, ncell)
+    cx = c0[rep, 0] + local // ncy[rep]
+    cy = c0[rep, 1] + local % ncy[rep]
+    ckey = cx * ny + cy
+    first = np.searchsorted(skeys, ckey, side="left")
+    count = np.searchsorted(skeys, ckey, side="right") - first
+    n = int(count.sum())
+    if n == 0:
+        return e, e
+    # (point, candidate) pairs
+    i = np.repeat(rep, count)
+    j = order[np.repeat(first, count) + np.arange(n) - np.repeat(np.cumsum(count) - count, count)]
+    inside = np.all(np.abs(a[i] - b[j]) <= half[i], axis=1)
+    return i[inside], j[inside]
+
+
+def gate_covariance(est: Gaussian, model: MeasurementModel, config: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Gate innovation covariance ``S = J P- J^T + R_g`` and the Jacobian ``J`` at the prediction.
+
+    ``R_g = R`` (the filter's), or ``J_p (gate_sigma^2 I) J_p^T`` with ``J_p = dh/dp`` when
+    ``config.gate_sigma`` is set.  Shapes: ``(K, m, m)``, ``(K, m, n)``.
+    """
+    J = _jacobian(model, est.mean)
+    if config.gate_sigma is None:
+        R = model.R
+    else:
+        jp = J[:, :, :2]
+        R = config.gate_sigma**2 * (jp @ np.swapaxes(jp, -1, -2))  # R_g = J_p (s^2 I) J_p^T
+    S = J @ est.cov @ np.swapaxes(J, -1, -2) + R  # S = J P- J^T + R_g
+    return 0.5 * (S + np.swapaxes(S, -1, -2)), J
+
+
 def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: MeasurementModel,
                 config: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """All (track, detection) pairs with ``d2 <= gate``: ``rows, cols, d2`` (each ``(P,)``).
 
-    ``d2 = nu^T S^-1 nu``, ``nu = wrap(z - h(x-))``, ``S = J P- J^T + R``.  Dense over all pairs when
-    ``K M <= dense_limit``; otherwise candidates come from a k-d tree over the Cartesian positions with
-    a radius 1.5x the gate ellipse's largest semi-axis (in position space) plus one unit.
+    ``d2 = nu^T S^-1 nu``, ``nu = wrap(z - h(x-))``, ``S`` from :func:`gate_covariance`.  Dense over all
+    pairs when ``K M <= dense_limit``; otherwise candidates come from a spatial grid
+    (:func:`box_pairs`) over the Cartesian positions: each track's box is the bounding box of its gate
+    ellipse in position space (covariance ``A S A^T``, ``A = (dh/dp)^-1``), widened 1.5x plus one unit
+    for the linearisation of a nonlinear ``h``; ``d2`` is then computed for the candidates only.
     """
     K, M = est.batch, zm.shape[0]
     if K == 0 or M == 0:
         e = np.zeros(0, dtype=np.intp)
         return e, e, np.zeros(0)
     zhat = model.h(est.mean)
-    J = _jacobian(model, est.mean)
-    S = J @ est.cov @ np.swapaxes(J, -1, -2) + model.R  # S = J P- J^T + R
-    S = 0.5 * (S + np.swapaxes(S, -1, -2))
+    S, J = gate_covariance(est, model, config)
     chol = np.linalg.cholesky(S)
     if K * M <= config.dense_limit:
         nu = model.residual(zm[None, :, :], zhat[:, None, :])  # (K, M, m)
@@ -291,19 +369,15 @@ def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: Mea
         rows, cols = np.nonzero(d2 <= config.gate)
         return rows, cols, d2[rows, cols]
     # Sparse path: the gate ellipse in position space has covariance A S A^T (A = (dh/dp)^-1).
-    pos = est.mean[:, :2]
     jp = J[:, :, :2]
     x = np.linalg.solve(jp, S)
     sc = np.linalg.solve(jp, np.swapaxes(x, -1, -2))
-    lam = np.linalg.eigvalsh(0.5 * (sc + np.swapaxes(sc, -1, -2)))[:, -1]
-    radius = 1.5 * np.sqrt(config.gate * np.maximum(lam, 0.0)) + 1.0
-    lists = cKDTree(positions).query_ball_point(pos, radius)
-    lens = np.fromiter((len(x) for x in lists), dtype=np.intp, count=K)
-    if lens.sum() == 0:
+    var = np.maximum(np.stack([sc[:, 0, 0], sc[:, 1, 1]], axis=1), 0.0)
+    half = 1.5 * np.sqrt(config.gate * var) + 1.0  # bounding box of d2 <= gate, widened
+    rows, cols = box_pairs(est.mean[:, :2], positions, half)
+    if rows.size == 0:
         e = np.zeros(0, dtype=np.intp)
         return e, e, np.zeros(0)
-    rows = np.repeat(np.arange(K), lens)
-    cols = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.intp, count=int(lens.sum()))
     nu = model.residual(zm[cols], zhat[rows])
     w = _whiten(chol[rows], nu)
     d2 = np.einsum("pi,pi->p", w, w)
@@ -341,7 +415,8 @@ def greedy_assign(rows: np.ndarray, cols: np.ndarray, cost: np.ndarray) -> tuple
 
 
 def rectangular_pairs(a: np.ndarray, b: np.ndarray, box: float, dense_limit: int = 250_000):
-    """Pairs ``(i, j)`` with ``|a_i - b_j|_inf <= box`` and their Chebyshev distances."""
+    """Pairs ``(i, j)`` with ``|a_i - b_j|_inf <= box`` and their Chebyshev distances (dense below
+    ``dense_limit`` pairs, else the spatial grid of :func:`box_pairs`)."""
     if a.shape[0] == 0 or b.shape[0] == 0:
         e = np.zeros(0, dtype=np.intp)
         return e, e, np.zeros(0)
@@ -349,13 +424,7 @@ def rectangular_pairs(a: np.ndarray, b: np.ndarray, box: float, dense_limit: int
         d = np.max(np.abs(a[:, None, :] - b[None, :, :]), axis=-1)
         i, j = np.nonzero(d <= box)
         return i, j, d[i, j]
-    lists = cKDTree(b).query_ball_point(a, box, p=np.inf)
-    lens = np.fromiter((len(x) for x in lists), dtype=np.intp, count=a.shape[0])
-    if lens.sum() == 0:
-        e = np.zeros(0, dtype=np.intp)
-        return e, e, np.zeros(0)
-    i = np.repeat(np.arange(a.shape[0]), lens)
-    j = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.intp, count=int(lens.sum()))
+    i, j = box_pairs(a, b, box, cell=max(2.0 * box, 1e-9))
     return i, j, np.max(np.abs(a[i] - b[j]), axis=-1)
 
 
