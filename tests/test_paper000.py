@@ -11,7 +11,8 @@ from workbench.radar import (RadarParameters, angle_accuracy, cartesian_to_spher
                              detection_probability, estimation_error, from_db, gate, log_detection_probability,
                              lost_track, marcum_q, measurement_error, north_detection_probability,
                              position_radial_velocity, position_radial_velocity_jacobian, radial_velocity,
-                             range_accuracy, spherical_to_cartesian, weighted_mean_measurement)
+                             range_accuracy, spherical_to_cartesian, weighted_mean_measurement,
+                             position_sigma, pseudo_measurement_covariance, whitened_model)
 from workbench.recipes import paper000
 from workbench.resampling import systematic_resample
 from workbench.rng import generator
@@ -169,6 +170,51 @@ def test_weighted_mean_measurement_eqs_9_to_11():
     np.testing.assert_allclose(out.z[1, 0, 0], (w[0] * (1e4 + 300) + w[1] * (1e4 - 300)) / w.sum())
     single = weighted_mean_measurement(Scan(z[:1, :1], valid[:1, :1], snr=snr[:1, :1]), pred[:1])
     np.testing.assert_allclose(single.z[0, 0], z[0, 0])
+
+
+def test_pseudo_measurement_covariance_is_the_pda_like_r_bar():
+    pred = np.array([[3e4, 0.0, 0.0, -100.0, 0.0, 0.0]] * 3)
+    z = np.array([[[3e4 + 300, 0.0, 0.0, -100.0], [3e4 - 300, 0.0, 0.0, -100.0]]] * 3)
+    z[2, 0, 3] = 20.0  # a lone detection with a Doppler 120 m/s off the prediction
+    snr = np.array([[8.0, 8.0], [8.0, 8.0], [8.0, 8.0]])
+    valid = np.array([[True, True], [False, False], [True, False]])
+    z_bar, r_bar = pseudo_measurement_covariance(Scan(z, valid, snr=snr), pred, 500.0, 15.0, 1e-6, 2.0,
+                                                 doppler_mismatch=True)
+    var_p = position_sigma(8.0, np.linalg.norm(z[0, :, :3], axis=-1)) ** 2
+    # two symmetric detections of equal weight: sum w R_m + spread (300 m along x)
+    want = np.diag([var_p.mean() + 300.0**2, var_p.mean(), var_p.mean(), 2.0**2])
+    np.testing.assert_allclose(r_bar[0], want, rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(r_bar[1], np.eye(4))  # no detection: identity, ignored by the filter
+    # the lone detection: its own accuracy, and the Doppler mismatch to the prediction in the vr variance
+    var_2 = position_sigma(8.0, np.linalg.norm(z[2, 0, :3])) ** 2
+    np.testing.assert_allclose(r_bar[2], np.diag([var_2] * 3 + [2.0**2 + 120.0**2]), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(z_bar.z[2, 0], z[2, 0])
+
+
+def test_whitened_model_gives_the_ekf_update_with_r_bar(host):
+    model = host.sensor("lband-radar").measurement_model()
+    rng = np.random.default_rng(3)
+    mean = np.array([[3e4, 1e3, 2e3, -200.0, 10.0, 0.0], [2e4, -5e3, 1e3, 50.0, 150.0, -5.0]])
+    a = rng.normal(size=(2, 6, 6))
+    cov = a @ np.swapaxes(a, 1, 2) * 100.0 + np.eye(6) * 1e4
+    z = model.h(mean) + rng.normal(size=(2, 4)) * [300.0, 300.0, 300.0, 5.0]
+    b = rng.normal(size=(2, 4, 4))
+    r_bar = b @ np.swapaxes(b, 1, 2) * 1e3 + np.diag([1e5, 1e5, 1e5, 10.0])
+    scan, white = whitened_model(model, Scan.single(z), r_bar)
+    out = host.filter("ekf").update(Gaussian(mean, cov), scan, white, None)
+    for i in range(2):  # the textbook EKF update with R_bar, item by item
+        H = model.jacobian(mean[i:i + 1])[0]
+        S = H @ cov[i] @ H.T + r_bar[i]
+        K = cov[i] @ H.T @ np.linalg.inv(S)
+        np.testing.assert_allclose(out.mean[i], mean[i] + K @ (z[i] - model.h(mean[i])), rtol=1e-9)
+        np.testing.assert_allclose(out.cov[i], (np.eye(6) - K @ H) @ cov[i], rtol=1e-6, atol=1e-6)
+    # the particle likelihood is N(z; h(x), R_bar) up to a constant per item
+    particles = mean[:, None, :] + rng.normal(size=(2, 5, 6)) * 100.0
+    nu = scan.z[:, 0][:, None, :] - white.h(particles)
+    got = -0.5 * np.sum(nu**2, axis=-1)
+    d = z[:, None, :] - model.h(particles)
+    want = -0.5 * np.einsum("bni,bni->bn", d, np.linalg.solve(r_bar[:, None], d[..., None])[..., 0])
+    np.testing.assert_allclose(got, want, rtol=1e-9)
 
 
 def test_error_metrics_and_lost_flag():

@@ -49,6 +49,8 @@ __all__ = [
     "clutter_pass_fraction",
     "gate",
     "weighted_mean_measurement",
+    "pseudo_measurement_covariance",
+    "whitened_model",
     "measurement_error",
     "estimation_error",
     "lost_track",
@@ -302,6 +304,70 @@ def weighted_mean_measurement(scan: Scan, predicted: np.ndarray, sigma_g: float 
     return Scan.single(z_bar, present, time=scan.time)
 
 
+def pseudo_measurement_covariance(scan: Scan, predicted: np.ndarray, sigma_g: float = 500.0, sigma_vr: float = 15.0,
+                                  pfa: float = 1e-6, sigma_vr_meas: float = 2.0,
+                                  radar: RadarParameters = RadarParameters(),
+                                  doppler_mismatch: bool = False) -> tuple[Scan, np.ndarray]:
+    """The pseudo-measurement of eqs 9-11 with the PDA-like noise ``R_bar`` of the brief's alternative.
+
+    ``R_bar = sum_m w~_m R_m + sum_m w~_m (z_m - z_bar)(z_m - z_bar)^T`` with
+    ``R_m = diag(sigma_p,m^2, sigma_p,m^2, sigma_p,m^2, sigma_vr_meas^2)``, ``sigma_p,m`` from the detection's
+    own SNR and range (:func:`position_sigma`, the same accuracy as method C's kernel).  An item without
+    detections gets the identity (the filter ignores it).
+
+    Shapes
+    ------
+    scan.z : (B, M, 4), scan.snr : (B, M) dB; predicted : (B, 6); returns (Scan (B, 1, 4), R_bar (B, 4, 4))
+    """
+    z_bar = weighted_mean_measurement(scan, predicted, sigma_g, sigma_vr, pfa)
+    B = scan.batch
+    R_bar = np.broadcast_to(np.eye(4), (B, 4, 4)).copy()
+    if scan.z.shape[1] == 0:
+        return z_bar, R_bar
+    r2 = np.sum((scan.z[..., :3] - predicted[:, None, :3]) ** 2, axis=-1)
+    dv = scan.z[..., 3] - radial_velocity(predicted)[:, None]
+    snr_db = np.nan_to_num(scan.snr)
+    log_w = log_detection_probability(from_db(snr_db), pfa) - 0.5 * r2 / sigma_g**2 - 0.5 * dv**2 / sigma_vr**2
+    log_w = np.where(scan.valid, log_w, -np.inf)
+    total = logsumexp(log_w, axis=1, keepdims=True)
+    w = np.where(scan.valid, np.exp(log_w - np.where(np.isfinite(total), total, 0.0)), 0.0)
+    # sum_m w~_m R_m: isotropic position variance at each detection's SNR, radial-velocity noise
+    var_p = position_sigma(np.where(scan.valid, snr_db, 10.0), np.linalg.norm(scan.z[..., :3], axis=-1), radar) ** 2
+    meas = np.zeros((B, 4, 4))
+    meas[:, [0, 1, 2], [0, 1, 2]] = np.einsum("bm,bm->b", w, var_p)[:, None]
+    meas[:, 3, 3] = sigma_vr_meas**2
+    # + sum_m w~_m (z_m - z_bar)(z_m - z_bar)^T  (spread of the gated detections)
+    d = scan.z - z_bar.z[:, :1, :]
+    spread = np.einsum("bm,bmi,bmj->bij", w, d, d)
+    if doppler_mismatch:
+        spread[:, 3, 3] += (z_bar.z[:, 0, 3] - radial_velocity(predicted)) ** 2
+    present = z_bar.valid[:, 0]
+    R_bar[present] = (meas + spread)[present]
+    return z_bar, R_bar
+
+
+def whitened_model(model: MeasurementModel, z_bar: Scan, R_bar: np.ndarray) -> tuple[Scan, MeasurementModel]:
+    """A measurement with its own noise ``R_bar (B, m, m)`` per batch item, for filters that take one ``R``.
+
+    With ``R_bar = L L^T``: ``z' = L^-1 z``, ``h'(x) = L^-1 h(x)``, ``H' = L^-1 H`` and ``R' = I``, which gives
+    the same likelihood ``N(z; h(x), R_bar)`` and the same (E)KF update.  ``model`` must have no angular
+    components.  Shapes: z_bar (B, 1, m); R_bar (B, m, m).
+    """
+    if any(model.angular):
+        raise InputError("whitened_model: angular measurement components are not supported")
+    L_inv = np.linalg.inv(np.linalg.cholesky(R_bar))
+
+    def h(x):
+        y = model.h(x)
+        return np.einsum("bij,bj->bi", L_inv, y) if y.ndim == 2 else np.einsum("bij,bnj->bni", L_inv, y)
+
+    jac = None if model.jacobian is None else (lambda x: L_inv @ model.jacobian(x))
+    white = MeasurementModel(name=f"{model.name}-whitened", h=h, R=np.eye(model.dim), jacobian=jac,
+                             params=model.params)
+    z = np.einsum("bij,bj->bi", L_inv, z_bar.z[:, 0])
+    return Scan.single(z, z_bar.valid[:, 0], time=z_bar.time), white
+
+
 # -- metrics (eqs 19-21) ------------------------------------------------------------------------------
 
 
@@ -362,9 +428,12 @@ def run_gated(spec: FilterSpec, prior: Gaussian, motion: MotionModel, model: Mea
               pseudo: Callable[[Scan, np.ndarray], Scan] | None = None, record_item: int = 0) -> GatedRun:
     """Track through ``scans`` with a gate of ``radius`` around each predicted position.
 
-    Per scan: predict (from scan 1 on), gate around the predicted position, then update with the
+    Per scan: predict (from scan 1 on), gate around the predicted position ``F s_hat_{k-1|k-1}`` (the
+    filter's estimate is taken once per scan, after the update), then update with the
     whole gated scan when the filter has the ``multi_measurement`` capability (method C), else with
-    ``pseudo(gated, predicted_state)`` (methods A and B: :func:`weighted_mean_measurement`).
+    ``pseudo(gated, predicted_state)`` (methods A and B: :func:`weighted_mean_measurement`), which returns
+    the pseudo-measurement Scan or ``(Scan, MeasurementModel)`` when its noise changes per scan
+    (:func:`whitened_model`).
     ``truth (B, T, >=3)`` only feeds the measurement-error metric (eq 19); the filter never sees it.
     The gated detections of batch item ``record_item`` are kept (with their origin) for plotting.
     """
@@ -379,10 +448,14 @@ def run_gated(spec: FilterSpec, prior: Gaussian, motion: MotionModel, model: Mea
     points = []
     start = time.perf_counter()
     state = spec.init(prior, rng)
+    previous = spec.estimate(state).mean
     for k in range(T):
         if k > 0:
             state = spec.predict(state, motion, rng)
-        pred[:, k] = spec.estimate(state).mean
+            # p_hat_{k|k-1} = F s_hat_{k-1|k-1}: the motion model's predicted mean (for a particle cloud the
+            # expectation of its predicted mean), so the estimate is taken once per scan
+            previous = previous @ motion.F.T
+        pred[:, k] = previous
         gated = gate(scans.scan(k), pred[:, k, :3], radius)
         count[:, k] = gated.counts
         row = gated.valid[record_item]
@@ -390,9 +463,13 @@ def run_gated(spec: FilterSpec, prior: Gaussian, motion: MotionModel, model: Mea
         points.append(np.column_stack([np.full(int(row.sum()), k), gated.z[record_item, row], origin]))
         if truth is not None:
             m_err[:, k] = measurement_error(gated, truth[:, k, :3])
-        step = gated.for_filter() if multi else pseudo(gated.for_filter(), pred[:, k])
-        state = spec.update(state, step, model, rng)
-        mean[:, k] = spec.estimate(state).mean
+        step, step_model = gated.for_filter(), model
+        if not multi:
+            step = pseudo(gated.for_filter(), pred[:, k])
+            if isinstance(step, tuple):  # (pseudo-measurement, its per-scan model)
+                step, step_model = step
+        state = spec.update(state, step, step_model, rng)
+        previous = mean[:, k] = spec.estimate(state).mean
     seconds = time.perf_counter() - start
     diag = dict(spec.diagnostics(state)) if spec.diagnostics is not None else {}
     return GatedRun(mean, pred, count, m_err, seconds, diag, np.concatenate(points, axis=0))

@@ -9,9 +9,10 @@ Cartesian, and carries the radial velocity ``vr = (p . v) / |p|`` (positive rece
 
 Measurement vector ``z = [x, y, z, vr]``; ``Scans.snr`` holds the measured SNR (dB) and
 ``Scans.doppler`` the radial velocity again.  The published measurement model is
-``h(s) = [x, y, z, (p . v)/|p|]`` with its Jacobian and ``R = diag(s_p^2, s_p^2, s_p^2, s_vr^2)``, the
-pseudo-measurement noise of methods A and B; its ``params`` carry the radar parameters for filters
-that weight detections by their own SNR (method C).
+``h(s) = [x, y, z, (p . v)/|p|]`` with its Jacobian and a fixed ``R = diag(s_p^2, s_p^2, s_p^2, s_vr^2)``
+(the brief's default pseudo-measurement noise; the paper-000 recipe replaces it per scan by the PDA-like
+``R_bar`` of :func:`workbench.radar.pseudo_measurement_covariance`); its ``params`` carry the radar
+parameters for filters that weight detections by their own SNR (method C and ``R_bar``).
 """
 
 from __future__ import annotations
