@@ -85,3 +85,22 @@ def test_cli_lists_a_working_third_party_filter(tmp_path):
                          text=True, check=True)
     line = next(l for l in out.stdout.splitlines() if " noop " in l)
     assert "fake-plugin" in line and "0.3" in line and line.rstrip().endswith("ok")
+
+
+def test_example_plugin_once_installed_is_listed_and_joins_a_report(tmp_path):
+    """The README's test command installs examples/workbench-alpha-beta like any third-party package."""
+    try:
+        metadata.distribution("workbench-alpha-beta")
+    except metadata.PackageNotFoundError:
+        pytest.skip("the example plugin is not installed (pip install ./examples/workbench-alpha-beta)")
+    out = subprocess.run([sys.executable, "-m", "workbench.cli", "plugins"], capture_output=True, text=True,
+                         check=True)
+    line = next(l for l in out.stdout.splitlines() if " alpha-beta " in l)
+    assert "workbench-alpha-beta" in line and line.rstrip().endswith("ok")
+    from fixtures import demo_plugin
+
+    from workbench.report.engine import run_report
+
+    host = load_host(extra_plugins=[("demo", demo_plugin)])
+    report = run_report(host, tmp_path, papers=["demo"], filters="+alpha-beta", progress=False)
+    assert "alpha-beta" in report.papers[0].filters and not report.papers[0].errors
