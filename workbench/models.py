@@ -166,7 +166,18 @@ class MeasurementModel:
 
     def residual(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """``a - b`` with angular components wrapped to (-pi, pi]."""
-        d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+        a = np.asarray(a, dtype=float)
+        b = np.asarray(b, dtype=float)
+        shape = None if a.shape == b.shape or a.size + b.size < 8192 else np.broadcast_shapes(a.shape, b.shape)
+        if shape is None or shape[-1:] != (len(self.angular),):
+            d = a - b
+        else:
+            # large and broadcast (e.g. (B, 1, m) - (B, N, m)): one component at a time, so that NumPy's
+            # inner loop runs over the long axes instead of over the m components
+            a, b = np.broadcast_to(a, shape), np.broadcast_to(b, shape)
+            d = np.empty(shape)
+            for i in range(shape[-1]):
+                np.subtract(a[..., i], b[..., i], out=d[..., i])
         for i, is_angle in enumerate(self.angular):
             if is_angle:
                 d[..., i] = wrap_angle(d[..., i])
@@ -230,7 +241,9 @@ def range_bearing(sigma_r: float, sigma_theta: float, sensor=(0.0, 0.0)) -> Meas
     def h(x: np.ndarray) -> np.ndarray:
         dx = x[..., 0] - sx
         dy = x[..., 1] - sy
-        return np.stack([np.hypot(dx, dy), np.arctan2(dy, dx)], axis=-1)
+        # sqrt(dx^2 + dy^2) rather than np.hypot: no overflow at tracking ranges, and it is the hot path
+        # of every particle filter on this model
+        return np.stack([np.sqrt(dx * dx + dy * dy), np.arctan2(dy, dx)], axis=-1)
 
     return MeasurementModel(
         name="range-bearing",

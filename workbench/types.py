@@ -96,6 +96,10 @@ class Gaussian:
                    np.broadcast_to(cov, (batch, *cov.shape)).copy())
 
 
+#: Particle sets up to this size get their moments from BLAS products in :meth:`Particles.to_gaussian`.
+BLAS_MOMENT_PARTICLES = 4096
+
+
 @dataclass(frozen=True)
 class Particles:
     """A batch of weighted particle sets.
@@ -122,12 +126,30 @@ class Particles:
         return np.exp(self.log_weights)
 
     def to_gaussian(self) -> Gaussian:
-        """Weighted mean and covariance of each particle set."""
+        """Weighted mean and covariance of each particle set.
+
+        Up to :data:`BLAS_MOMENT_PARTICLES` particles per set: two matrix products.  Beyond that, one
+        weighted dot product over the particles per component (pair), for any memory layout: measured
+        4x faster at N = 10^5 than the products with their ``(B, N, n)`` temporaries.
+        """
         w = self.weights
-        mean = np.matmul(w[:, None, :], self.particles)[:, 0, :]  # sum_i w_i x_i
-        d = self.particles - mean[:, None, :]
-        cov = np.matmul(np.swapaxes(d * w[..., None], 1, 2), d)  # sum_i w_i d_i d_i^T (one BLAS call)
-        return Gaussian(mean, 0.5 * (cov + np.swapaxes(cov, 1, 2)))
+        x = self.particles
+        B, N, n = x.shape
+        if N <= BLAS_MOMENT_PARTICLES:
+            mean = np.matmul(w[:, None, :], x)[:, 0, :]  # sum_i w_i x_i
+            d = x - mean[:, None, :]
+            cov = np.matmul(np.swapaxes(d * w[..., None], 1, 2), d)  # sum_i w_i d_i d_i^T (one BLAS call)
+            return Gaussian(mean, 0.5 * (cov + np.swapaxes(cov, 1, 2)))
+        mean = np.empty((B, n))
+        for j in range(n):
+            mean[:, j] = np.einsum("bn,bn->b", w, x[..., j])  # sum_i w_i x_ij
+        d = [x[..., j] - mean[:, j, None] for j in range(n)]
+        cov = np.empty((B, n, n))
+        for i in range(n):
+            wd = w * d[i]
+            for j in range(i, n):
+                cov[:, i, j] = cov[:, j, i] = np.einsum("bn,bn->b", wd, d[j])  # sum_k w_k d_ki d_kj
+        return Gaussian(mean, cov)
 
 
 def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):
