@@ -60,6 +60,21 @@ def run_group(name: str, quick: bool, timeout: float = 1800) -> dict:
     return out
 
 
+def flatten(prefix: str, value) -> list[tuple[str, object]]:
+    """Nested figures as ``(dotted.name, value)`` rows; a list of dicts is indexed ``name[i]``."""
+    if isinstance(value, dict):
+        rows = []
+        for k, v in value.items():
+            rows += flatten(f"{prefix}.{k}", v)
+        return rows
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        rows = []
+        for i, v in enumerate(value):
+            rows += flatten(f"{prefix}[{i}]", v)
+        return rows
+    return [(prefix, value)]
+
+
 def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.4g}"
@@ -79,11 +94,11 @@ def run_bench(host, quick: bool, json_path: Path, only: list[str] | None = None)
     for g in groups:
         print(f"running benchmark group {g} ({'quick' if quick else 'full'})...", file=sys.stderr, flush=True)
         results[g] = run_group(g, quick)
-    width = max([len(f"{g}.{k}") for g, r in results.items() for k in r] + [10])
+    rows = [row for g, r in results.items() for row in flatten(g, r)]
+    width = max([len(name) for name, _ in rows] + [10])
     print(f"{'figure'.ljust(width)}  value")
-    for g, r in results.items():
-        for k, v in r.items():
-            print(f"{(g + '.' + k).ljust(width)}  {_fmt(v)}")
+    for name, value in rows:
+        print(f"{name.ljust(width)}  {_fmt(value)}")
     json_path = Path(json_path)
     json_path.write_text(json.dumps({"quick": quick, "groups": results}, indent=2, default=str))
     print(f"written: {json_path}")
