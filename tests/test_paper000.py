@@ -289,6 +289,95 @@ def test_tbd_filter_backends_agree(host):
     np.testing.assert_allclose(outs[2], outs[0], rtol=1e-10, atol=1e-10)
 
 
+# -- manoeuvre handling shared by methods A, B and C ---------------------------------------------------------
+
+
+def test_jump_markov_prediction_switches_modes_and_scales_the_noise():
+    from workbench_filters.particle import ParticleState
+    from workbench_filters.tbd import ModeState, predict_jump_markov
+
+    motion = constant_velocity(3, 1.0, (10.0, 10.0, 5.0))
+    B, N = 2, 20000
+    x = np.zeros((B, N, 6))
+    mode = np.zeros((B, N))
+    mode[:, : N // 2] = 1.0
+    state = ModeState(Particles(x, np.full((B, N), -np.log(N))), 0, 0, mode)
+    out = predict_jump_markov(state, motion, generator(0, "jm"), switch_on=0.05, switch_off=0.2, scale=4.0)
+    new = out.mode
+    # quiet -> manoeuvre with 0.05, manoeuvre -> quiet with 0.2 (binomial, 5 standard errors)
+    for old, want in ((0.0, 0.05), (1.0, 0.8)):
+        frac = new[mode == old].mean()
+        assert abs(frac - want) < 5 * np.sqrt(want * (1 - want) / (B * N / 2))
+    # the noise: W in the quiet mode, scale^2 W in the manoeuvre mode (sample covariance, 10 % band)
+    for m, factor in ((0.0, 1.0), (1.0, 16.0)):
+        d = out.cloud.particles[new == m]
+        np.testing.assert_allclose(np.cov(d.T), factor * motion.Q, rtol=0.1, atol=0.02 * factor * motion.Q.max())
+    # a plain particle state starts quiet
+    plain = ParticleState(Particles(x, np.full((B, N), -np.log(N))))
+    assert predict_jump_markov(plain, motion, generator(1), switch_on=0.0, switch_off=0.2, scale=4.0).mode.sum() == 0
+
+
+def test_resampling_carries_each_particle_s_mode(host):
+    from workbench_filters.tbd import ModeState, make_sir_jm
+
+    model = host.sensor("lband-radar").measurement_model()
+    rng = np.random.default_rng(5)
+    x = np.array([3e4, 1e3, 2e3, -200.0, 0.0, 0.0]) + rng.normal(size=(2, 500, 6)) * [400, 400, 300, 30, 30, 10]
+    mode = (x[..., 0] > 3e4).astype(float)  # a function of the particle, so it must survive resampling with it
+    state = ModeState(Particles(x, np.full((2, 500), -np.log(500))), 0, 0, mode)
+    z = model.h(np.array([[3.03e4, 1e3, 2e3, -200.0, 0.0, 0.0]] * 2))
+    spec = make_sir_jm(500, threshold=1.0)
+    new = spec.update(state, Scan.single(z), model, generator(2))
+    assert new.resamples == 2
+    np.testing.assert_array_equal(new.mode, (new.cloud.particles[..., 0] > 3e4).astype(float))
+    # without resampling: log w_i + log N(z; h(x_i), R), normalised (NumPy reference), modes untouched
+    kept = make_sir_jm(500, threshold=0.0).update(state, Scan.single(z), model, generator(2))
+    d = z[:, None, :] - model.h(x)
+    log_w = -0.5 * np.einsum("bni,ij,bnj->bn", d, np.linalg.inv(model.R), d)
+    want = log_w - np.log(np.exp(log_w - log_w.max(1, keepdims=True)).sum(1, keepdims=True)) - log_w.max(1, keepdims=True)
+    np.testing.assert_allclose(kept.cloud.log_weights, want, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(kept.mode, mode)
+
+
+def test_moment_matched_noise_of_the_ekf():
+    from workbench.radar import moment_matched_scale
+
+    # stationary share on / (on + off) = 0.2; variance factor 0.8 + 0.2 * 16 = 4
+    assert moment_matched_scale(0.05, 0.2, 4.0) == pytest.approx(2.0)
+    assert moment_matched_scale(0.0, 0.2, 4.0) == pytest.approx(1.0)
+
+
+def test_ekf_nis_switches_its_noise_on_a_large_innovation(host):
+    from workbench_filters.tbd import make_ekf_nis
+
+    spec = make_ekf_nis()
+    model = host.sensor("lband-radar").measurement_model()
+    motion = constant_velocity(3, 1.0, (10.0, 10.0, 5.0))
+    mean = np.array([[3e4, 1e3, 2e3, -200.0, 0.0, 0.0]] * 3)
+    prior = Gaussian(mean, np.broadcast_to(np.diag([100.0, 100, 100, 10, 10, 5]) ** 2, (3, 6, 6)).copy())
+    state = spec.init(prior, None)
+    z = model.h(mean) + np.array([[30.0, 0, 0, 1.0], [3000.0, 0, 0, 1.0], [0.0, 0, 0, 0]])
+    scan = Scan(z[:, None, :], np.array([[True], [True], [False]]))
+    new = spec.update(state, scan, model, None)
+    assert new.manoeuvre.tolist() == [False, True, False]  # NIS 0.1 vs about 1000 (chi2_4 99 % = 13.3)
+    # the update itself is the EKF's
+    ekf = host.filter("ekf").update(prior, scan, model, None)
+    np.testing.assert_allclose(spec.estimate(new).mean, ekf.mean)
+    # next prediction: Q for quiet items, scale^2 Q for the flagged one
+    pred = spec.predict(new, motion, None).gaussian
+    base = host.filter("ekf").predict(ekf, motion, None)
+    np.testing.assert_allclose(pred.cov[0], base.cov[0], rtol=1e-12)
+    np.testing.assert_allclose(pred.cov[1], base.cov[1] + 15.0 * motion.Q, rtol=1e-9)
+
+
+def test_every_method_runs_with_the_quiet_noise_and_others_with_the_moment_match(host):
+    quiet = paper000.motion_for(host.filter("tbd-pf"), host.filter("tbd-pf"))
+    np.testing.assert_allclose(quiet.Q, constant_velocity(3, 1.0, paper000.SIGMA_A).Q)
+    np.testing.assert_allclose(paper000.motion_for(host.filter("ekf-nis"), host.filter("tbd-pf")).Q, quiet.Q)
+    plain = paper000.motion_for(host.filter("ekf"), host.filter("tbd-pf"))
+    np.testing.assert_allclose(plain.Q, 4.0 * quiet.Q)
+
+
 # -- the report recipe ------------------------------------------------------------------------------------
 
 
@@ -306,7 +395,7 @@ def results(host):
 
 def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
     recipe = host.recipe("000")
-    options = RecipeOptions("full", recipe.sizes["full"], 0, ("ekf", "sir", "tbd-pf", "ukf"))
+    options = RecipeOptions("full", recipe.sizes["full"], 0, ("ekf-nis", "sir-jm", "tbd-pf", "ukf"))
     keys = {t.key for t in recipe.tasks(options)}
     assert "track-ukf-N600-R1000" in keys and "track-tbd-pf-N50-R1000" in keys and "track-tbd-pf-N100-R2500" in keys
     assert recipe.sizes["full"]["runs"] == 20 and len(recipe.sizes["full"]["sweep_particles"]) == 9
@@ -327,7 +416,7 @@ def test_report_figures_hold_the_scenario_and_the_runs(host, results):
     assert tgt.any() and figs["fig7"]["gated_km_R2500"].shape[0] > figs["fig7"]["gated_km_R1000"].shape[0]
     assert figs["fig9"]["estimate_km_R1000"].shape == (300, 3)
     assert figs["fig12"]["particles"].tolist() == [100, 600] and figs["fig12"]["e_avg_mean"].shape == (2,)
-    assert set(figs["fig13"]["filters"]) == {"ekf", "sir", "tbd-pf", "tbd-pf-eps0"}
+    assert set(figs["fig13"]["filters"]) == {"ekf-nis", "sir-jm", "tbd-pf", "tbd-pf-eps0"}
     e = results["track-tbd-pf-N600-R1000"]["error"]
     np.testing.assert_allclose(figs["fig10"]["e_error_R1000"], e.mean(axis=0))
     from matplotlib.figure import Figure
@@ -342,14 +431,14 @@ def test_report_table3_and_criteria_are_computed(host, results):
     recipe = host.recipe("000")
     table = next(t for t in recipe.tables if t.id == "table3").make(results)
     rows = {r[0]: r for r in table.rows}
-    assert rows["(A) ekf"][3:5] == (332.0, 236.0) and rows["(B) sir"][3:5] == (291.0, 214.0)
+    assert rows["(A) ekf-nis"][3:5] == (332.0, 236.0) and rows["(B) sir-jm"][3:5] == (291.0, 214.0)
     assert rows["(C) tbd-pf"][3:5] == (221.0, 124.0)
     e = results["track-tbd-pf-N600-R1000"]["error"]
     assert rows["(C) tbd-pf"][1] == pytest.approx(round(e[:, 1:101].mean(), 1))
     assert rows["(C) tbd-pf"][2] == pytest.approx(round(e[:, 1:].mean(), 1))
     crit = recipe.criteria(results)
     assert [c.id for c in crit] == ["1", "2", "3", "4", "5", "6"]
-    a = results["track-ekf-N600-R1000"]["error"][:, 1:].mean()
+    a = results["track-ekf-nis-N600-R1000"]["error"][:, 1:].mean()
     ratio = a / e[:, 1:].mean()
     assert crit[1].met == (ratio >= 1.3) and f"{ratio:.2f}" in crit[1].detail
     clutter = next(t for t in recipe.tables if t.id == "table_clutter").make(results)

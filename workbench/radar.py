@@ -54,6 +54,7 @@ __all__ = [
     "measurement_error",
     "estimation_error",
     "lost_track",
+    "moment_matched_scale",
     "GatedRun",
     "run_gated",
 ]
@@ -399,6 +400,18 @@ def lost_track(error: np.ndarray, limit: float = 3000.0, scans: int = 5) -> np.n
         run = np.where(over[:, k], run + 1, 0)
         lost |= run >= scans
     return lost
+
+
+def moment_matched_scale(switch_on: float, switch_off: float, manoeuvre_scale: float) -> float:
+    """Factor on sigma_a of the one Gaussian process noise with the covariance of the two-mode noise.
+
+    Two modes, quiet (``W``) and manoeuvre (``scale^2 W``), switching with ``P(quiet -> manoeuvre) = on`` and
+    ``P(manoeuvre -> quiet) = off``: stationary manoeuvre share ``pi = on / (on + off)`` and covariance
+    ``((1 - pi) + pi scale^2) W``, so a filter with a single Gaussian noise (the EKF) uses
+    ``sigma_a sqrt((1 - pi) + pi scale^2)``.
+    """
+    share = switch_on / (switch_on + switch_off)
+    return float(np.sqrt((1.0 - share) + share * manoeuvre_scale**2))
 
 
 # -- the gated tracking loop ---------------------------------------------------------------------------

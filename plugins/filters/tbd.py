@@ -24,23 +24,47 @@ keeps its previous weights (counted).  Systematic resampling when
 filter (:mod:`workbench_filters.particle`).
 
 The update takes the whole gated scan: ``scan.z = [x, y, z, vr]`` (B, M, 4), ``scan.snr`` (dB).
+
+Manoeuvres (the same two-level process noise for methods A, B and C; docs/paper000.md).  The particle
+filters predict with a jump-Markov (two-mode) CV model, :func:`predict_jump_markov`: each particle
+carries a mode, quiet (the motion model's ``W``) or manoeuvre (``MANOEUVRE_SCALE^2 W``), switching
+quiet -> manoeuvre with probability ``SWITCH_ON`` and back with ``SWITCH_OFF`` per scan; the mode
+rides along through resampling.  Filters registered here:
+
+- ``tbd-pf`` (method C) and ``tbd-pf-eps0`` (no floor), both with the two-mode prediction;
+- ``sir-jm`` (method B): the bootstrap filter of :mod:`workbench_filters.particle` (its likelihood),
+  with the same two-mode prediction;
+- ``ekf-nis`` (method A): the EKF (:mod:`workbench_filters.kalman`, its update) whose process noise
+  switches to ``MANOEUVRE_SCALE^2 W`` for the next prediction when the normalised innovation squared
+  of the pseudo-measurement exceeds the chi-square 99 % point (4 dof), the Gaussian filter's
+  counterpart of the two modes (noise-level switching by manoeuvre detection).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
+from scipy.stats import chi2
 
 from workbench import hookimpl
-from workbench.filtering import keep_where
+from workbench.filtering import keep_where, single_measurement
 from workbench.kernels.tbd_weights import BACKENDS, tbd_log_weight_sums
-from workbench.models import MeasurementModel
+from workbench.linalg import psd_solve, symmetrise
+from workbench.models import MeasurementModel, MotionModel
 from workbench.radar import RadarParameters, log_detection_probability, from_db, position_sigma, radial_velocity
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
 from workbench.specs import FilterSpec
-from workbench.types import InputError, Particles, Scan
-from workbench_filters.particle import ParticleState, diagnostics, estimate, init, predict
+from workbench.types import Gaussian, InputError, Particles, Scan
+from workbench_filters.kalman import ekf_update
+from workbench_filters.particle import (ParticleState, combine_columns, component_major, diagnostics, estimate, init,
+                                        predict)
+from workbench_filters.particle import log_likelihood as sir_log_likelihood
+
+#: two-mode process noise [U, chosen by a sweep, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre -> quiet)
+#: per scan and the manoeuvre mode's factor on sigma_a
+SWITCH_ON, SWITCH_OFF, MANOEUVRE_SCALE = 0.05, 0.2, 4.0
 
 
 def _radar(model: MeasurementModel) -> RadarParameters:
@@ -75,6 +99,63 @@ def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, s
     return np.where(np.isfinite(log_eps), np.logaddexp(log_eps, log_sum), -np.inf)
 
 
+@dataclass(frozen=True)
+class ModeState(ParticleState):
+    """A particle cloud with a manoeuvre mode per particle (0 quiet, 1 manoeuvre): ``mode (B, N)``."""
+
+    mode: np.ndarray | None = None
+
+
+def _modes(state: ParticleState) -> np.ndarray:
+    mode = getattr(state, "mode", None)
+    return np.zeros(state.cloud.log_weights.shape) if mode is None else mode
+
+
+def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.random.Generator, *, switch_on: float,
+                        switch_off: float, scale: float) -> ModeState:
+    """Jump-Markov (two-mode) prediction: each particle carries a mode, quiet (noise ``W``) or manoeuvre
+    (noise ``scale^2 W``), that switches with ``P(quiet -> manoeuvre) = switch_on`` and
+    ``P(manoeuvre -> quiet) = switch_off`` before the particle moves::
+
+        m_i <- Markov(m_i),   x_i <- F x_i + (scale if m_i else 1) W^(1/2) e_i
+
+    A particle that the detections select during a manoeuvre keeps a large noise for its
+    descendants (mean sojourn ``1 / switch_off`` scans), so the cloud can follow a sustained turn.
+
+    Shapes
+    ------
+    particles (B, N, n), mode (B, N)
+    """
+    x = state.cloud.particles
+    B, N, n = x.shape
+    mode = _modes(state)
+    u = rng.random((B, N))
+    # m <- 1 - m with probability switch_off (m = 1) or switch_on (m = 0)
+    mode = np.where(u < np.where(mode > 0, switch_off, switch_on), 1.0 - mode, mode)
+    g = motion.Q_sqrt[:, np.flatnonzero(np.any(motion.Q_sqrt != 0.0, axis=0))]  # non-zero columns of W^(1/2)
+    e = rng.standard_normal((B, N, g.shape[1]))
+    e *= np.where(mode > 0, scale, 1.0)[..., None]
+    # x_i <- F x_i + s_i W^(1/2) e_i  (small products written out per component, no threaded BLAS call)
+    moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), x, e)
+    return ModeState(Particles(moved, state.cloud.log_weights), state.resamples, state.underflows, mode)
+
+
+def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, threshold: float, dead: np.ndarray,
+            rng: np.random.Generator) -> ParticleState:
+    """Resample where ``N_eff < threshold N`` (eq 16), carrying the particles' modes along."""
+    cloud = state.cloud
+    n = log_w.shape[1]
+    resample = present & (effective_sample_size(log_w) < threshold * n)
+    mode = getattr(state, "mode", None)
+    if mode is None:
+        x, log_w = resample_where(resample, cloud.particles, log_w, rng)
+        return ParticleState(Particles(x, log_w), state.resamples + int(resample.sum()),
+                             state.underflows + int(dead.sum()))
+    joint, log_w = resample_where(resample, np.concatenate([cloud.particles, mode[..., None]], axis=-1), log_w, rng)
+    return ModeState(Particles(np.ascontiguousarray(joint[..., :-1]), log_w), state.resamples + int(resample.sum()),
+                     state.underflows + int(dead.sum()), np.ascontiguousarray(joint[..., -1]))
+
+
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
            threshold: float, floor_density: float, sigma_vr: float, backend: str, arch: str = "cpu") -> ParticleState:
     present = scan.valid.any(axis=1)
@@ -86,38 +167,152 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
     dead = present & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
     log_w = keep_where(present, log_w, cloud.log_weights)
-    n = log_w.shape[1]
-    resample = present & (effective_sample_size(log_w) < threshold * n)
-    x, log_w = resample_where(resample, cloud.particles, log_w, rng)
-    return ParticleState(Particles(x, log_w), state.resamples + int(resample.sum()),
-                         state.underflows + int(dead.sum()))
+    return _finish(state, log_w, present, threshold, dead, rng)
+
+
+def _predict(switch_on: float, switch_off: float, scale: float):
+    if switch_on <= 0.0 or scale == 1.0:
+        return predict
+    return partial(predict_jump_markov, switch_on=switch_on, switch_off=switch_off, scale=scale)
+
+
+def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) -> None:
+    if not (0.0 <= switch_on <= 1.0 and 0.0 < switch_off <= 1.0 and scale >= 1.0):
+        raise InputError(f"{who}: need 0 <= switch_on <= 1, 0 < switch_off <= 1, manoeuvre_scale >= 1; got "
+                         f"{switch_on}, {switch_off}, {scale}")
 
 
 def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor_density: float = 5e-11, sigma_vr: float = 15.0,
-                backend: str = "auto", arch: str = "cpu", name: str | None = None) -> FilterSpec:
+                backend: str = "auto", arch: str = "cpu", name: str | None = None, switch_on: float = SWITCH_ON,
+                switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE) -> FilterSpec:
     """Method C with ``particles`` particles, floor density ``floor_density`` (m^-3) and Doppler sigma
-    ``sigma_vr`` (m/s); resampling when ``N_eff < threshold N``; weights by the kernel ``backend``."""
+    ``sigma_vr`` (m/s); resampling when ``N_eff < threshold N``; weights by the kernel ``backend``; the
+    two-mode (jump-Markov) prediction of :func:`predict_jump_markov` (``switch_on = 0``: plain CV)."""
     if backend not in BACKENDS:
         raise InputError(f"tbd-pf: unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
     if floor_density < 0 or particles < 1 or not 0 <= threshold <= 1 or sigma_vr <= 0:
         raise InputError(f"tbd-pf: need particles >= 1, 0 <= threshold <= 1, floor_density >= 0, sigma_vr > 0; "
                          f"got {particles}, {threshold}, {floor_density}, {sigma_vr}")
+    _check_modes("tbd-pf", switch_on, switch_off, manoeuvre_scale)
     return FilterSpec(
         name=name or "tbd-pf",
         summary=(f"TBD particle filter (paper 000, method C): weights from every gated detection, N={particles}, "
-                 f"floor {floor_density:g} m^-3"),
+                 f"floor {floor_density:g} m^-3, two-mode CV (x{manoeuvre_scale:g} noise, on {switch_on:g}, "
+                 f"off {switch_off:g})"),
         init=partial(init, particles=particles),
-        predict=predict,
+        predict=_predict(switch_on, switch_off, manoeuvre_scale),
         update=partial(update, threshold=threshold, floor_density=floor_density, sigma_vr=sigma_vr,
                        backend=backend, arch=arch),
         estimate=estimate,
         capabilities=frozenset({"stochastic", "multi_measurement", "position_doppler_3d"}),
         params={"particles": particles, "threshold": threshold, "floor_density": floor_density, "sigma_vr": sigma_vr,
-                "backend": backend},
+                "backend": backend, "switch_on": switch_on, "switch_off": switch_off,
+                "manoeuvre_scale": manoeuvre_scale},
         diagnostics=diagnostics,
+    )
+
+
+def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
+               threshold: float) -> ParticleState:
+    """The bootstrap update (``log w_i += log N(z; h(x_i), R)``, :mod:`workbench_filters.particle`), with
+    the particles' modes carried through resampling."""
+    z, present = single_measurement(scan, "sir-jm")
+    if not present.any():
+        return state
+    cloud = state.cloud
+    log_w = sir_log_likelihood(z, cloud.particles, model) + cloud.log_weights
+    dead = present & ~np.isfinite(np.max(log_w, axis=1))
+    log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
+    log_w = keep_where(present, log_w, cloud.log_weights)
+    return _finish(state, log_w, present, threshold, dead, rng)
+
+
+def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float = SWITCH_ON,
+                switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
+                name: str | None = None) -> FilterSpec:
+    """Method B: the bootstrap filter with the same two-mode prediction as method C."""
+    if particles < 1 or not 0 <= threshold <= 1:
+        raise InputError(f"sir-jm: need particles >= 1 and 0 <= threshold <= 1, got {particles}, {threshold}")
+    _check_modes("sir-jm", switch_on, switch_off, manoeuvre_scale)
+    return FilterSpec(
+        name=name or "sir-jm",
+        summary=(f"Bootstrap PF with a two-mode CV prediction (x{manoeuvre_scale:g} noise, on {switch_on:g}, off "
+                 f"{switch_off:g}), N={particles}"),
+        init=partial(init, particles=particles),
+        predict=_predict(switch_on, switch_off, manoeuvre_scale),
+        update=partial(sir_update, threshold=threshold),
+        estimate=estimate,
+        capabilities=frozenset({"stochastic"}),
+        params={"particles": particles, "threshold": threshold, "switch_on": switch_on, "switch_off": switch_off,
+                "manoeuvre_scale": manoeuvre_scale},
+        diagnostics=diagnostics,
+    )
+
+
+@dataclass(frozen=True)
+class AdaptiveGaussian:
+    """An EKF state with a manoeuvre flag per item: ``gaussian`` (B, n), ``manoeuvre (B,)`` bool."""
+
+    gaussian: Gaussian
+    manoeuvre: np.ndarray
+
+
+def nis_init(prior: Gaussian, rng=None) -> AdaptiveGaussian:
+    return AdaptiveGaussian(prior, np.zeros(prior.batch, dtype=bool))
+
+
+def nis_predict(state: AdaptiveGaussian, motion: MotionModel, rng=None, *, scale: float) -> AdaptiveGaussian:
+    """``x- = F x``, ``P- = F P F^T + q_b W`` with ``q_b = scale^2`` for an item in manoeuvre, else 1."""
+    g = state.gaussian
+    q = np.where(state.manoeuvre, scale**2, 1.0)
+    mean = g.mean @ motion.F.T
+    # P- = F P F^T + q_b W
+    cov = symmetrise(motion.F @ g.cov @ motion.F.T + q[:, None, None] * motion.Q)
+    return AdaptiveGaussian(Gaussian(mean, cov), state.manoeuvre)
+
+
+def nis_update(state: AdaptiveGaussian, scan: Scan, model: MeasurementModel, rng=None, *,
+               nis_threshold: float) -> AdaptiveGaussian:
+    """The EKF update; an item whose normalised innovation ``nu^T S^-1 nu`` exceeds ``nis_threshold``
+    switches to the manoeuvre noise for the next prediction, and back when it falls below (an item
+    without a measurement keeps its flag)."""
+    z, present = single_measurement(scan, "ekf-nis")
+    if not present.any():
+        return state
+    g = state.gaussian
+    H = model.jacobian(g.mean)
+    # S = H P- H^T + R;  NIS = nu^T S^-1 nu
+    S = symmetrise(H @ g.cov @ np.swapaxes(H, -1, -2) + model.R)
+    nu = model.residual(z, model.h(g.mean))
+    nis = np.einsum("bi,bi->b", nu, psd_solve(S, nu[..., None])[..., 0])
+    flag = np.where(present, nis > nis_threshold, state.manoeuvre)
+    return AdaptiveGaussian(ekf_update(g, scan, model), flag)
+
+
+def nis_estimate(state: AdaptiveGaussian) -> Gaussian:
+    return state.gaussian
+
+
+def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float = float(chi2.ppf(0.99, 4)),
+                 name: str | None = None) -> FilterSpec:
+    """Method A: the EKF with the two-level noise switched by the NIS of the pseudo-measurement (the
+    Gaussian filter's counterpart of the two-mode particle prediction: quiet ``W``, manoeuvre
+    ``scale^2 W``; Bar-Shalom, Li and Kirubarajan's noise-level switching by manoeuvre detection)."""
+    if manoeuvre_scale < 1.0 or nis_threshold <= 0.0:
+        raise InputError(f"ekf-nis: need manoeuvre_scale >= 1 and nis_threshold > 0, got {manoeuvre_scale}, "
+                         f"{nis_threshold}")
+    return FilterSpec(
+        name=name or "ekf-nis",
+        summary=f"EKF with NIS-switched process noise (x{manoeuvre_scale:g} above NIS {nis_threshold:.2f})",
+        init=nis_init,
+        predict=partial(nis_predict, scale=manoeuvre_scale),
+        update=partial(nis_update, nis_threshold=nis_threshold),
+        estimate=nis_estimate,
+        capabilities=frozenset({"gaussian", "needs_jacobian"}),
+        params={"manoeuvre_scale": manoeuvre_scale, "nis_threshold": nis_threshold},
     )
 
 
 @hookimpl
 def workbench_filters():
-    return [make_tbd_pf(), make_tbd_pf(floor_density=0.0, name="tbd-pf-eps0")]
+    return [make_tbd_pf(), make_tbd_pf(floor_density=0.0, name="tbd-pf-eps0"), make_sir_jm(), make_ekf_nis()]
