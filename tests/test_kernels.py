@@ -50,8 +50,12 @@ def test_reference_equals_direct_logsumexp():
     np.testing.assert_allclose(naive_log_weight_sums(points, z, valid, log_pd, sigma_p, s_vr), ref, rtol=1e-12)
 
 
+@pytest.mark.parametrize("serial_pairs", [0, 10**12], ids=["threaded", "serial"])
 @pytest.mark.parametrize(("backend", "arch"), BACKENDS, ids=IDS)
-def test_kernel_matches_reference_on_random_inputs(backend, arch):
+def test_kernel_matches_reference_on_random_inputs(backend, arch, serial_pairs, monkeypatch):
+    import workbench.kernels.tbd_weights as kernels
+
+    monkeypatch.setattr(kernels, "SERIAL_PAIRS", serial_pairs)  # the Numba backend has both variants
     rng = np.random.default_rng(11)
     for B, N, M in ((4, 300, 40), (3, 257, 1), (2, 1, 9), (5, 130, 129)):
         args = random_case(rng, B, N, M)

@@ -50,6 +50,9 @@ BACKENDS = ("auto", "numba", "taichi", "numpy")
 #: Particles per tile of the Numba kernel (its per-tile accumulators stay in L1).
 TILE = 128
 
+#: Below this many particle-measurement pairs the Numba kernel runs on one thread.
+SERIAL_PAIRS = 2_000_000
+
 # exp(x) = 2^n exp(r), n = round(x / ln 2), r = x - n ln2 with ln2 split in a high and a low part
 # (Cody-Waite), so that n * LN2_HI is exact for |n| < 2^20.
 INV_LN2 = 1.4426950408889634
@@ -156,7 +159,8 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
     beta = 0.5 / float(sigma_vr) ** 2
     if B and N and meas.shape[2]:
         if which == "numba":
-            _numba_kernel()(pts, meas, counts, beta, out)
+            parallel, serial = _numba_kernel()
+            (parallel if B * N * int(counts.max()) >= SERIAL_PAIRS else serial)(pts, meas, counts, beta, out)
         else:
             ensure_taichi(arch)
             _taichi_kernel()(pts, meas, counts, beta, out)
@@ -244,7 +248,6 @@ def _numba_kernel():
              * r + c10) * r + c11
         return p * as_double((np.int64(n) + 1023) << 52)
 
-    @numba.njit(parallel=True, fastmath=flags, cache=True)
     def kernel(pts, meas, counts, beta, out):
         B = pts.shape[0]
         N = pts.shape[2]
@@ -278,4 +281,8 @@ def _numba_kernel():
                 for j in range(n):
                     out[b, lo + j] = top[j] + np.log(s[j])
 
-    return kernel
+    # The same loops compiled twice: threaded for real work, serial for small calls, where waking the
+    # thread pool costs more than the work (milliseconds on a loaded machine); prange is range there.
+    parallel = numba.njit(parallel=True, fastmath=flags, cache=True)(kernel)
+    serial = numba.njit(parallel=False, fastmath=flags, cache=True)(kernel)
+    return parallel, serial
