@@ -3,7 +3,8 @@
 :func:`bench` measures
 
 (a) the wall time of the paper's Monte Carlo: the recipe's primary (mismatched) tasks, 3 levels x 8 filters,
-    at the full size (3,000 runs, 100 steps) or the quick size, run in ``workers`` processes;
+    at the full size (3,000 runs, 100 steps) or the quick size, in this process (the ``dask`` group runs the
+    same tasks on a local Dask cluster);
 (b) the cost per run-step (one predict + update) of our UKF batched over ``batch`` runs, against FilterPy's
     ``UnscentedKalmanFilter`` (an optional ``bench`` extra; skipped when it is not installed) on the same
     range-bearing problem with the same (alpha, beta, kappa), angle-aware residual and mean; the ratio is
@@ -18,13 +19,12 @@ from __future__ import annotations
 
 import math
 import time
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 
 import numpy as np
 
 from .bench import median_time
 from .plugins import load_host
+from .report.engine import InProcess
 from .recipes import paper003 as recipe
 from .specs import RecipeOptions, TaskContext
 
@@ -40,47 +40,36 @@ def _host():
     return _HOST
 
 
-def _run_task(key: str, params: dict, seed: int) -> tuple[str, float, float]:
-    """Run one Monte Carlo task; returns (key, wall seconds, filtering seconds)."""
-    t0 = time.perf_counter()
-    out = recipe.run_monte_carlo(TaskContext(params=params, seed=seed, host=_host()))
-    return key, time.perf_counter() - t0, float(out["seconds"])
-
-
-def _warm(_: int) -> int:
-    _host()
-    return 0
-
-
-def monte_carlo_wall_time(size: str = "full", workers: int = 2, seed: int = 0) -> dict:
-    """Wall time of the primary Monte Carlo (mismatched tasks, every level, the 8 default filters)."""
-    values = recipe.SIZES[size]
-    options = RecipeOptions(size=size, values=values, seed=seed, filters=recipe.DEFAULT_FILTERS)
+def primary_tasks(size: str = "full", seed: int = 0) -> list:
+    """The recipe's primary Monte Carlo tasks (mismatched noise, every level, the 8 default filters),
+    largest first (by particle count) so that parallel workers finish together."""
+    options = RecipeOptions(size=size, values=recipe.SIZES[size], seed=seed, filters=recipe.DEFAULT_FILTERS)
     tasks = [t for t in recipe.tasks(options) if t.key.startswith("mc/") and t.key.endswith("/mismatched")]
-    # largest first (by particle count) so that the workers finish together
-    tasks.sort(key=lambda t: -int(_host().filter(t.params["filter"]).params.get("particles", 1)))
-    per_task = {}
-    if workers <= 1:
-        _host()
-        t0 = time.perf_counter()
-        for t in tasks:
-            key, wall, filt = _run_task(t.key, dict(t.params), seed)
-            per_task[key] = (wall, filt)
-        wall_total = time.perf_counter() - t0
-    else:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("fork")) as pool:
-            list(pool.map(_warm, range(workers)))  # plugin hosts loaded before the clock starts
-            t0 = time.perf_counter()
-            futures = [pool.submit(_run_task, t.key, dict(t.params), seed) for t in tasks]
-            for fut in futures:
-                key, wall, filt = fut.result()
-                per_task[key] = (wall, filt)
-            wall_total = time.perf_counter() - t0
+    return sorted(tasks, key=lambda t: -int(_host().filter(t.params["filter"]).params.get("particles", 1)))
+
+
+def run_primary(size: str = "full", seed: int = 0, executor=None) -> tuple[float, dict]:
+    """Run the primary Monte Carlo through a report executor (default: in-process); returns the wall time
+    and every task's arrays."""
+    tasks = primary_tasks(size, seed)
+    executor = executor if executor is not None else InProcess(_host())
+    results = {}
+    t0 = time.perf_counter()
+    for task, arrays, _seconds, error in executor.execute(tasks, seed, "cpu"):
+        if error is not None:
+            raise RuntimeError(f"{task.key}: {error[0]}")
+        results[task.key] = arrays
+    return time.perf_counter() - t0, results
+
+
+def monte_carlo_wall_time(size: str = "full", seed: int = 0) -> dict:
+    """Wall time of the primary Monte Carlo in this process, with each filter's own filtering time."""
+    values = recipe.SIZES[size]
+    wall, results = run_primary(size, seed)
     out = {"mc_size": size, "mc_runs_per_level": values["runs"], "mc_steps": values["steps"],
-           "mc_levels": len(recipe.LEVELS), "mc_filters": len(recipe.DEFAULT_FILTERS), "mc_workers": workers,
-           "mc_wall_s": wall_total, "mc_task_s_sum": sum(w for w, _ in per_task.values())}
+           "mc_levels": len(recipe.LEVELS), "mc_filters": len(recipe.DEFAULT_FILTERS), "mc_wall_s": wall}
     for name in recipe.DEFAULT_FILTERS:
-        out[f"mc_filter_s[{name}]"] = sum(f for k, (_, f) in per_task.items() if k.split("/")[2] == name)
+        out[f"mc_filter_s[{name}]"] = sum(float(r["seconds"]) for k, r in results.items() if k.split("/")[2] == name)
     return out
 
 
@@ -189,10 +178,10 @@ def quick_tasks_time(seed: int = 0) -> dict:
     return {"quick_tasks": len(tasks), "quick_tasks_s": time.perf_counter() - t0}
 
 
-def bench(quick: bool = False, *, workers: int = 2, seed: int = 0) -> dict:
+def bench(quick: bool = False, *, seed: int = 0) -> dict:
     """All three measurements: ``quick`` uses the quick Monte Carlo size and fewer FilterPy runs."""
     out = {}
-    out.update(monte_carlo_wall_time("quick" if quick else "full", workers=workers, seed=seed))
+    out.update(monte_carlo_wall_time("quick" if quick else "full", seed=seed))
     out.update(ukf_vs_filterpy(batch=3000, filterpy_runs=5 if quick else 30, seed=seed))
     out.update(quick_tasks_time(seed=seed))
     return out
