@@ -410,6 +410,8 @@ def test_report_figures_hold_the_scenario_and_the_runs(host, results):
     assert figs["fig3"]["thresholds_db"].tolist() == [12.0, 9.0, 7.0, 5.0, 3.0]
     counts = results["scenario"]["count_per_scan"].mean(axis=1)
     assert np.all(np.diff(counts) > 0)  # lower threshold, more detections
+    np.testing.assert_array_equal(figs["fig5_counts"]["count_per_scan"], results["scenario"]["count_per_scan"])
+    assert figs["fig5_counts"]["k"].shape[0] == figs["fig5_counts"]["count_per_scan"].shape[1]
     assert results["scenario"]["clutter_per_scan"][3] == pytest.approx(results["scenario"]["clutter_expected"][3],
                                                                       rel=0.05)
     tgt = figs["fig7"]["gated_target_R1000"]

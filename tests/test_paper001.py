@@ -374,6 +374,9 @@ def test_report_figures_hold_the_data(report):
     # Figs 5-6: detections and confirmed tracks of run 0; after removal fewer detections are kept
     assert figs["fig5"]["det_kept"].all() and figs["fig6"]["det_kept"].sum() < 0.5 * figs["fig6"]["det_kept"].size
     assert figs["fig6"]["trk_xy"].shape[1] == 2 and figs["fig5"]["trk_true"].dtype == bool
+    # The surrogate figures: every detection of the file before removal, fewer after.
+    assert figs["fig7"]["det_kept"].all() and 0 < figs["fig8"]["det_kept"].sum() < figs["fig8"]["det_kept"].size
+    np.testing.assert_array_equal(figs["fig7"]["det_xy"], figs["fig8"]["det_xy"])
     # Figs 9-10: counts per ping; no confirmed track during the warm-up after removal
     for fid in ("fig9", "fig10", "fig11", "fig12"):
         assert figs[fid]["ping"].tolist() == list(range(1, 21))

@@ -451,6 +451,9 @@ def test_report_figures_hold_the_papers_content(quick_results):
     np.testing.assert_allclose(geo["rx"], RX)
     assert geo["path"].shape == (120, 3)
     traj = data["fig2"]
+    assert data["fig2b"].keys() == traj.keys()  # the R(t), Rdot(t) panel draws the same run
+    for key in traj:
+        np.testing.assert_array_equal(data["fig2b"][key], traj[key])
     res = results["detection-kf"]
     # the selected measurements are candidates of run 0
     cands = traj["candidates"]
