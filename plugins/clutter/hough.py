@@ -16,8 +16,9 @@ every ping ``k`` the remover decides, from pings ``<= k`` only (causal) and with
 
         rho = x cos(theta) + y sin(theta)          (eq 1; rho may be negative)
 
-   Votes are counted per ping with ``np.bincount`` (vectorised); a cell's *support* is the number of
-   distinct pings that voted for it.
+   Votes are counted per ping (``np.add.at``) and kept from ping to ping: when the gate of an earlier ping
+   changes only its newly gated / ungated points vote; a cell's *support* is the number of distinct pings
+   that voted for it.
 4. **Peaks:** cells with support ``>= v_min`` that are maxima of ``support + votes / (max votes + 1)``
    in their 3 x 3 neighbourhood (non-maximum suppression, ties kept).  A peak of ``B`` must also hold
    a vote from ping ``k``.
@@ -46,7 +47,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from workbench import hookimpl
@@ -103,8 +103,14 @@ class HoughGrid:
         """Row index of each point's vote in each column, ``(n, 2) -> (n, n_theta)`` int."""
         th = self.theta
         # rho = x cos(theta) + y sin(theta)     (eq 1)
-        rho = points[:, :1] * np.cos(th) + points[:, 1:2] * np.sin(th)
-        return (np.rint(rho / self.d_rho) + self.off).astype(np.int32)
+        rho = points[:, :1] * np.cos(th)
+        rho += points[:, 1:2] * np.sin(th)
+        if self.d_rho != 1.0:  # x / 1.0 == x exactly
+            rho /= self.d_rho
+        np.rint(rho, out=rho)
+        rows = rho.astype(np.int32)
+        rows += self.off
+        return rows
 
 
 def make_grid(d_rho: float, d_theta_deg: float, rho_max: float) -> HoughGrid:
@@ -134,49 +140,66 @@ def neighbours(rows: np.ndarray, cols: np.ndarray, grid: HoughGrid, half_rho: in
     return np.where(inside, r * grid.n_theta + c, -1)
 
 
-def _seam_pad(grid_values: np.ndarray, width: int) -> np.ndarray:
-    """Pad the ``theta`` axis by ``width`` columns on each side across the ``theta = 0 / pi`` seam:
-    column ``-c`` is column ``n_theta - c`` with ``rho`` negated (rows flipped), column ``n_theta + c``
-    is column ``c`` flipped.  ``(n_rho, n_theta) -> (n_rho, n_theta + 2 width)``."""
-    if width == 0:
-        return grid_values
-    left = grid_values[::-1, grid_values.shape[1] - width:]
-    right = grid_values[::-1, :width]
-    return np.concatenate([left, grid_values, right], axis=1)
+def _max_rows(values: np.ndarray, half: int) -> np.ndarray:
+    """Maximum over rows ``i - half .. i + half`` of each cell (rows outside the grid ignored), ``(n_rho, J)``."""
+    out = values.copy()
+    for d in range(1, min(int(half), values.shape[0] - 1) + 1):
+        np.maximum(out[d:], values[:-d], out=out[d:])
+        np.maximum(out[:-d], values[d:], out=out[:-d])
+    return out
+
+
+def _max_cols_seam(values: np.ndarray, half: int) -> np.ndarray:
+    """Maximum over columns ``j - half .. j + half`` across the ``theta = 0 / pi`` seam: column ``-c`` is
+    column ``n_theta - c`` with ``rho`` negated (rows flipped), column ``n_theta + c`` is column ``c``
+    flipped; one wrap at most (``half`` is capped at ``n_theta``).  ``(n_rho, n_theta)``."""
+    n = values.shape[1]
+    out = values.copy()
+    flipped = values[::-1]
+    for d in range(1, min(int(half), n) + 1):
+        np.maximum(out[:, d:], values[:, :n - d], out=out[:, d:])  # column j - d
+        np.maximum(out[:, :d], flipped[:, n - d:], out=out[:, :d])  # j - d < 0: column n + j - d flipped
+        np.maximum(out[:, :n - d], values[:, d:], out=out[:, :n - d])  # column j + d
+        np.maximum(out[:, n - d:], flipped[:, :d], out=out[:, n - d:])  # j + d >= n: column j + d - n flipped
+    return out
 
 
 def find_peaks(support: np.ndarray, votes: np.ndarray, v_min: int, grid: HoughGrid) -> tuple[np.ndarray, np.ndarray]:
     """Peaks ``(rows, cols)``: cells with ``support >= v_min`` that are maxima of
     ``score = support + votes / (max votes + 1)`` over their 3 x 3 neighbourhood (seam-aware, ties kept).
 
-    Dense grid filter: two separable 3-point maximum filters over the seam-padded score (cells outside
-    the ``rho`` range count as ``-1``), so the cost is a few passes over the grid however many cells
-    qualify (dense clutter).  Equal to comparing each cell with :func:`neighbours` (tested).
+    ``support, votes (n_rho, n_theta)`` non-negative integers.  Since ``votes < max votes + 1`` the score
+    orders cells exactly as the integer key ``support (max votes + 1) + votes`` (equal keys, equal
+    scores), so the filter runs on that key in the smallest integer type: a 3-point maximum down ``rho``
+    then a seam-aware 3-point maximum across ``theta`` (cells outside the ``rho`` range ignored).  Equal
+    to comparing each cell with :func:`neighbours` (tested).
     """
-    scale = 1.0 / (votes.max() + 1.0) if votes.size else 1.0
-    # score = support + votes / (max votes + 1)
-    score = support.astype(np.float64) + votes * scale
-    m = ndimage.maximum_filter1d(_seam_pad(score, 1), size=3, axis=0, mode="constant", cval=-1.0)
-    m = ndimage.maximum_filter1d(m, size=3, axis=1, mode="constant", cval=-1.0)[:, 1:-1]
-    return np.nonzero((support >= v_min) & (score >= m))
+    if votes.size == 0:
+        return np.nonzero(np.zeros(grid.shape, dtype=bool))
+    top = int(votes.max()) + 1
+    dtype = np.min_scalar_type(int(support.max()) * top + top)
+    # score = support + votes / (max votes + 1), ordered as support * (max votes + 1) + votes
+    key = support.astype(dtype)
+    key *= top
+    key += votes.astype(dtype)
+    m = _max_cols_seam(_max_rows(key, 1), 1)
+    return np.nonzero((support >= v_min) & (key >= m))
 
 
 def similar_to(rows_b, cols_b, rows_a, cols_a, grid: HoughGrid, half_rho: int, half_theta: int) -> np.ndarray:
     """Which cells ``b`` lie within ``half_rho`` rows and ``half_theta`` columns of some cell ``a``, modulo
     ``(rho, theta) == (-rho, theta + pi)``; ``(len(b),)`` bool.
 
-    Dense: the ``a`` cells are marked on the grid, padded across the seam, dilated by a
-    ``(2 half_rho + 1) x (2 half_theta + 1)`` maximum filter and read at the ``b`` cells.
+    Dense: the ``a`` cells are marked on the grid, dilated by ``half_rho`` rows and (across the seam)
+    ``half_theta`` columns, and read at the ``b`` cells.
     """
     out = np.zeros(len(rows_b), dtype=bool)
     if len(rows_a) == 0 or len(rows_b) == 0:
         return out
-    mark = np.zeros(grid.shape, dtype=np.uint8)
-    mark[rows_a, cols_a] = 1
-    ht = min(int(half_theta), grid.n_theta)
-    near = ndimage.maximum_filter(_seam_pad(mark, ht), size=(2 * int(half_rho) + 1, 2 * ht + 1), mode="constant",
-                                  cval=0)
-    return near[rows_b, np.asarray(cols_b) + ht] > 0
+    mark = np.zeros(grid.shape, dtype=bool)
+    mark[rows_a, cols_a] = True
+    near = _max_cols_seam(_max_rows(mark, int(half_rho)), min(int(half_theta), grid.n_theta))
+    return near[rows_b, cols_b]
 
 
 def lines_similar(rho_a, theta_a, rho_b, theta_b, tol_rho: float, tol_theta: float) -> np.ndarray:
@@ -196,11 +219,17 @@ def lines_similar(rho_a, theta_a, rho_b, theta_b, tol_rho: float, tol_theta: flo
 
 @dataclass
 class _RunCache:
-    """Per-run memo of what earlier pings already computed (mutable, private to one ``remove`` call)."""
+    """Per-run memo of what earlier pings already computed (mutable, private to one ``remove`` call).
+
+    ``counts[p] = (mask, flat counts)``: ping ``p``'s votes from its gated points ``mask``, kept up to date
+    when the gate of ``p`` changes (add the newly gated points' votes, drop the ungated ones') instead of
+    re-voting the whole ping.
+    """
 
     pts: list
     grid: HoughGrid
     slots: list
+    count_dtype: np.dtype
     row_cache: dict = field(default_factory=dict)
     trees: dict = field(default_factory=dict)
     partner: dict = field(default_factory=dict)
@@ -217,6 +246,28 @@ class _RunCache:
         if p not in self.trees:
             self.trees[p] = cKDTree(self.pts[p])
         return self.trees[p]
+
+    def _add_votes(self, counts: np.ndarray, p: int, which: np.ndarray, ufunc) -> None:
+        """``counts[cell] (+/-)= 1`` for every vote of the points ``which`` of ping ``p`` (unbuffered)."""
+        grid = self.grid
+        flat = (self.rows(p)[which] * grid.n_theta + np.arange(grid.n_theta)).ravel()
+        ufunc.at(counts, flat, np.ones(flat.size, dtype=counts.dtype))
+
+    def counts_of(self, p: int, mask: np.ndarray) -> np.ndarray:
+        """Votes of the points ``mask`` of ping ``p`` per cell, flat ``(n_rho n_theta,)``."""
+        entry = self.counts.get(p)
+        if entry is None:
+            counts = np.zeros(self.grid.n_rho * self.grid.n_theta, dtype=self.count_dtype)
+            self._add_votes(counts, p, mask, np.add)
+        else:
+            old, counts = entry
+            added, dropped = mask & ~old, old & ~mask
+            if added.any():
+                self._add_votes(counts, p, added, np.add)
+            if dropped.any():  # never below zero: these votes were added before
+                self._add_votes(counts, p, dropped, np.subtract)
+        self.counts[p] = (mask.copy(), counts)
+        return counts
 
 
 def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
@@ -243,51 +294,20 @@ def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> 
     return kept
 
 
-def _counts(cache: _RunCache, grid: HoughGrid, p: int, mask: np.ndarray) -> np.ndarray:
-    key = (p, mask.tobytes())
-    if key not in cache.counts:
-        rows = cache.rows(p)[mask]
-        flat = (rows * grid.n_theta + np.arange(grid.n_theta)).ravel()
-        cache.counts[key] = np.bincount(flat, minlength=grid.n_rho * grid.n_theta).reshape(grid.shape)
-    return cache.counts[key]
-
-
-def _pairs_supported(rz: np.ndarray, rs: np.ndarray, slot: np.ndarray, cum: np.ndarray, cols: np.ndarray,
-                     e: int) -> np.ndarray:
-    """For pairs (detection, support): is there a similar line within ``e`` rows of both in one of the
-    columns ``cols``, counted in the support's map ``cum[slot]``?
-
-    ``rz, rs (P, len(cols))`` rows, ``slot (P,)``, ``cum (S, n_rho + 1, J)`` the cumulative count of
-    qualifying line cells down each of the ``J`` line columns (``cols`` index into those).
-    """
-    n_rho, J = cum.shape[1] - 1, cum.shape[2]
-    lo = np.maximum(np.maximum(rz, rs) - e, 0)
-    hi = np.minimum(np.minimum(rz, rs) + e, n_rho - 1)
-    ok = hi >= lo
-    hi = np.where(ok, hi, lo)
-    base = slot[:, None] * (n_rho + 1)
-    flat = cum.reshape(-1, J)
-    # line cells in rows lo..hi of each column: cum[hi + 1] - cum[lo]
-    n = flat[base + hi + 1, cols] - flat[base + lo, cols]
-    return np.any(ok & (n > 0), axis=1)
-
-
-def _check_pairs(zi: np.ndarray, si: np.ndarray, rz_all: np.ndarray, sup_rows, cum_slot: np.ndarray, cum: np.ndarray,
-                 e: int, chunk: int = 16) -> np.ndarray:
-    """:func:`_pairs_supported` for pairs (detection ``zi``, support ``si``), a few columns at a time: a
-    pair is dropped from later columns as soon as one column supports it (dense clutter settles fast)."""
-    J = cum.shape[2]
-    ok = np.zeros(zi.size, dtype=bool)
-    todo = np.arange(zi.size)
-    for start in range(0, J, chunk):
-        if todo.size == 0:
-            break
-        cols = np.arange(start, min(start + chunk, J))
-        rs = sup_rows(si[todo], cols)
-        hit = _pairs_supported(rz_all[zi[todo][:, None], cols[None, :]], rs, cum_slot[si[todo]], cum, cols, e)
-        ok[todo[hit]] = True
-        todo = todo[~hit]
-    return ok
+def _range_tables(bits: np.ndarray, longest: int) -> np.ndarray:
+    """Sparse table of ``bits (n_rho, J)`` along ``rho``: level ``t`` holds the OR of rows ``r .. r + 2^t - 1``
+    (rows past the grid ignored); levels ``0 .. floor(log2 longest)``, ``-> (levels, n_rho, J)``.  The OR
+    over rows ``lo .. hi`` (``hi - lo + 1 <= longest``) is ``level[t][lo] | level[t][hi - 2^t + 1]`` with
+    ``t = floor(log2(hi - lo + 1))``."""
+    levels = [bits]
+    step = 1
+    while 2 * step <= longest:
+        prev = levels[-1]
+        nxt = prev.copy()
+        np.bitwise_or(nxt[:-step], prev[step:], out=nxt[:-step])
+        levels.append(nxt)
+        step *= 2
+    return np.stack(levels)
 
 
 def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: dict, counts: dict,
@@ -296,6 +316,11 @@ def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: di
 
     ``sim_rows, sim_cols``: the similar line cells.  ``reach (len(earlier pings),)``: the distance allowed
     to a support of each earlier ping of B.  Only the columns holding a similar line are looked at.
+
+    Each line cell gets one bit: the slot (earlier ping of B, oldest first) of its latest support
+    (``support="latest"``), or bit 0 for every line (``"any"``).  A pair (detection ``z``, support ``s``)
+    is supported when some column holds a line cell with ``s``'s bit within ``e`` rows of both: an OR
+    over the rows ``max(r_z, r_s) - e .. min(r_z, r_s) + e``, read from a sparse table (two lookups).
     """
     n_k = len(cache.pts[k])
     keep = np.zeros(n_k, dtype=bool)
@@ -305,43 +330,82 @@ def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: di
     e = int(np.floor(eps / grid.d_rho + 1e-9))
     cols, col_of = np.unique(sim_cols, return_inverse=True)
     J = cols.size
-    similar = np.zeros((grid.n_rho, J), dtype=bool)
-    similar[sim_rows, col_of] = True
+    every_col = J == grid.n_theta
+
+    def in_cols(a: np.ndarray) -> np.ndarray:
+        return a if every_col else a[:, cols]
+
     n_slots = len(earlier)
     if support == "latest":
         # latest earlier ping of B with a gated point within e rows of each line cell
-        latest = np.full((grid.n_rho, J), -1, dtype=np.int16)
+        latest = np.full((grid.n_rho, J), -1, dtype=np.min_scalar_type(-n_slots))
         for slot, p in enumerate(earlier):
-            latest[counts[p][:, cols] > 0] = slot
-        latest = ndimage.maximum_filter1d(latest, size=2 * e + 1, axis=0, mode="constant", cval=-1)
-        cum = np.zeros((n_slots, grid.n_rho + 1, J), dtype=np.int32)
-        for slot in range(n_slots):
-            np.cumsum(similar & (latest == slot), axis=0, out=cum[slot, 1:])
-    else:  # "any": every earlier support of the line counts; one map serves all slots
-        cum = np.zeros((1, grid.n_rho + 1, J), dtype=np.int32)
-        np.cumsum(similar, axis=0, out=cum[0, 1:])
-    # candidates: detections of ping k within e rows of some similar line at all
-    near_line = ndimage.maximum_filter1d(similar.view(np.uint8), size=2 * e + 1, axis=0, mode="constant", cval=0) > 0
-    rz_all = cache.rows(k)[:, cols]
+            np.copyto(latest, slot, where=in_cols(counts[p].reshape(grid.shape)) > 0)
+        latest = _max_rows(latest, e)
+        cell_slot = latest[sim_rows, col_of].astype(np.intp)
+        has = cell_slot >= 0
+        cell_rows, cell_cols, cell_slot = sim_rows[has], col_of[has], cell_slot[has]
+    else:  # "any": every earlier support of the line counts; one bit serves all slots
+        cell_rows, cell_cols, cell_slot = sim_rows, col_of, np.zeros(sim_rows.size, dtype=np.intp)
+    if cell_rows.size == 0:
+        return keep
+    n_words = int(cell_slot.max()) // 8 + 1
+    bits = np.zeros((n_words, grid.n_rho, J), dtype=np.uint8)
+    bits[cell_slot // 8, cell_rows, cell_cols] = (1 << (cell_slot % 8)).astype(np.uint8)
+    # candidates: detections of ping k within e rows of some line cell at all
+    near_line = _max_rows(bits.any(axis=0), e)
+    rz_all = in_cols(cache.rows(k))
     cand = np.flatnonzero(near_line[rz_all, np.arange(J)].any(axis=1))
     sup_pts = [cache.pts[p][kept[p]] for p in earlier]
     sup_xy = np.concatenate(sup_pts, axis=0)
     if cand.size == 0 or sup_xy.shape[0] == 0:
         return keep
-    sup_ping = np.concatenate([np.full(len(sp), p, dtype=np.intp) for p, sp in zip(earlier, sup_pts)])
+    tables = [_range_tables(bits[w], 2 * e + 1) for w in range(n_words)]
+    sup_ping = np.concatenate([np.full(len(sp), i, dtype=np.intp) for i, sp in enumerate(sup_pts)])
     sup_index = np.concatenate([np.flatnonzero(kept[p]) for p in earlier])
-    sup_slot = np.concatenate([np.full(len(sp), i, dtype=np.intp) for i, sp in enumerate(sup_pts)])
-    sup_reach = reach[sup_slot]
-    cum_slot = sup_slot if support == "latest" else np.zeros_like(sup_slot)
-    ping_rows = {p: cache.rows(p)[:, cols] for p in earlier}
+    sup_reach = reach[sup_ping]
+    sup_bit = sup_ping if support == "latest" else np.zeros_like(sup_ping)
 
-    def sup_rows(idx: np.ndarray, sub: np.ndarray) -> np.ndarray:
-        out = np.empty((idx.size, sub.size), dtype=np.intp)
-        for p in earlier:
-            m = sup_ping[idx] == p
-            if m.any():
-                out[m] = ping_rows[p][sup_index[idx[m]][:, None], sub[None, :]]
-        return out
+    longest = 2 * e + 1
+    log2 = np.zeros(longest + 1, dtype=np.intp)
+    log2[1:] = np.floor(np.log2(np.arange(1, longest + 1)))
+    table_flat = [t.ravel() for t in tables]
+
+    def supported(zi: np.ndarray, si: np.ndarray, chunk: int = 30) -> np.ndarray:
+        """Pairs (detection ``zi``, support ``si``) with a line cell of the support's bit near both, a few
+        columns at a time (a pair settled by one column skips the rest)."""
+        ok = np.zeros(zi.size, dtype=bool)
+        todo = np.arange(zi.size)
+        for start in range(0, J, chunk):
+            if todo.size == 0:
+                break
+            c = np.arange(start, min(start + chunk, J))
+            s = si[todo]
+            rs = np.empty((todo.size, c.size), dtype=np.int32)
+            for slot, p in enumerate(earlier):
+                m = sup_ping[s] == slot
+                if m.any():
+                    rs[m] = cache.rows(p)[sup_index[s[m]][:, None], cols[c]]
+            rz = rz_all[zi[todo][:, None], c]
+            # rows max(rz, rs) - e .. min(rz, rs) + e (inside the grid) are not empty
+            i_pair, i_col = np.nonzero(np.abs(rz - rs) <= 2 * e)
+            rz, rs = rz[i_pair, i_col], rs[i_pair, i_col]
+            lo = np.maximum(np.maximum(rz, rs) - e, 0)
+            hi = np.minimum(np.minimum(rz, rs) + e, grid.n_rho - 1)
+            t = log2[hi - lo + 1]
+            bit = sup_bit[s[i_pair]]
+            col = c[i_col]
+            hit = np.zeros(todo.size, dtype=bool)
+            for w in range(n_words):
+                sel = slice(None) if n_words == 1 else bit // 8 == w
+                at = (t[sel] * grid.n_rho + lo[sel]) * J + col[sel]
+                to = (t[sel] * grid.n_rho + hi[sel] - (1 << t[sel]) + 1) * J + col[sel]
+                # OR of the line bits over rows lo .. hi: two overlapping power-of-two windows
+                got = (table_flat[w][at] | table_flat[w][to]) & (1 << (bit[sel] % 8)).astype(np.uint8)
+                hit[i_pair[sel][got > 0]] = True
+            ok[todo[hit]] = True
+            todo = todo[~hit]
+        return ok
 
     tree = cKDTree(sup_xy)
     todo = cand
@@ -360,7 +424,7 @@ def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: di
         close = d[i_loc, col] <= sup_reach[s_idx]
         i_loc, s_idx = i_loc[close], s_idx[close]
         hit = np.zeros(todo.size, dtype=bool)
-        ok = _check_pairs(todo[i_loc], s_idx, rz_all, sup_rows, cum_slot, cum, e)
+        ok = supported(todo[i_loc], s_idx)
         hit[i_loc[ok]] = True
         keep[todo[hit]] = True
         # a detection whose every support within reach has been checked is finished
@@ -383,7 +447,9 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
     st = int(np.floor(np.deg2rad(sim_theta_deg) / grid.d_theta + 1e-9))
     slots = [np.flatnonzero(valid[k]) for k in range(T)]
     pts = [z[k][s] for k, s in enumerate(slots)]
-    cache = _RunCache(pts=pts, grid=grid, slots=slots)
+    most = max([len(s) for s in slots] + [1])
+    cache = _RunCache(pts=pts, grid=grid, slots=slots, count_dtype=np.min_scalar_type(most))
+    vote_dtype, support_dtype = np.min_scalar_type(window * most), np.min_scalar_type(window)
     out = np.zeros(valid.shape, dtype=bool)
     first_output = window - 1 + shift
     gaps = np.arange(window - 1, 0, -1)  # k - p for the earlier pings of B, oldest first
@@ -400,9 +466,13 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
             continue
         group_b = range(k - window + 1, k + 1)
         kept = _gate(cache, group_b, v_max, dt, gate_gap)
-        counts = {p: _counts(cache, grid, p, kept[p]) for p in group_b}
-        n_pings = sum((counts[p] > 0).astype(np.int16) for p in group_b)
-        votes = sum(counts[p] for p in group_b)
+        counts = {p: cache.counts_of(p, kept[p]) for p in group_b}
+        n_pings = np.zeros(grid.n_rho * grid.n_theta, dtype=support_dtype)
+        votes = np.zeros(grid.n_rho * grid.n_theta, dtype=vote_dtype)
+        for p in group_b:
+            n_pings += counts[p] > 0
+            votes += counts[p]
+        n_pings, votes = n_pings.reshape(grid.shape), votes.reshape(grid.shape)
         cache.peaks[k] = find_peaks(n_pings, votes, v_min, grid)
         for old in [q for q in cache.peaks if q < k - shift]:
             del cache.peaks[old]
@@ -410,7 +480,7 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
             continue
         ra, ca = cache.peaks[k - shift]
         rb, cb = cache.peaks[k]
-        now = counts[k][rb, cb] > 0  # a B peak needs a vote from ping k
+        now = counts[k].reshape(grid.shape)[rb, cb] > 0  # a B peak needs a vote from ping k
         rb, cb = rb[now], cb[now]
         sim = similar_to(rb, cb, ra, ca, grid, sr, st)
         keep = _inverse(cache, grid, k, group_b, kept, counts, rb[sim], cb[sim], eps, reach, support)
@@ -420,7 +490,8 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
             del cache.trees[p]
         for p in [p for p in cache.row_cache if p <= k - window]:
             del cache.row_cache[p]
-        cache.counts = {key: v for key, v in cache.counts.items() if key[0] > k - window}
+        for p in [p for p in cache.counts if p <= k - window]:
+            del cache.counts[p]
         cache.partner = {key: v for key, v in cache.partner.items() if min(key) > k - window}
         if trace is not None:
             rho, theta = grid.rho, grid.theta
