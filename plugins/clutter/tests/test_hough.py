@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from workbench.rng import generator
 from workbench.types import CLUTTER, InputError, Scans
-from workbench_clutter.hough import (HOUGH, HoughGrid, find_peaks, lines_similar, make_grid, neighbours, remove,
+from workbench_clutter.hough import (_gate, HOUGH, HoughGrid, find_peaks, lines_similar, make_grid, neighbours, remove,
                                      similar_to)
 
 AREA = 250.0
@@ -216,7 +216,8 @@ def test_fast_remover_equals_the_reference_on_the_paper_scenario():
     assert got.any() and (got.sum() < scans.valid.sum())
 
 
-# --- reference: the dense implementation before the incremental rewrite (kept verbatim, renamed) ---------
+# --- reference: the dense implementation before the incremental rewrite (kept verbatim, renamed; the
+# pieces the rewrite left unchanged, _has_partner and _gate, are imported from the module) ------------
 # Every ping re-votes the W pings of group B with a full-grid bincount, filters the float score with
 # scipy.ndimage and counts line cells with dense cumulative sums.  The fast remover must give exactly
 # its decisions.
@@ -298,30 +299,6 @@ class _RunCache:
         if p not in self.trees:
             self.trees[p] = cKDTree(self.pts[p])
         return self.trees[p]
-
-
-def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
-    """Points of ping ``p`` with a point of ping ``q`` in the box ``|dx|, |dy| <= box``."""
-    key = (p, q)
-    if key not in cache.partner:
-        if len(cache.pts[p]) == 0 or len(cache.pts[q]) == 0:
-            cache.partner[key] = np.zeros(len(cache.pts[p]), dtype=bool)
-        else:
-            bound = np.nextafter(box, np.inf)
-            d, _ = cache.tree(q).query(cache.pts[p], k=1, p=np.inf, distance_upper_bound=bound)
-            cache.partner[key] = np.isfinite(d)
-    return cache.partner[key]
-
-
-def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> dict:
-    kept = {}
-    for p in group:
-        mask = np.zeros(len(cache.pts[p]), dtype=bool)
-        for q in group:
-            if q != p and abs(q - p) <= gap:
-                mask |= _has_partner(cache, p, q, v_max * dt * abs(q - p))
-        kept[p] = mask
-    return kept
 
 
 def _counts(cache: _RunCache, grid: HoughGrid, p: int, mask: np.ndarray) -> np.ndarray:
