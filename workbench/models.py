@@ -28,6 +28,8 @@ __all__ = [
     "linear_measurement",
     "range_bearing",
     "range_bearing_jacobian",
+    "polar_to_cartesian",
+    "converted_covariance",
 ]
 
 
@@ -253,3 +255,26 @@ def range_bearing(sigma_r: float, sigma_theta: float, sensor=(0.0, 0.0)) -> Meas
         angular=(False, True),
         params={"sigma_r": float(sigma_r), "sigma_b": float(sigma_theta), "sensor": (sx, sy)},
     )
+
+
+def polar_to_cartesian(z: np.ndarray, sensor=(0.0, 0.0)) -> np.ndarray:
+    """``(r, b) -> (sx + r cos b, sy + r sin b)`` for ``z (..., 2)``; math bearing convention."""
+    z = np.asarray(z, dtype=float)
+    r, b = z[..., 0], z[..., 1]
+    return np.stack([sensor[0] + r * np.cos(b), sensor[1] + r * np.sin(b)], axis=-1)
+
+
+def converted_covariance(r: np.ndarray, b: np.ndarray, sigma_r: float, sigma_b: float) -> np.ndarray:
+    """Linearised covariance of the converted measurement, ``(...,) -> (..., 2, 2)``.
+
+    ``sigma_b`` in radians; ``b`` in the math convention (from the +x axis).
+    """
+    r = np.asarray(r, dtype=float)
+    c, s = np.cos(b), np.sin(b)
+    sr2 = sigma_r * sigma_r
+    rb2 = r * r * sigma_b * sigma_b
+    out = np.empty(r.shape + (2, 2))
+    out[..., 0, 0] = sr2 * c * c + rb2 * s * s  # R11 = sr^2 cos^2 b + r^2 sb^2 sin^2 b
+    out[..., 1, 1] = sr2 * s * s + rb2 * c * c  # R22 = sr^2 sin^2 b + r^2 sb^2 cos^2 b
+    out[..., 0, 1] = out[..., 1, 0] = (sr2 - rb2) * s * c  # R12 = (sr^2 - r^2 sb^2) sin b cos b
+    return out

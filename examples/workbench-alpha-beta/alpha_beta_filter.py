@@ -22,6 +22,7 @@ import numpy as np
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.linalg import joseph_update, symmetrise
+from workbench.models import converted_covariance, polar_to_cartesian
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError
 
@@ -42,15 +43,9 @@ def _position_measurement(z, model, d):
                              "something else")
         return z, np.broadcast_to(model.R, (z.shape[0], d, d))
     if d == 2 and model.angular == (False, True) and "sigma_r" in model.params:
-        r, b = z[:, 0], z[:, 1]
-        sr2, sb2 = model.params["sigma_r"] ** 2, model.params["sigma_b"] ** 2
-        sx, sy = model.params.get("sensor", (0.0, 0.0))
-        c, s = np.cos(b), np.sin(b)
-        cov = np.empty((z.shape[0], 2, 2))
-        cov[:, 0, 0] = sr2 * c * c + r * r * sb2 * s * s
-        cov[:, 1, 1] = sr2 * s * s + r * r * sb2 * c * c
-        cov[:, 0, 1] = cov[:, 1, 0] = (sr2 - r * r * sb2) * s * c
-        return np.stack([sx + r * c, sy + r * s], axis=1), cov
+        sensor = model.params.get("sensor", (0.0, 0.0))
+        cov = converted_covariance(z[:, 0], z[:, 1], model.params["sigma_r"], model.params["sigma_b"])
+        return polar_to_cartesian(z, sensor), cov
     raise InputError(f"alpha-beta cannot use measurement model {model.name!r}: it takes positions or range-bearing")
 
 

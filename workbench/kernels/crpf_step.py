@@ -277,6 +277,21 @@ def _taichi_kernel():
             bad = 1
         return m, bad
 
+    @ti.func
+    def pmf(vals: ti.template(), b, N, beta, delta, w: ti.template()):
+        """Write pi_i ~ ((v_i - min v + delta) / delta)^-beta of row ``b`` into ``w[b]`` (uniform for a bad
+        row); return the sum.  ``vals`` may be ``w`` itself."""
+        m, bad = pmf_min(vals, b, N)
+        total = ti.f64(0.0)
+        for i in range(N):
+            wi = ti.f64(1.0)
+            if not bad:
+                t = (vals[b, i] - m + delta) / delta
+                wi = 1.0 / (t * t) if beta == ti.f64(2.0) else ti.pow(t, -beta)
+            w[b, i] = wi
+            total += wi
+        return total
+
     @ti.kernel
     def kernel(x: ti.types.ndarray(dtype=ti.f64, ndim=3), c: ti.types.ndarray(dtype=ti.f64, ndim=2),
                F: ti.types.ndarray(dtype=ti.f64, ndim=2), z: ti.types.ndarray(dtype=ti.f64, ndim=2),
@@ -299,16 +314,7 @@ def _taichi_kernel():
                     px += F[0, k] * x[b, i, k]
                     py += F[1, k] * x[b, i, k]
                 w[b, i] = lam * c[b, i] + cost(px, py, zr, zt, sx, sy, q, arc)
-            m, bad = pmf_min(w, b, N)
-            total = ti.f64(0.0)
-            for i in range(N):
-                wi = ti.f64(1.0)
-                if not bad:
-                    # pi ~ ((R - min R + delta) / delta)^-beta
-                    t = (w[b, i] - m + delta) / delta
-                    wi = 1.0 / (t * t) if beta == ti.f64(2.0) else ti.pow(t, -beta)
-                w[b, i] = wi
-                total += wi
+            total = pmf(w, b, N, beta, delta, w)
             # systematic selection: edge_i = clip(ceil(N cdf_i - u0), 0, N), k_i = edge_i - edge_{i-1}
             cum = ti.f64(0.0)
             prev = 0
@@ -331,15 +337,7 @@ def _taichi_kernel():
                     j += 1
                 prev = ti.max(prev, ie)
             # estimate: pi' ~ (C' - min C' + delta)^-beta, weighted mean and covariance
-            m2, bad2 = pmf_min(c_new, b, N)
-            total = ti.f64(0.0)
-            for i in range(N):
-                wi = ti.f64(1.0)
-                if not bad2:
-                    t = (c_new[b, i] - m2 + delta) / delta
-                    wi = 1.0 / (t * t) if beta == ti.f64(2.0) else ti.pow(t, -beta)
-                w[b, i] = wi
-                total += wi
+            total = pmf(c_new, b, N, beta, delta, w)
             for r in range(n):
                 acc = ti.f64(0.0)
                 for i in range(N):
