@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from workbench.filtering import run_filter
-from workbench.kernels.crpf_step import crpf_step, crpf_step_numpy, numba_available
+from workbench.kernels.crpf_step import atan2_poly, crpf_step, crpf_step_numpy, numba_available
 from workbench.models import random_walk_velocity, range_bearing
 from workbench.plugins import load_host
 from workbench.rng import generator
@@ -34,6 +34,34 @@ def test_kernel_matches_the_numpy_twin(backend, q, beta, arc):
     got = crpf_step(x, c, F, z, e, u0, std, 0.9, beta, 0.01, q, arc, sensor=(5.0, -3.0), backend=backend)
     for a, b in zip(ref, got):
         assert np.allclose(a, b, rtol=1e-11, atol=1e-11)
+
+
+def test_polynomial_atan2_matches_the_library_to_an_ulp_or_two():
+    rng = np.random.default_rng(5)
+    y = rng.normal(size=200_000) * np.exp(rng.normal(size=200_000) * 6)
+    x = rng.normal(size=200_000) * np.exp(rng.normal(size=200_000) * 6)
+    edges = np.array([0.0, 1.0, -1.0, 1e-300, 1e300, np.tan(np.pi / 8), 1.0 - 1e-16])
+    y = np.concatenate([y, np.repeat(edges, edges.size), -np.repeat(edges, edges.size)])
+    x = np.concatenate([x, np.tile(edges, edges.size), -np.tile(edges, edges.size)])
+    ref = np.arctan2(y, x)
+    got = atan2_poly(y, x)
+    assert np.max(np.abs(got - ref)) <= 2 * np.spacing(np.pi)
+    assert np.all(np.abs(got) <= np.pi)
+    assert np.array_equal(np.signbit(got), np.signbit(ref))  # signed zeros: atan2(-0, -1) = -pi
+
+
+@pytest.mark.skipif(not numba_available(), reason="the optional Numba backend is not installed")
+def test_kernel_atan2_is_the_numpy_twin_of_the_polynomial():
+    # N = 1 and zero noise: the cost is (z_r - |x|)^2 + wrap(z_t - atan2(x_y, x_x))^2, the kernel's atan2
+    B = 4000
+    rng = np.random.default_rng(6)
+    x = np.zeros((B, 1, 4))
+    x[:, 0, :2] = rng.normal(size=(B, 2)) * np.exp(rng.normal(size=(B, 1)) * 4)
+    z = np.zeros((B, 2))
+    _, cn, _, _ = crpf_step(x, np.zeros((B, 1)), np.eye(4), z, np.zeros((B, 1, 4)), np.zeros(B), np.zeros(4),
+                            1.0, 2.0, 0.01, backend="numba")
+    theta = atan2_poly(x[:, 0, 1], x[:, 0, 0])
+    assert np.allclose(cn[:, 0], np.hypot(x[:, 0, 0], x[:, 0, 1]) ** 2 + theta ** 2, rtol=1e-14, atol=0)
 
 
 def test_numpy_twin_follows_the_formulas():
