@@ -50,7 +50,7 @@ def test_polynomial_atan2_matches_the_library_to_an_ulp_or_two():
     assert np.array_equal(np.signbit(got), np.signbit(ref))  # signed zeros: atan2(-0, -1) = -pi
 
 
-@pytest.mark.skipif(not numba_available(), reason="the optional Numba backend is not installed")
+@pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
 def test_kernel_atan2_is_the_numpy_twin_of_the_polynomial():
     # N = 1 and zero noise: the cost is (z_r - |x|)^2 + wrap(z_t - atan2(x_y, x_x))^2, the kernel's atan2
     B = 4000

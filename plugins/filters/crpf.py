@@ -44,7 +44,7 @@ from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
 
 COSTS = ("norm", "arc-length")
-#: "auto": the fused kernel (:mod:`workbench.kernels.crpf_step`, Numba if installed, else Taichi) for a
+#: "auto": the fused kernel (:mod:`workbench.kernels.crpf_step`, Numba on the CPU, else Taichi) for a
 #: range-bearing model; "numpy": always the array code below; "numba"/"taichi": that kernel backend.
 BACKENDS = ("auto", "numpy", "numba", "taichi")
 

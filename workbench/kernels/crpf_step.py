@@ -20,9 +20,9 @@ Backends (held to :func:`crpf_step_numpy`, which is written with the workbench's
 :func:`workbench.resampling.systematic_counts` and the measurement model's ``h``):
 
 - ``"taichi"``: one run per parallel iteration, any Taichi arch;
-- ``"numba"`` (optional dependency): the same loops with ``numba.prange`` over runs, CPU only;
+- ``"numba"`` (the CPU default): the same loops with ``numba.prange`` over runs, CPU only;
 - ``"numpy"``: :func:`crpf_step_numpy`;
-- ``"auto"``: Numba when it is installed and the arch is the CPU, else Taichi
+- ``"auto"``: Numba when the arch is the CPU and Numba is installed, else Taichi
   (:func:`workbench.kernels.tbd_weights.resolve_backend`).
 
 Shapes: ``x (B, N, n)`` with position ``x, y`` first, ``c (B, N)``, ``F (n, n)``, ``z (B, 2)``,
@@ -141,7 +141,7 @@ def crpf_step(x, c, F, z, e, u0, std, lam, beta, delta, q=2.0, arc=False, sensor
     return x_new, c_new, mean, cov
 
 
-# -- Numba (optional) -----------------------------------------------------------------------------
+# -- Numba (the CPU default) ---------------------------------------------------------------------
 
 #: Cephes' rational approximation of atan on |t| <= 0.66: atan(t) = t + t z P(z) / Q(z), z = t^2
 #: (Q monic); about 1 ulp in float64.

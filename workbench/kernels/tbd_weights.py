@@ -13,10 +13,10 @@ Backends (all held to :func:`workbench.kernels.reference.tbd_log_weight_sums_ref
 
 - ``"taichi"``: one particle per parallel iteration, two streaming passes over ``m`` (an integer max,
   which LLVM vectorises, then the sum of exponentials); runs on any Taichi arch.
-- ``"numba"`` (optional dependency): particles in tiles of :data:`TILE`, a one-pass online logsumexp
+- ``"numba"`` (the CPU default): particles in tiles of :data:`TILE`, a one-pass online logsumexp
   vectorised across the particles of a tile; CPU only.
 - ``"numpy"``: the chunked NumPy reference.
-- ``"auto"``: Numba when it is installed and the arch is the CPU, else Taichi.
+- ``"auto"``: Numba when the arch is the CPU and Numba is installed, else Taichi.
 
 Both compiled kernels use the same inlined polynomial ``exp`` (:func:`poly_exp`): range reduction
 ``x = n ln2 + r`` with ``|r| <= ln2 / 2``, a degree-11 Taylor polynomial in Horner form (relative error
@@ -80,16 +80,17 @@ def poly_exp(x: np.ndarray) -> np.ndarray:
 
 
 def numba_available() -> bool:
-    """Whether the optional Numba backend can be used (Numba installed)."""
+    """Whether Numba is installed (a dependency; an install without it falls back to Taichi)."""
     return importlib.util.find_spec("numba") is not None
 
 
 def resolve_backend(backend: str = "auto", arch: str = "cpu") -> str:
-    """The backend ``"auto"`` stands for here: Numba on the CPU when installed, else Taichi."""
+    """The backend ``"auto"`` stands for here: Numba on the CPU when it is installed, else Taichi."""
     if backend not in BACKENDS:
         raise ValueError(f"unknown kernel backend {backend!r}; expected one of {', '.join(BACKENDS)}")
     if backend == "numba" and not numba_available():
-        raise ValueError("backend 'numba' needs the optional dependency numba (pip install numba)")
+        raise ValueError("backend 'numba' needs numba, a dependency of the workbench that this install lacks "
+                         "(pip install numba)")
     if backend != "auto":
         return backend
     return "numba" if arch == "cpu" and numba_available() else "taichi"
@@ -218,7 +219,7 @@ def _taichi_kernel():
     return kernel
 
 
-# -- Numba (optional) -----------------------------------------------------------------------------
+# -- Numba (the CPU default) ---------------------------------------------------------------------
 
 
 @functools.cache

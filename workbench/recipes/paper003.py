@@ -110,7 +110,7 @@ Choices where the paper is silent (brief § 3.2-3.4; details in docs/paper003.md
   crpf-100-iso. No jitter setting stops the plain-norm CRPF from diverging: the cost ||y - h(x)||^2 adds
   m^2 and rad^2, so the bearing hardly enters and the cross-range error random-walks; the arc-length cost
   rows show that the cost scaling, not the jitter, is what loses the track. Every CRPF filter runs the fused
-  kernel workbench.kernels.crpf_step (Numba if installed, else Taichi) for the range-bearing sensor; the
+  kernel workbench.kernels.crpf_step (Numba on the CPU, else Taichi) for the range-bearing sensor; the
   random numbers are drawn in NumPy in the same order as the array code, so both give the same numbers
   up to float round-off.
 - MSE(t) = mean over runs of the squared position error; the scalar is its mean over t. RMSE = sqrt(MSE).
