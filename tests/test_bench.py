@@ -308,3 +308,15 @@ def test_bench_problem_is_paper_003():
     resid = scans.z[:, :, 0] - model.h(truth.states)
     resid[..., 1] = (resid[..., 1] + np.pi) % (2 * np.pi) - np.pi
     assert np.all(np.abs(resid[..., 0]) < 6 * 1.0) and np.all(np.abs(resid[..., 1]) < 6 * 0.1)
+
+
+def test_paper003_monte_carlo_figures_add_up():
+    from workbench import bench_paper003
+    from workbench.recipes import paper003 as recipe
+
+    out = bench_paper003.monte_carlo_wall_time("quick")
+    assert out["mc_runs_per_level"] == recipe.SIZES["quick"]["runs"] and out["mc_filters"] == len(recipe.DEFAULT_FILTERS)
+    per_filter = [out[f"mc_filter_s[{name}]"] for name in recipe.DEFAULT_FILTERS]
+    assert all(s > 0 for s in per_filter) and sum(per_filter) <= out["mc_wall_s"]
+    assert out["mc_crpf_backend"] in ("numba", "taichi") and out["mc_draw_threads"] >= 1
+    assert "mc_target_met" not in out  # the target is about the full size only
