@@ -37,9 +37,14 @@ every ping ``k`` the remover decides, from pings ``<= k`` only (causal) and with
 The remover only narrows ``Scans.valid`` (:meth:`workbench.types.Scans.with_valid`); it never moves a
 detection (the brief's optional "replace each point by its projection on the line" is not done).
 
-Cost per ping is ``O(n W n_theta)`` for the votes plus ``O(n_rho n_theta)`` grid filters; the inverse
-step checks (detection, nearby support) pairs in rounds of nearest neighbours, so it stays bounded in
-dense clutter.  Runs are processed one after another.
+Cost per ping is ``O(n n_theta)`` for the new votes plus a few ``O(n_rho n_theta)`` grid passes (every
+one a plain slice operation; no float score grid, no 2-D ``nonzero``).  Pairs of nearby points (the gate,
+and (detection, support) pairs of the inverse step) come from neighbouring square cells
+(:func:`_cell_pairs`); when that would give more than ``CELL_PAIRS_PER_POINT`` candidates per point
+(dense clutter) they come from k-d tree queries instead, nearest supports first, so the cost stays
+bounded.  Both routes yield the same pairs, hence the same decisions (tested).  A pair is checked in
+all line columns at once with one table lookup per column (:func:`_window_tables`).  Runs are
+processed one after another.
 """
 
 from __future__ import annotations
@@ -99,17 +104,28 @@ class HoughGrid:
     def rho(self) -> np.ndarray:
         return (np.arange(self.n_rho) - self.off) * self.d_rho
 
-    def rho_index(self, points: np.ndarray) -> np.ndarray:
-        """Row index of each point's vote in each column, ``(n, 2) -> (n, n_theta)`` int."""
+    def rho_index(self, points: np.ndarray, out: np.ndarray | None = None, block: int = 512) -> np.ndarray:
+        """Row index of each point's vote in each column, ``(n, 2) -> (n, n_theta)`` int32 (into ``out`` if
+        given).  Computed ``block`` points at a time so that the float temporaries stay in cache; the
+        arithmetic of every element is the same as in one pass."""
         th = self.theta
-        # rho = x cos(theta) + y sin(theta)     (eq 1)
-        rho = points[:, :1] * np.cos(th)
-        rho += points[:, 1:2] * np.sin(th)
-        if self.d_rho != 1.0:  # x / 1.0 == x exactly
-            rho /= self.d_rho
-        np.rint(rho, out=rho)
-        rows = rho.astype(np.int32)
-        rows += self.off
+        cos, sin = np.cos(th), np.sin(th)
+        n = points.shape[0]
+        rows = np.empty((n, self.n_theta), dtype=np.int32) if out is None else out
+        rho = np.empty((min(block, n), self.n_theta))
+        tmp = np.empty_like(rho)
+        for start in range(0, n, block):
+            stop = min(start + block, n)
+            r, t = rho[:stop - start], tmp[:stop - start]
+            # rho = x cos(theta) + y sin(theta)     (eq 1)
+            np.multiply(points[start:stop, :1], cos, out=r)
+            np.multiply(points[start:stop, 1:2], sin, out=t)
+            r += t
+            if self.d_rho != 1.0:  # x / 1.0 == x exactly
+                r /= self.d_rho
+            np.rint(r, out=r)
+            rows[start:stop] = r  # integral values: the cast is exact
+            rows[start:stop] += self.off
         return rows
 
 
@@ -164,6 +180,22 @@ def _max_cols_seam(values: np.ndarray, half: int) -> np.ndarray:
     return out
 
 
+def peak_cells(support: np.ndarray, votes: np.ndarray, v_min: int) -> np.ndarray:
+    """Flat indices (ascending) of the peaks of :func:`find_peaks`."""
+    if votes.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    top = int(votes.max()) + 1
+    dtype = np.min_scalar_type(int(support.max()) * top + top)
+    # score = support + votes / (max votes + 1), ordered as support * (max votes + 1) + votes
+    key = support.astype(dtype)
+    key *= top
+    key += votes.astype(dtype)
+    m = _max_cols_seam(_max_rows(key, 1), 1)
+    ok = key >= m
+    ok &= support >= v_min
+    return np.flatnonzero(ok)
+
+
 def find_peaks(support: np.ndarray, votes: np.ndarray, v_min: int, grid: HoughGrid) -> tuple[np.ndarray, np.ndarray]:
     """Peaks ``(rows, cols)``: cells with ``support >= v_min`` that are maxima of
     ``score = support + votes / (max votes + 1)`` over their 3 x 3 neighbourhood (seam-aware, ties kept).
@@ -174,16 +206,18 @@ def find_peaks(support: np.ndarray, votes: np.ndarray, v_min: int, grid: HoughGr
     then a seam-aware 3-point maximum across ``theta`` (cells outside the ``rho`` range ignored).  Equal
     to comparing each cell with :func:`neighbours` (tested).
     """
-    if votes.size == 0:
-        return np.nonzero(np.zeros(grid.shape, dtype=bool))
-    top = int(votes.max()) + 1
-    dtype = np.min_scalar_type(int(support.max()) * top + top)
-    # score = support + votes / (max votes + 1), ordered as support * (max votes + 1) + votes
-    key = support.astype(dtype)
-    key *= top
-    key += votes.astype(dtype)
-    m = _max_cols_seam(_max_rows(key, 1), 1)
-    return np.nonzero((support >= v_min) & (key >= m))
+    return np.divmod(peak_cells(support, votes, v_min), grid.n_theta)
+
+
+def similar_cells(flat_b: np.ndarray, flat_a: np.ndarray, grid: HoughGrid, half_rho: int,
+                  half_theta: int) -> np.ndarray:
+    """:func:`similar_to` on flat cell indices ``(len(b),) -> (len(b),)`` bool."""
+    if len(flat_a) == 0 or len(flat_b) == 0:
+        return np.zeros(len(flat_b), dtype=bool)
+    mark = np.zeros(grid.n_rho * grid.n_theta, dtype=bool)
+    mark[flat_a] = True
+    near = _max_cols_seam(_max_rows(mark.reshape(grid.shape), int(half_rho)), min(int(half_theta), grid.n_theta))
+    return near.ravel()[flat_b]
 
 
 def similar_to(rows_b, cols_b, rows_a, cols_a, grid: HoughGrid, half_rho: int, half_theta: int) -> np.ndarray:
@@ -193,13 +227,9 @@ def similar_to(rows_b, cols_b, rows_a, cols_a, grid: HoughGrid, half_rho: int, h
     Dense: the ``a`` cells are marked on the grid, dilated by ``half_rho`` rows and (across the seam)
     ``half_theta`` columns, and read at the ``b`` cells.
     """
-    out = np.zeros(len(rows_b), dtype=bool)
-    if len(rows_a) == 0 or len(rows_b) == 0:
-        return out
-    mark = np.zeros(grid.shape, dtype=bool)
-    mark[rows_a, cols_a] = True
-    near = _max_cols_seam(_max_rows(mark, int(half_rho)), min(int(half_theta), grid.n_theta))
-    return near[rows_b, cols_b]
+    flat_b = np.asarray(rows_b, dtype=np.intp) * grid.n_theta + np.asarray(cols_b, dtype=np.intp)
+    flat_a = np.asarray(rows_a, dtype=np.intp) * grid.n_theta + np.asarray(cols_a, dtype=np.intp)
+    return similar_cells(flat_b, flat_a, grid, half_rho, half_theta)
 
 
 def lines_similar(rho_a, theta_a, rho_b, theta_b, tol_rho: float, tol_theta: float) -> np.ndarray:
@@ -217,41 +247,102 @@ def lines_similar(rho_a, theta_a, rho_b, theta_b, tol_rho: float, tol_theta: flo
     return direct | flipped
 
 
+#: Neighbouring-cell candidate pairs are enumerated while there are at most this many per point (sparse
+#: pings); denser pings use k-d tree queries instead.  Both give the same pairs, so the same decisions.
+CELL_PAIRS_PER_POINT = 16
+
+
+def _cell_pairs(a: np.ndarray, b: np.ndarray, r: float, limit: int):
+    """Candidate pairs ``(i, j)`` such that every pair with ``|a_i - b_j|_inf <= r`` is among them, or
+    ``None`` when there would be more than ``limit`` (or the points span too many cells).
+
+    Points are binned into square cells of side ``h = r (1 + 2^-20)``; a pair within ``r`` lies in the
+    same or neighbouring cells (the margin covers the rounding of ``(x - x0) / h`` while the span is
+    below ``2^30`` cells).  Each ``a`` point looks up the three runs of three cells ``(cx + dx, cy - 1 ..
+    cy + 1)`` in the sorted cell keys of ``b`` (``searchsorted``).  Pairs come out grouped by ``a`` point in
+    cell order, so consecutive pairs are near each other.  Shapes: ``a (n, 2)``, ``b (m, 2)`` ->
+    ``(P,), (P,)`` intp.
+    """
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    if not r > 0:
+        return None
+    h = r * (1.0 + 2.0 ** -20)
+    # per coordinate (a reduction over axis 0 of an (n, 2) array is slow)
+    lo = np.array([min(a[:, c].min(), b[:, c].min()) for c in (0, 1)])
+    span = (np.array([max(a[:, c].max(), b[:, c].max()) for c in (0, 1)]) - lo) / h
+    if not np.all(span < 2.0 ** 30):
+        return None
+    # uniform points would give about 9 n m / cells candidates: do not sort what is bound to be refused
+    if 9.0 * len(a) * len(b) > 4.0 * limit * (np.floor(span[0]) + 1) * (np.floor(span[1]) + 1):
+        return None
+    ny = int(span[1]) + 3
+    ca = np.floor((a - lo) / h).astype(np.int64)
+    cb = np.floor((b - lo) / h).astype(np.int64)
+    ka = ca[:, 0] * ny + ca[:, 1] + 1  # + 1: the cell below, cy - 1, keeps a key >= 0 in the same x run
+    kb = cb[:, 0] * ny + cb[:, 1] + 1
+    b_order = np.argsort(kb, kind="stable")
+    kb = kb[b_order]
+    a_order = np.argsort(ka, kind="stable")
+    # (3, n), each row ascending (searchsorted is fastest on sorted queries): cells (cx + dx, cy - 1)
+    first = ka[a_order] + np.array([-ny - 1, -1, ny - 1])[:, None]
+    start = np.searchsorted(kb, first)
+    count = np.searchsorted(kb, first + 2, side="right") - start
+    total = int(count.sum())
+    if total > limit:
+        return None
+    start, count = start.T.ravel(), count.T.ravel()  # grouped by a point
+    i = np.repeat(np.repeat(a_order, 3), count)
+    # position of each candidate in the sorted b: its run's start plus its rank within the run
+    shift = np.repeat(start - (np.cumsum(count) - count), count)
+    j = b_order[shift + np.arange(total)]
+    return i, j
+
+
 @dataclass
 class _RunCache:
     """Per-run memo of what earlier pings already computed (mutable, private to one ``remove`` call).
 
     ``counts[p] = (mask, flat counts)``: ping ``p``'s votes from its gated points ``mask``, kept up to date
     when the gate of ``p`` changes (add the newly gated points' votes, drop the ungated ones') instead of
-    re-voting the whole ping.
+    re-voting the whole ping.  The vote rows of the last ``window`` pings live in one ring buffer
+    ``ring (window, most, n_theta)``, ping ``p`` at ``p % window``.
     """
 
     pts: list
     grid: HoughGrid
     slots: list
     count_dtype: np.dtype
-    row_cache: dict = field(default_factory=dict)
+    ring: np.ndarray
+    ring_ping: list
     trees: dict = field(default_factory=dict)
     partner: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
     peaks: dict = field(default_factory=dict)
+    scratch: np.ndarray | None = None
 
     def rows(self, p: int) -> np.ndarray:
-        """The vote rows of ping ``p`` in every column, ``(n_p, n_theta)`` (computed once)."""
-        if p not in self.row_cache:
-            self.row_cache[p] = self.grid.rho_index(self.pts[p])
-        return self.row_cache[p]
+        """The vote rows of ping ``p`` in every column, ``(n_p, n_theta)`` (computed once while ``p`` is in
+        the window)."""
+        slot = p % self.ring.shape[0]
+        n = len(self.pts[p])
+        if self.ring_ping[slot] != p:
+            self.grid.rho_index(self.pts[p], out=self.ring[slot, :n])
+            self.ring_ping[slot] = p
+        return self.ring[slot, :n]
 
     def tree(self, p: int) -> cKDTree:
         if p not in self.trees:
-            self.trees[p] = cKDTree(self.pts[p])
+            self.trees[p] = cKDTree(self.pts[p], balanced_tree=False)
         return self.trees[p]
 
     def _add_votes(self, counts: np.ndarray, p: int, which: np.ndarray, ufunc) -> None:
         """``counts[cell] (+/-)= 1`` for every vote of the points ``which`` of ping ``p`` (unbuffered)."""
         grid = self.grid
-        flat = (self.rows(p)[which] * grid.n_theta + np.arange(grid.n_theta)).ravel()
-        ufunc.at(counts, flat, np.ones(flat.size, dtype=counts.dtype))
+        flat = self.rows(p)[which]
+        flat *= grid.n_theta
+        flat += np.arange(grid.n_theta, dtype=flat.dtype)
+        ufunc.at(counts, flat.ravel(), counts.dtype.type(1))
 
     def counts_of(self, p: int, mask: np.ndarray) -> np.ndarray:
         """Votes of the points ``mask`` of ping ``p`` per cell, flat ``(n_rho n_theta,)``."""
@@ -269,17 +360,34 @@ class _RunCache:
         self.counts[p] = (mask.copy(), counts)
         return counts
 
+    def buffer(self, shape: tuple, dtype) -> np.ndarray:
+        """A scratch array of ``shape`` (reused from ping to ping; contents undefined)."""
+        size = int(np.prod(shape))
+        if self.scratch is None or self.scratch.size < size or self.scratch.dtype != dtype:
+            self.scratch = np.empty(size, dtype=dtype)
+        return self.scratch[:size].reshape(shape)
+
 
 def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
-    """Points of ping ``p`` with a point of ping ``q`` in the box ``|dx|, |dy| <= box``."""
+    """Points of ping ``p`` with a point of ping ``q`` in the box ``|dx|, |dy| <= box`` (symmetric: the
+    answer for ``(q, p)`` is stored at the same time)."""
     key = (p, q)
     if key not in cache.partner:
-        if len(cache.pts[p]) == 0 or len(cache.pts[q]) == 0:
-            cache.partner[key] = np.zeros(len(cache.pts[p]), dtype=bool)
-        else:
+        a, b = cache.pts[p], cache.pts[q]
+        in_a, in_b = np.zeros(len(a), dtype=bool), np.zeros(len(b), dtype=bool)
+        pairs = _cell_pairs(a, b, box, CELL_PAIRS_PER_POINT * (len(a) + len(b)))
+        if pairs is not None:
+            i, j = pairs
+            # |dx|, |dy| <= box: the Chebyshev distance that the k-d tree query below compares
+            ok = np.abs(a[i, 0] - b[j, 0]) <= box
+            ok &= np.abs(a[i, 1] - b[j, 1]) <= box
+            in_a[i[ok]] = True
+            in_b[j[ok]] = True
+        else:  # dense pings: nearest neighbour in the max norm, both ways
             bound = np.nextafter(box, np.inf)
-            d, _ = cache.tree(q).query(cache.pts[p], k=1, p=np.inf, distance_upper_bound=bound)
-            cache.partner[key] = np.isfinite(d)
+            in_a = np.isfinite(cache.tree(q).query(a, k=1, p=np.inf, distance_upper_bound=bound)[0])
+            in_b = np.isfinite(cache.tree(p).query(b, k=1, p=np.inf, distance_upper_bound=bound)[0])
+        cache.partner[key], cache.partner[(q, p)] = in_a, in_b
     return cache.partner[key]
 
 
@@ -294,20 +402,57 @@ def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> 
     return kept
 
 
-def _range_tables(bits: np.ndarray, longest: int) -> np.ndarray:
-    """Sparse table of ``bits (n_rho, J)`` along ``rho``: level ``t`` holds the OR of rows ``r .. r + 2^t - 1``
-    (rows past the grid ignored); levels ``0 .. floor(log2 longest)``, ``-> (levels, n_rho, J)``.  The OR
-    over rows ``lo .. hi`` (``hi - lo + 1 <= longest``) is ``level[t][lo] | level[t][hi - 2^t + 1]`` with
-    ``t = floor(log2(hi - lo + 1))``."""
-    levels = [bits]
-    step = 1
-    while 2 * step <= longest:
-        prev = levels[-1]
-        nxt = prev.copy()
-        np.bitwise_or(nxt[:-step], prev[step:], out=nxt[:-step])
-        levels.append(nxt)
-        step *= 2
-    return np.stack(levels)
+def _window_tables(bits: np.ndarray, e: int, out: np.ndarray) -> np.ndarray:
+    """OR of the line bits over every row window a pair can ask about.
+
+    ``bits (W, J, H)`` (rows padded with ``e`` empty rows at each end) -> ``out (W, J, 2 e + 2, H)``:
+    level ``a`` holds the OR of rows ``r .. r + 2 e - a`` (window length ``2 e + 1 - a``; rows past the
+    end empty), level ``2 e + 1`` is empty.  A pair whose rows differ by ``a = |r_z - r_s|`` asks for the
+    rows ``max(r_z, r_s) - e .. min(r_z, r_s) + e``: level ``min(a, 2 e + 1)`` at padded row
+    ``max(r_z, r_s)``.  Rows are the last axis so that nearby pairs read nearby bytes.
+    """
+    H = bits.shape[-1]
+    out[:, :, 2 * e] = bits
+    out[:, :, 2 * e + 1] = 0
+    for length in range(2, 2 * e + 2):
+        a = 2 * e + 1 - length
+        np.copyto(out[:, :, a], out[:, :, a + 1])
+        np.bitwise_or(out[:, :, a, :H - length + 1], bits[:, :, length - 1:], out=out[:, :, a, :H - length + 1])
+    return out
+
+
+def _supported_numpy(zi, si, rows_k, ring, sup_ring, sup_index, sup_word, sup_bit, cols, table, e,
+                     chunk: int = 1024) -> np.ndarray:
+    """Pairs (detection ``zi``, support ``si``) with a line cell of the support's bit within ``e`` rows of
+    both in some column: ``table[word, j, min(|r_z - r_s|, 2 e + 1), max(r_z, r_s)] & bit``, ``chunk``
+    pairs at a time over all line columns.  ``(P,) -> (P,)`` bool."""
+    ok = np.zeros(zi.size, dtype=bool)
+    n_words, J, levels, H = table.shape
+    idx_type = np.int32 if table[0].size < 2 ** 31 else np.int64
+    col_base = np.arange(J, dtype=idx_type) * (levels * H)
+    every_col = J == rows_k.shape[1]
+    for w in range(n_words):
+        flat = table[w].ravel()
+        sel = np.arange(zi.size) if n_words == 1 else np.flatnonzero(sup_word[si] == w)
+        for start in range(0, sel.size, chunk):
+            at = sel[start:start + chunk]
+            z, s = zi[at], si[at]
+            rz = rows_k[z]
+            rs = ring[sup_ring[s], sup_index[s]]
+            if not every_col:
+                rz, rs = rz[:, cols], rs[:, cols]
+            a = rz - rs
+            np.abs(a, out=a)
+            np.minimum(a, 2 * e + 1, out=a)
+            a = a.astype(idx_type, copy=False)
+            # flat index (column, level, padded row): the rows max - e .. min + e
+            a *= H
+            a += np.maximum(rz, rs)
+            a += col_base
+            got = np.take(flat, a)
+            got &= sup_bit[s][:, None]
+            ok[at] = got.any(axis=1)
+    return ok
 
 
 def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: dict, counts: dict,
@@ -320,7 +465,9 @@ def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: di
     Each line cell gets one bit: the slot (earlier ping of B, oldest first) of its latest support
     (``support="latest"``), or bit 0 for every line (``"any"``).  A pair (detection ``z``, support ``s``)
     is supported when some column holds a line cell with ``s``'s bit within ``e`` rows of both: an OR
-    over the rows ``max(r_z, r_s) - e .. min(r_z, r_s) + e``, read from a sparse table (two lookups).
+    over the rows ``max(r_z, r_s) - e .. min(r_z, r_s) + e``, one lookup in :func:`_window_tables`.
+    Pairs within reach come from neighbouring cells (:func:`_cell_pairs`), or in dense pings from rounds
+    of k-d tree nearest neighbours (a detection settled in one round skips the rest).
     """
     n_k = len(cache.pts[k])
     keep = np.zeros(n_k, dtype=bool)
@@ -328,94 +475,74 @@ def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: di
     if n_k == 0 or sim_rows.size == 0 or not earlier:
         return keep
     e = int(np.floor(eps / grid.d_rho + 1e-9))
-    cols, col_of = np.unique(sim_cols, return_inverse=True)
+    used = np.zeros(grid.n_theta, dtype=bool)
+    used[sim_cols] = True
+    cols = np.flatnonzero(used)
+    col_of = (np.cumsum(used) - 1)[sim_cols]
     J = cols.size
     every_col = J == grid.n_theta
 
-    def in_cols(a: np.ndarray) -> np.ndarray:
-        return a if every_col else a[:, cols]
-
     n_slots = len(earlier)
     if support == "latest":
-        # latest earlier ping of B with a gated point within e rows of each line cell
-        latest = np.full((grid.n_rho, J), -1, dtype=np.min_scalar_type(-n_slots))
+        # latest earlier ping of B with a gated point within e rows of each line cell: the largest
+        # slot + 1 voted in the cell, dilated over e rows (0: none)
+        latest = np.zeros((grid.n_rho, J), dtype=np.min_scalar_type(n_slots))
         for slot, p in enumerate(earlier):
-            np.copyto(latest, slot, where=in_cols(counts[p].reshape(grid.shape)) > 0)
+            c = counts[p].reshape(grid.shape)
+            voted = (c if every_col else c[:, cols]) > 0
+            voted = voted.astype(latest.dtype, copy=False) if latest.dtype != np.uint8 else voted.view(np.uint8)
+            voted *= latest.dtype.type(slot + 1)
+            np.maximum(latest, voted, out=latest)
         latest = _max_rows(latest, e)
-        cell_slot = latest[sim_rows, col_of].astype(np.intp)
+        cell_slot = latest.ravel()[sim_rows * J + col_of].astype(np.intp) - 1
         has = cell_slot >= 0
         cell_rows, cell_cols, cell_slot = sim_rows[has], col_of[has], cell_slot[has]
     else:  # "any": every earlier support of the line counts; one bit serves all slots
         cell_rows, cell_cols, cell_slot = sim_rows, col_of, np.zeros(sim_rows.size, dtype=np.intp)
-    if cell_rows.size == 0:
-        return keep
-    n_words = int(cell_slot.max()) // 8 + 1
-    bits = np.zeros((n_words, grid.n_rho, J), dtype=np.uint8)
-    bits[cell_slot // 8, cell_rows, cell_cols] = (1 << (cell_slot % 8)).astype(np.uint8)
-    # candidates: detections of ping k within e rows of some line cell at all
-    near_line = _max_rows(bits.any(axis=0), e)
-    rz_all = in_cols(cache.rows(k))
-    cand = np.flatnonzero(near_line[rz_all, np.arange(J)].any(axis=1))
     sup_pts = [cache.pts[p][kept[p]] for p in earlier]
     sup_xy = np.concatenate(sup_pts, axis=0)
-    if cand.size == 0 or sup_xy.shape[0] == 0:
+    if cell_rows.size == 0 or sup_xy.shape[0] == 0:
         return keep
-    tables = [_range_tables(bits[w], 2 * e + 1) for w in range(n_words)]
-    sup_ping = np.concatenate([np.full(len(sp), i, dtype=np.intp) for i, sp in enumerate(sup_pts)])
+    n_words = int(cell_slot.max()) // 8 + 1
+    H = grid.n_rho + 2 * e  # e empty rows above and below: windows never leave the array
+    bits = np.zeros((n_words, J, H), dtype=np.uint8)
+    bits[cell_slot // 8, cell_cols, cell_rows + e] = (1 << (cell_slot % 8)).astype(np.uint8)
+    table = _window_tables(bits, e, cache.buffer((n_words, J, 2 * e + 2, H), np.uint8))
+
+    sup_slot = np.concatenate([np.full(len(sp), i, dtype=np.intp) for i, sp in enumerate(sup_pts)])
     sup_index = np.concatenate([np.flatnonzero(kept[p]) for p in earlier])
-    sup_reach = reach[sup_ping]
-    sup_bit = sup_ping if support == "latest" else np.zeros_like(sup_ping)
+    sup_ring = np.array([p % cache.ring.shape[0] for p in earlier], dtype=np.intp)[sup_slot]
+    for p in earlier:
+        cache.rows(p)  # in the ring
+    rows_k = cache.rows(k)
+    sup_reach = reach[sup_slot]
+    sup_bitslot = sup_slot if support == "latest" else np.zeros_like(sup_slot)
+    sup_word = sup_bitslot // 8
+    sup_bit = (1 << (sup_bitslot % 8)).astype(np.uint8)
 
-    longest = 2 * e + 1
-    log2 = np.zeros(longest + 1, dtype=np.intp)
-    log2[1:] = np.floor(np.log2(np.arange(1, longest + 1)))
-    table_flat = [t.ravel() for t in tables]
+    def supported(zi: np.ndarray, si: np.ndarray) -> np.ndarray:
+        return _supported_numpy(zi, si, rows_k, cache.ring, sup_ring, sup_index, sup_word, sup_bit, cols, table, e)
 
-    def supported(zi: np.ndarray, si: np.ndarray, chunk: int = 30) -> np.ndarray:
-        """Pairs (detection ``zi``, support ``si``) with a line cell of the support's bit near both, a few
-        columns at a time (a pair settled by one column skips the rest)."""
-        ok = np.zeros(zi.size, dtype=bool)
-        todo = np.arange(zi.size)
-        for start in range(0, J, chunk):
-            if todo.size == 0:
-                break
-            c = np.arange(start, min(start + chunk, J))
-            s = si[todo]
-            rs = np.empty((todo.size, c.size), dtype=np.int32)
-            for slot, p in enumerate(earlier):
-                m = sup_ping[s] == slot
-                if m.any():
-                    rs[m] = cache.rows(p)[sup_index[s[m]][:, None], cols[c]]
-            rz = rz_all[zi[todo][:, None], c]
-            # rows max(rz, rs) - e .. min(rz, rs) + e (inside the grid) are not empty
-            i_pair, i_col = np.nonzero(np.abs(rz - rs) <= 2 * e)
-            rz, rs = rz[i_pair, i_col], rs[i_pair, i_col]
-            lo = np.maximum(np.maximum(rz, rs) - e, 0)
-            hi = np.minimum(np.minimum(rz, rs) + e, grid.n_rho - 1)
-            t = log2[hi - lo + 1]
-            bit = sup_bit[s[i_pair]]
-            col = c[i_col]
-            hit = np.zeros(todo.size, dtype=bool)
-            for w in range(n_words):
-                sel = slice(None) if n_words == 1 else bit // 8 == w
-                at = (t[sel] * grid.n_rho + lo[sel]) * J + col[sel]
-                to = (t[sel] * grid.n_rho + hi[sel] - (1 << t[sel]) + 1) * J + col[sel]
-                # OR of the line bits over rows lo .. hi: two overlapping power-of-two windows
-                got = (table_flat[w][at] | table_flat[w][to]) & (1 << (bit[sel] % 8)).astype(np.uint8)
-                hit[i_pair[sel][got > 0]] = True
-            ok[todo[hit]] = True
-            todo = todo[~hit]
-        return ok
-
-    tree = cKDTree(sup_xy)
-    todo = cand
-    done_k = 0
+    z_xy = cache.pts[k]
     S = sup_xy.shape[0]
+    pairs = _cell_pairs(z_xy, sup_xy, float(reach.max()), CELL_PAIRS_PER_POINT * (n_k + S))
+    if pairs is not None:
+        zi, si = pairs
+        dx, dy = z_xy[zi, 0] - sup_xy[si, 0], z_xy[zi, 1] - sup_xy[si, 1]
+        # Euclidean distance, computed as the k-d tree computes it
+        close = np.sqrt(dx * dx + dy * dy) <= sup_reach[si]
+        zi, si = zi[close], si[close]
+        keep[zi[supported(zi, si)]] = True
+        return keep
+
+    tree = cKDTree(sup_xy, balanced_tree=False)
+    todo = np.arange(n_k)
+    done_k = 0
     for k_nn in (1, 4, 32, S):  # rounds of nearest supports; most detections settle in the first
         k_nn = min(k_nn, S)
         if todo.size == 0 or k_nn <= done_k:
             break
-        d, idx = tree.query(cache.pts[k][todo], k=k_nn, distance_upper_bound=np.nextafter(reach.max(), np.inf))
+        d, idx = tree.query(z_xy[todo], k=k_nn, distance_upper_bound=np.nextafter(reach.max(), np.inf))
         d = d.reshape(todo.size, -1)[:, done_k:]
         idx = idx.reshape(todo.size, -1)[:, done_k:]
         found = np.isfinite(d)
@@ -448,7 +575,8 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
     slots = [np.flatnonzero(valid[k]) for k in range(T)]
     pts = [z[k][s] for k, s in enumerate(slots)]
     most = max([len(s) for s in slots] + [1])
-    cache = _RunCache(pts=pts, grid=grid, slots=slots, count_dtype=np.min_scalar_type(most))
+    cache = _RunCache(pts=pts, grid=grid, slots=slots, count_dtype=np.min_scalar_type(most),
+                      ring=np.empty((window, most, grid.n_theta), dtype=np.int32), ring_ping=[-1] * window)
     vote_dtype, support_dtype = np.min_scalar_type(window * most), np.min_scalar_type(window)
     out = np.zeros(valid.shape, dtype=bool)
     first_output = window - 1 + shift
@@ -473,28 +601,27 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
             n_pings += counts[p] > 0
             votes += counts[p]
         n_pings, votes = n_pings.reshape(grid.shape), votes.reshape(grid.shape)
-        cache.peaks[k] = find_peaks(n_pings, votes, v_min, grid)
+        cache.peaks[k] = peak_cells(n_pings, votes, v_min)
         for old in [q for q in cache.peaks if q < k - shift]:
             del cache.peaks[old]
         if k < first_output:
             continue
-        ra, ca = cache.peaks[k - shift]
-        rb, cb = cache.peaks[k]
-        now = counts[k].reshape(grid.shape)[rb, cb] > 0  # a B peak needs a vote from ping k
-        rb, cb = rb[now], cb[now]
-        sim = similar_to(rb, cb, ra, ca, grid, sr, st)
-        keep = _inverse(cache, grid, k, group_b, kept, counts, rb[sim], cb[sim], eps, reach, support)
+        fa, fb = cache.peaks[k - shift], cache.peaks[k]
+        fb = fb[counts[k][fb] > 0]  # a B peak needs a vote from ping k
+        sim = similar_cells(fb, fa, grid, sr, st)
+        rb, cb = np.divmod(fb[sim], grid.n_theta)
+        keep = _inverse(cache, grid, k, group_b, kept, counts, rb, cb, eps, reach, support)
         out[k, slots[k][keep]] = True
         # memo entries later pings can no longer use
         for p in [p for p in cache.trees if p < k - window]:
             del cache.trees[p]
-        for p in [p for p in cache.row_cache if p <= k - window]:
-            del cache.row_cache[p]
         for p in [p for p in cache.counts if p <= k - window]:
             del cache.counts[p]
         cache.partner = {key: v for key, v in cache.partner.items() if min(key) > k - window}
         if trace is not None:
             rho, theta = grid.rho, grid.theta
+            ra, ca = np.divmod(fa, grid.n_theta)
+            rb, cb = np.divmod(fb, grid.n_theta)
             trace.append({
                 "run": np.array(run), "ping": np.array(k), "rho": rho, "theta": theta,
                 "support_b": n_pings.astype(np.int8),

@@ -10,7 +10,8 @@ from scipy.spatial import cKDTree
 
 from workbench.rng import generator
 from workbench.types import CLUTTER, InputError, Scans
-from workbench_clutter.hough import (_gate, HOUGH, HoughGrid, find_peaks, lines_similar, make_grid, neighbours, remove,
+from workbench_clutter import hough
+from workbench_clutter.hough import (HOUGH, HoughGrid, find_peaks, lines_similar, make_grid, neighbours, remove,
                                      similar_to)
 
 AREA = 250.0
@@ -216,11 +217,84 @@ def test_fast_remover_equals_the_reference_on_the_paper_scenario():
     assert got.any() and (got.sum() < scans.valid.sum())
 
 
-# --- reference: the dense implementation before the incremental rewrite (kept verbatim, renamed; the
-# pieces the rewrite left unchanged, _has_partner and _gate, are imported from the module) ------------
-# Every ping re-votes the W pings of group B with a full-grid bincount, filters the float score with
-# scipy.ndimage and counts line cells with dense cumulative sums.  The fast remover must give exactly
-# its decisions.
+
+@pytest.mark.parametrize("scale, offset", [(1.0, 0.0), (1.0, -500.0), (0.25, 1e6), (3.0, 0.0)])
+def test_cell_pairs_hold_every_pair_within_reach(scale, offset):
+    # integer coordinates put many pairs exactly on the box edge |dx| = r
+    rng = generator(21, "cell-pairs", scale, offset)
+    for r in (8.0, 16.0, 5.0):
+        a = offset + scale * rng.integers(0, 120, (300, 2)).astype(float)
+        b = offset + scale * rng.integers(0, 120, (500, 2)).astype(float)
+        b[:50] = a[:50] + scale * r * rng.choice([-1.0, 0.0, 1.0], (50, 2))  # on the edge
+        rr = scale * r
+        i, j = hough._cell_pairs(a, b, rr, 10 ** 9)
+        got = set(zip(i.tolist(), j.tolist()))
+        assert len(got) == i.size  # no pair twice
+        cheb = np.abs(a[:, None, :] - b[None, :, :]).max(axis=2)
+        want = set(zip(*np.nonzero(cheb <= rr)))
+        assert want <= got and len(want) > 50
+    assert hough._cell_pairs(a, b, rr, 10) is None  # over the limit: the caller uses the k-d tree
+
+
+def test_box_gate_equals_the_k_d_tree_gate():
+    rng = generator(22, "box-gate")
+    for trial in range(6):
+        pts = [rng.integers(0, 200 + 200 * trial, (150 + 40 * trial, 2)).astype(float) for _ in range(5)]
+        if trial % 2:
+            pts = [p + rng.uniform(-0.5, 0.5, p.shape) for p in pts]
+        grid = make_grid(1.0, 1.0, 1000.0)
+        fast = hough._RunCache(pts=pts, grid=grid, slots=[None] * 5, count_dtype=np.uint16,
+                               ring=np.empty((5, 400, grid.n_theta), np.int32), ring_ping=[-1] * 5)
+        ref = _RunCache(pts=pts, grid=grid, slots=[None] * 5)
+        got, want = hough._gate(fast, range(5), 8.0, 1.0, 2), _gate(ref, range(5), 8.0, 1.0, 2)
+        assert all(np.array_equal(got[p], want[p]) for p in range(5))
+        assert 0 < sum(m.sum() for m in got.values()) < sum(len(p) for p in pts)
+
+
+def test_rho_index_in_blocks_equals_one_pass():
+    rng = generator(23, "rho-index")
+    pts = rng.uniform(-3000, 3000, (1300, 2))
+    for d_rho, d_theta in ((1.0, 1.0), (0.7, 2.0), (2.0, 0.5)):
+        grid = make_grid(d_rho, d_theta, 4300.0)
+        want = _ref_rho_index(grid, pts)
+        for block in (1, 7, 512, 5000):
+            assert np.array_equal(grid.rho_index(pts, block=block), want)
+
+
+def test_window_tables_or_the_rows_of_each_window():
+    rng = generator(24, "window-tables")
+    e = 3
+    bits = (rng.random((2, 5, 40)) < 0.1).astype(np.uint8) * rng.integers(1, 256, (2, 5, 40)).astype(np.uint8)
+    bits[:, :, :e] = bits[:, :, -e:] = 0  # the padding rows
+    out = hough._window_tables(bits, e, np.full((2, 5, 2 * e + 2, 40), 77, dtype=np.uint8))
+    for a in range(2 * e + 2):
+        for r in range(40):
+            stop = min(r + 2 * e + 1 - a, 40)
+            want = np.bitwise_or.reduce(bits[:, :, r:stop], axis=2) if stop > r else np.zeros((2, 5), np.uint8)
+            assert np.array_equal(out[:, :, a, r], want)
+
+
+@pytest.mark.parametrize("seed, pings, options", [
+    (30, 9, {}),
+    (31, 13, {"window": 11, "v_min": 4}),  # 10 support slots: two bit words
+    (32, 9, {"support": "any", "support_reach": "gap", "d_rho": 2.0, "eps": 5.0}),
+])
+def test_cell_pairs_and_k_d_tree_paths_decide_alike(seed, pings, options, monkeypatch):
+    # 600 detections per ping on [0, 1000]^2 (about the paper's density): the default takes
+    # neighbouring-cell pairs; a limit of 0 forces every gate and every inverse step onto the k-d tree
+    # (rounds of nearest supports)
+    scans = _random_scene(seed, runs=1, pings=pings, clutter=600, area=1000.0)
+    cells = remove(scans, **options).valid
+    monkeypatch.setattr(hough, "CELL_PAIRS_PER_POINT", 0)
+    trees = remove(scans, **options).valid
+    assert np.array_equal(cells, trees)
+    assert np.array_equal(cells, _ref_remove(scans, **options))
+    assert 0 < cells.sum() < scans.valid[:, 5:].sum()
+
+# --- reference: the dense implementation before the incremental rewrite (kept verbatim, renamed) ------
+# Every ping re-votes the W pings of group B with a full-grid bincount, gates with k-d tree queries,
+# filters the float score with scipy.ndimage and counts line cells with dense cumulative sums.  The fast
+# remover must give exactly its decisions.
 
 
 def _ref_rho_index(grid, points):
@@ -299,6 +373,30 @@ class _RunCache:
         if p not in self.trees:
             self.trees[p] = cKDTree(self.pts[p])
         return self.trees[p]
+
+
+def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
+    """Points of ping ``p`` with a point of ping ``q`` in the box ``|dx|, |dy| <= box``."""
+    key = (p, q)
+    if key not in cache.partner:
+        if len(cache.pts[p]) == 0 or len(cache.pts[q]) == 0:
+            cache.partner[key] = np.zeros(len(cache.pts[p]), dtype=bool)
+        else:
+            bound = np.nextafter(box, np.inf)
+            d, _ = cache.tree(q).query(cache.pts[p], k=1, p=np.inf, distance_upper_bound=bound)
+            cache.partner[key] = np.isfinite(d)
+    return cache.partner[key]
+
+
+def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> dict:
+    kept = {}
+    for p in group:
+        mask = np.zeros(len(cache.pts[p]), dtype=bool)
+        for q in group:
+            if q != p and abs(q - p) <= gap:
+                mask |= _has_partner(cache, p, q, v_max * dt * abs(q - p))
+        kept[p] = mask
+    return kept
 
 
 def _counts(cache: _RunCache, grid: HoughGrid, p: int, mask: np.ndarray) -> np.ndarray:
