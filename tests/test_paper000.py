@@ -1,5 +1,7 @@
 """Paper 000 (TBD particle filter, L-band radar): radar maths, sensor, clutter, gating, filters, recipe."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import integrate
@@ -446,3 +448,121 @@ def test_report_table3_and_criteria_are_computed(host, results):
     clutter = next(t for t in recipe.tables if t.id == "table_clutter").make(results)
     assert [r[1] for r in clutter.rows] == [0.4, 18.8, 81.6, 205.7, 368.8]
     assert "sigma_a" in recipe.notes and recipe.published["table3_whole_m"]["C"] == 124.0
+
+
+# -- lost-track remedies: regularised resampling (C), clutter floor / PDA update (A, B) ---------------------
+
+
+def test_regularisation_bandwidth_and_jitter_follow_the_kernel_covariance():
+    from workbench_filters.tbd import regularisation_bandwidth, regularise
+
+    # h_opt = (4 / (N (n + 2)))^(1 / (n + 4)): n = 1 gives Silverman's 1.06 N^(-1/5)
+    assert regularisation_bandwidth(600, 6) == pytest.approx((4.0 / 4800.0) ** 0.1)
+    assert regularisation_bandwidth(1000, 1) == pytest.approx((4.0 / 3.0) ** 0.2 * 1000 ** -0.2)
+    B, N = 2, 40000
+    cov = np.diag([400.0, 400.0, 300.0, 30.0, 30.0, 10.0]) ** 2
+    x = np.zeros((B, N, 6))
+    rows = np.array([True, False])
+    out = regularise(x, np.broadcast_to(cov, (B, 6, 6)), rows, 0.5, generator(0, "reg"))
+    h = 0.5 * regularisation_bandwidth(N, 6)
+    # the jitter of a resampled row is N(0, h^2 cov) (sample covariance, 5 % band); other rows untouched
+    np.testing.assert_allclose(np.cov(out[0].T), h**2 * cov, rtol=0.05, atol=0.01 * h**2 * cov.max())
+    np.testing.assert_array_equal(out[1], x[1])
+    np.testing.assert_array_equal(regularise(x, cov[None].repeat(2, 0), rows, 0.0, generator(0)), x)
+
+
+def test_tbd_filter_regularises_only_after_resampling(host):
+    from workbench_filters.tbd import make_tbd_pf
+
+    model = host.sensor("lband-radar").measurement_model()
+    _, state = _cloud(host)
+    z = np.array([[[30.1e3, 2e3, 2e3, -200.0]]] * 2)
+    scan = Scan(z, np.array([[True], [False]]), snr=np.full((2, 1), 15.0))
+    plain = make_tbd_pf(400, regularisation=0.0).update(state, scan, model, generator(3))
+    jittered = make_tbd_pf(400, regularisation=0.5).update(state, scan, model, generator(3))
+    assert plain.resamples == jittered.resamples == 1  # the sharp detection collapses item 0's N_eff
+    n_distinct = lambda s: len(np.unique(s.cloud.particles[0, :, 0]))  # noqa: E731
+    assert n_distinct(plain) < 400 and n_distinct(jittered) == 400  # copies made distinct
+    np.testing.assert_array_equal(jittered.cloud.particles[1], state.cloud.particles[1])  # empty gate
+    assert make_tbd_pf().params["regularisation"] == 0.5
+
+
+def test_sir_clutter_floor_is_the_mixture_likelihood(host):
+    from scipy.stats import multivariate_normal
+
+    from workbench_filters.tbd import make_sir_jm
+
+    model = host.sensor("lband-radar").measurement_model()
+    rng = np.random.default_rng(6)
+    x = np.array([3e4, 1e3, 2e3, -200.0, 0.0, 0.0]) + rng.normal(size=(2, 300, 6)) * [400, 400, 300, 30, 30, 10]
+    from workbench_filters.tbd import ModeState
+
+    state = ModeState(Particles(x, np.full((2, 300), -np.log(300))), 0, 0, np.zeros((2, 300)))
+    z_bar = np.array([[3.1e4, 1.2e3, 2e3, 150.0], [3.0e4, 1e3, 2e3, -200.0]])
+    r_bar = np.stack([np.diag([600.0, 600, 600, 120]) ** 2, np.diag([300.0, 300, 300, 10]) ** 2])
+    step, white = whitened_model(model, Scan.single(z_bar), r_bar)
+    white = replace(white, params={**white.params, "log_det_R": np.linalg.slogdet(r_bar)[1]})
+    lam = 3.5e-12
+    new = make_sir_jm(300, threshold=0.0, clutter_density=lam).update(state, step, white, generator(1))
+    # NumPy/SciPy reference on the un-whitened pseudo-measurement: w_i ∝ lambda + N(z_bar; h(x_i), R_bar)
+    for b in range(2):
+        lik = lam + multivariate_normal(z_bar[b], r_bar[b]).pdf(model.h(x[b]))
+        np.testing.assert_allclose(np.exp(new.cloud.log_weights[b]), lik / lik.sum(), rtol=1e-9)
+    # a Doppler-inconsistent (clutter) pseudo-measurement hardly moves the weights; without the floor it does
+    bare = make_sir_jm(300, threshold=0.0).update(state, step, white, generator(1))
+    spread = lambda lw: np.exp(lw.max() - lw.min())  # noqa: E731
+    assert spread(new.cloud.log_weights[0]) < 30.0 < spread(bare.cloud.log_weights[0])
+
+
+def test_ekf_pda_update_against_the_textbook_pdaf(host):
+    from scipy.stats import multivariate_normal
+
+    from workbench_filters.tbd import make_ekf_nis
+
+    model = host.sensor("lband-radar").measurement_model()
+    mean = np.array([[3e4, 1e3, 2e3, -200.0, 0.0, 0.0]] * 3)
+    P = np.broadcast_to(np.diag([300.0, 300, 300, 20, 20, 10]) ** 2, (3, 6, 6)).copy()
+    prior = Gaussian(mean, P)
+    z = model.h(mean) + np.array([[100.0, 0, 0, 2.0], [1500.0, -900.0, 0, 250.0], [0.0, 0, 0, 0]])
+    valid = np.array([True, True, False])
+    lam = 3.5e-12
+    spec = make_ekf_nis(clutter_density=lam)
+    new = spec.update(spec.init(prior, None), Scan(z[:, None, :], valid[:, None]), model, None)
+    ekf = host.filter("ekf").update(prior, Scan(z[:, None, :], valid[:, None]), model, None)
+    for b in range(2):
+        H = model.jacobian(mean[b:b + 1])[0]
+        S = H @ P[b] @ H.T + model.R
+        nu = z[b] - model.h(mean[b])
+        beta0 = lam / (lam + multivariate_normal(np.zeros(4), S).pdf(nu))
+        K = P[b] @ H.T @ np.linalg.inv(S)
+        want_mean = mean[b] + (1 - beta0) * K @ nu
+        want_cov = beta0 * P[b] + (1 - beta0) * ekf.cov[b] + beta0 * (1 - beta0) * np.outer(K @ nu, K @ nu)
+        np.testing.assert_allclose(new.gaussian.mean[b], want_mean, rtol=1e-9)
+        np.testing.assert_allclose(new.gaussian.cov[b], want_cov, rtol=1e-7, atol=1e-6)
+    assert np.linalg.norm(new.gaussian.mean[1] - mean[1]) < 1.0  # the clutter-like measurement is ignored
+    np.testing.assert_array_equal(new.gaussian.mean[2], mean[2])  # no measurement: unchanged
+    assert new.manoeuvre.tolist() == [False, False, False]  # clutter does not switch the manoeuvre noise on
+    # the whitened form of the recipe (R_bar per item, log |R_bar| in the params) gives the same update
+    r_bar = np.broadcast_to(model.R, (3, 4, 4))
+    step, white = whitened_model(model, Scan(z[:, None, :], valid[:, None]), r_bar.copy())
+    white = replace(white, params={**white.params, "log_det_R": np.linalg.slogdet(r_bar)[1]})
+    again = spec.update(spec.init(prior, None), step, white, None)
+    np.testing.assert_allclose(again.gaussian.mean[:2], new.gaussian.mean[:2], rtol=1e-9)
+
+
+def test_recipe_clutter_floor_from_the_clutter_and_sensor_models(host):
+    from scipy.stats import norm
+
+    b, lam, pd = paper000.clutter_floor(host)
+    # lambda = rate exp(-t / mu) / cube^3 / (2 vr_max) at 5 dB: 205.7 per (10 km)^3, Doppler over 600 m/s
+    assert lam == pytest.approx(1000 * np.exp(-from_db(5.0) / 2) / 1e12 / 600.0, rel=1e-12)
+    snr0 = 10 * np.log10(float(paper000.radar_snr(np.linalg.norm(paper000.START_POSITION), from_db(-20.0))))
+    assert snr0 == pytest.approx(2.3, abs=0.1)  # the brief's SNR at k = 0
+    assert pd == pytest.approx(norm.cdf((snr0 - 5.0) / 2.0)) and b == pytest.approx(lam * (1 - pd) / pd)
+    assert paper000.with_clutter_density(host.filter("sir-jm"), b).params["clutter_density"] == b
+    assert "clutter_density" not in paper000.with_clutter_density(host.filter("tbd-pf"), b).params
+    # amplitude ratio: 1 at the threshold, exp(-(p - t) / mu) above it, from the strongest gated detection
+    snr = np.array([[5.0, 3.0], [12.0, 6.0], [0.0, 0.0]])
+    gated = Scan(np.zeros((3, 2, 4)), np.array([[True, False], [True, True], [False, False]]), snr=snr)
+    ratio = paper000.clutter_amplitude_ratio(gated, 2.0, 5.0)
+    np.testing.assert_allclose(ratio, [1.0, np.exp(-(from_db(12.0) - from_db(5.0)) / 2.0), 1.0])

@@ -20,8 +20,12 @@ Everything is in the log domain; the sum over ``m`` is the compiled kernel
 :func:`workbench.kernels.tbd_weights.tbd_log_weight_sums` (streaming, no (B, N, M) array).  Items
 without a gated detection keep their weights (predict only); an item whose weights all underflow
 keeps its previous weights (counted).  Systematic resampling when
-``N_eff < threshold * N`` (eq 16).  The state, prediction and estimate are those of the bootstrap
-filter (:mod:`workbench_filters.particle`).
+``N_eff < threshold * N`` (eq 16), followed by post-regularisation (:func:`regularise`, Musso, Oudjane
+and Le Gland's regularised particle filter): each resampled particle is jittered by
+``h D e``, ``D D^T`` the cloud's weighted covariance before resampling, ``h = 0.5 h_opt``
+(:func:`regularisation_bandwidth`), so that the copies of the few particles that keep up with a sharp
+manoeuvre become distinct particles (``regularisation = 0`` turns it off).  The state, prediction and
+estimate are those of the bootstrap filter (:mod:`workbench_filters.particle`).
 
 The update takes the whole gated scan: ``scan.z = [x, y, z, vr]`` (B, M, 4), ``scan.snr`` (dB).
 
@@ -38,6 +42,12 @@ rides along through resampling.  Filters registered here:
   switches to ``MANOEUVRE_SCALE^2 W`` for the next prediction when the normalised innovation squared
   of the pseudo-measurement exceeds the chi-square 99 % point (4 dof), the Gaussian filter's
   counterpart of the two modes (noise-level switching by manoeuvre detection).
+
+Clutter (methods A and B, ``clutter_density = b > 0``, set by the paper-000 recipe from the clutter
+model): the pseudo-measurement may be clutter.  B's likelihood is the mixture ``b + N(z; h(x_i), R)``;
+A's update is the PDAF's for one validated measurement, ``beta_0 = b / (b + N(nu; 0, S))``.  A model
+may scale ``b`` per item by ``params["clutter_amplitude_ratio"]`` (the clutter amplitude law at the
+measurement's SNR) and, when whitened, carries ``log |R_bar|`` in ``params["log_det_R"]``.
 """
 
 from __future__ import annotations
@@ -51,7 +61,7 @@ from scipy.stats import chi2
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.kernels.tbd_weights import BACKENDS, tbd_log_weight_sums
-from workbench.linalg import psd_solve, symmetrise
+from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.radar import RadarParameters, log_detection_probability, from_db, position_sigma, radial_velocity
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
@@ -65,6 +75,8 @@ from workbench_filters.particle import log_likelihood as sir_log_likelihood
 #: two-mode process noise [U, chosen by a sweep, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre -> quiet)
 #: per scan and the manoeuvre mode's factor on sigma_a
 SWITCH_ON, SWITCH_OFF, MANOEUVRE_SCALE = 0.05, 0.2, 4.0
+#: post-regularisation of method C (tbd-pf) after resampling, as a fraction of the optimal kernel bandwidth
+REGULARISATION = 0.5
 
 
 def _radar(model: MeasurementModel) -> RadarParameters:
@@ -140,24 +152,65 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     return ModeState(Particles(moved, state.cloud.log_weights), state.resamples, state.underflows, mode)
 
 
+def regularisation_bandwidth(particles: int, dim: int) -> float:
+    """Optimal bandwidth of a Gaussian kernel for a ``dim``-dimensional density from ``particles`` samples
+    (Musso, Oudjane and Le Gland 2001, the regularised particle filter)::
+
+        h_opt = (4 / (N (n + 2)))^(1 / (n + 4))
+    """
+    # h_opt = A N^(-1/(n+4)),  A = (4 / (n + 2))^(1/(n+4))
+    return float((4.0 / (particles * (dim + 2.0))) ** (1.0 / (dim + 4.0)))
+
+
+def regularise(x: np.ndarray, cov: np.ndarray, rows: np.ndarray, scale: float, rng: np.random.Generator) -> np.ndarray:
+    """Post-regularisation of the rows just resampled: ``x_i <- x_i + h D e_i``, ``e_i ~ N(0, I)``.
+
+    ``D D^T = cov`` is the weighted covariance of the cloud before resampling and ``h = scale * h_opt``
+    (:func:`regularisation_bandwidth`): the resampled cloud becomes a draw from the kernel-smoothed
+    posterior instead of copies of a few particles (sample impoverishment).
+
+    Shapes
+    ------
+    x : (B, N, n) resampled particles; cov : (B, n, n); rows : (B,) bool; returns (B, N, n)
+    """
+    if scale <= 0.0 or not rows.any():
+        return x
+    B, N, n = x.shape
+    h = scale * regularisation_bandwidth(N, n)
+    D, _ = safe_cholesky(cov[rows])
+    e = rng.standard_normal((int(rows.sum()), N, n))
+    out = x.copy(order="K")
+    # x_i <- x_i + h D e_i
+    out[rows] += h * np.einsum("bij,bnj->bni", D, e)
+    return out
+
+
 def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, threshold: float, dead: np.ndarray,
-            rng: np.random.Generator) -> ParticleState:
-    """Resample where ``N_eff < threshold N`` (eq 16), carrying the particles' modes along."""
+            rng: np.random.Generator, regularisation: float = 0.0) -> ParticleState:
+    """Resample where ``N_eff < threshold N`` (eq 16), carrying the particles' modes along; with
+    ``regularisation > 0`` the resampled rows are jittered by :func:`regularise`."""
     cloud = state.cloud
     n = log_w.shape[1]
     resample = present & (effective_sample_size(log_w) < threshold * n)
+    cov = Particles(cloud.particles, log_w).to_gaussian().cov if regularisation > 0.0 and resample.any() else None
     mode = getattr(state, "mode", None)
     if mode is None:
         x, log_w = resample_where(resample, cloud.particles, log_w, rng)
+        if cov is not None:
+            x = regularise(x, cov, resample, regularisation, rng)
         return ParticleState(Particles(x, log_w), state.resamples + int(resample.sum()),
                              state.underflows + int(dead.sum()))
     joint, log_w = resample_where(resample, np.concatenate([cloud.particles, mode[..., None]], axis=-1), log_w, rng)
-    return ModeState(Particles(np.ascontiguousarray(joint[..., :-1]), log_w), state.resamples + int(resample.sum()),
+    x = np.ascontiguousarray(joint[..., :-1])
+    if cov is not None:
+        x = regularise(x, cov, resample, regularisation, rng)
+    return ModeState(Particles(x, log_w), state.resamples + int(resample.sum()),
                      state.underflows + int(dead.sum()), np.ascontiguousarray(joint[..., -1]))
 
 
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
-           threshold: float, floor_density: float, sigma_vr: float, backend: str, arch: str = "cpu") -> ParticleState:
+           threshold: float, floor_density: float, sigma_vr: float, backend: str, arch: str = "cpu",
+           regularisation: float = 0.0) -> ParticleState:
     present = scan.valid.any(axis=1)
     if not present.any():
         return state
@@ -167,7 +220,7 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
     dead = present & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
     log_w = keep_where(present, log_w, cloud.log_weights)
-    return _finish(state, log_w, present, threshold, dead, rng)
+    return _finish(state, log_w, present, threshold, dead, rng, regularisation)
 
 
 def _predict(switch_on: float, switch_off: float, scale: float):
@@ -184,10 +237,14 @@ def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) ->
 
 def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor_density: float = 5e-11, sigma_vr: float = 15.0,
                 backend: str = "auto", arch: str = "cpu", name: str | None = None, switch_on: float = SWITCH_ON,
-                switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE) -> FilterSpec:
+                switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
+                regularisation: float = REGULARISATION) -> FilterSpec:
     """Method C with ``particles`` particles, floor density ``floor_density`` (m^-3) and Doppler sigma
     ``sigma_vr`` (m/s); resampling when ``N_eff < threshold N``; weights by the kernel ``backend``; the
-    two-mode (jump-Markov) prediction of :func:`predict_jump_markov` (``switch_on = 0``: plain CV)."""
+    two-mode (jump-Markov) prediction of :func:`predict_jump_markov` (``switch_on = 0``: plain CV);
+    ``regularisation`` x the optimal kernel bandwidth jitters the resampled particles (:func:`regularise`)."""
+    if regularisation < 0.0:
+        raise InputError(f"tbd-pf: need regularisation >= 0, got {regularisation}")
     if backend not in BACKENDS:
         raise InputError(f"tbd-pf: unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
     if floor_density < 0 or particles < 1 or not 0 <= threshold <= 1 or sigma_vr <= 0:
@@ -198,41 +255,83 @@ def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor_density: flo
         name=name or "tbd-pf",
         summary=(f"TBD particle filter (paper 000, method C): weights from every gated detection, N={particles}, "
                  f"floor {floor_density:g} m^-3, two-mode CV (x{manoeuvre_scale:g} noise, on {switch_on:g}, "
-                 f"off {switch_off:g})"),
+                 f"off {switch_off:g}), regularised resampling ({regularisation:g} h_opt)"),
         init=partial(init, particles=particles),
         predict=_predict(switch_on, switch_off, manoeuvre_scale),
         update=partial(update, threshold=threshold, floor_density=floor_density, sigma_vr=sigma_vr,
-                       backend=backend, arch=arch),
+                       backend=backend, arch=arch, regularisation=regularisation),
         estimate=estimate,
         capabilities=frozenset({"stochastic", "multi_measurement", "position_doppler_3d"}),
         params={"particles": particles, "threshold": threshold, "floor_density": floor_density, "sigma_vr": sigma_vr,
                 "backend": backend, "switch_on": switch_on, "switch_off": switch_off,
-                "manoeuvre_scale": manoeuvre_scale},
+                "manoeuvre_scale": manoeuvre_scale, "regularisation": regularisation},
         diagnostics=diagnostics,
     )
 
 
+def log_noise_determinant(model: MeasurementModel, batch: int) -> np.ndarray:
+    """``log |R|`` per batch item: a whitened pseudo-measurement model (``R = I``) carries the log-determinant
+    of its per-item ``R_bar`` in ``params["log_det_R"]`` (B,); any other model gives ``log |model.R|``."""
+    ld = model.params.get("log_det_R")
+    if ld is None:
+        return np.full(batch, np.linalg.slogdet(np.asarray(model.R, dtype=float))[1])
+    ld = np.asarray(ld, dtype=float)
+    if ld.shape != (batch,):
+        raise InputError(f"log_det_R of model {model.name!r} must have shape ({batch},), got {ld.shape}")
+    return ld
+
+
+def log_clutter_density(model: MeasurementModel, clutter_density: float, batch: int) -> np.ndarray:
+    """``log lambda_b`` per batch item: ``clutter_density`` times the measurement's amplitude factor
+    ``params["clutter_amplitude_ratio"]`` (B,) when the model carries one (the relative density of clutter as
+    strong as the measurement, from the clutter amplitude law), else ``log clutter_density``."""
+    ratio = model.params.get("clutter_amplitude_ratio")
+    if ratio is None:
+        return np.full(batch, np.log(clutter_density))
+    ratio = np.asarray(ratio, dtype=float)
+    if ratio.shape != (batch,):
+        raise InputError(f"clutter_amplitude_ratio of model {model.name!r} must have shape ({batch},), got "
+                         f"{ratio.shape}")
+    with np.errstate(divide="ignore"):
+        return np.log(clutter_density) + np.log(ratio)
+
+
 def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
-               threshold: float) -> ParticleState:
+               threshold: float, clutter_density: float = 0.0, regularisation: float = 0.0) -> ParticleState:
     """The bootstrap update (``log w_i += log N(z; h(x_i), R)``, :mod:`workbench_filters.particle`), with
-    the particles' modes carried through resampling."""
+    the particles' modes carried through resampling.
+
+    With ``clutter_density = lambda > 0`` (per unit measurement volume) the likelihood is the mixture of a
+    target-originated and a clutter-originated measurement, ``lambda + N(z; h(x_i), R)``: a pseudo-measurement
+    that no particle explains (clutter) pulls the cloud no more than ``lambda`` allows."""
     z, present = single_measurement(scan, "sir-jm")
     if not present.any():
         return state
     cloud = state.cloud
-    log_w = sir_log_likelihood(z, cloud.particles, model) + cloud.log_weights
+    m = z.shape[-1]
+    log_det = log_noise_determinant(model, z.shape[0])
+    # log N(z; h(x_i), R) = -|L^-1 (z - h)|^2 / 2 - (m log 2 pi + log |R|) / 2
+    log_lik = sir_log_likelihood(z, cloud.particles, model) - 0.5 * (m * np.log(2.0 * np.pi) + log_det)[:, None]
+    if clutter_density > 0.0:
+        # log(lambda + N(z; h(x_i), R))
+        log_lik = np.logaddexp(log_clutter_density(model, clutter_density, z.shape[0])[:, None], log_lik)
+    log_w = log_lik + cloud.log_weights
     dead = present & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
     log_w = keep_where(present, log_w, cloud.log_weights)
-    return _finish(state, log_w, present, threshold, dead, rng)
+    return _finish(state, log_w, present, threshold, dead, rng, regularisation)
 
 
 def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float = SWITCH_ON,
                 switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
-                name: str | None = None) -> FilterSpec:
-    """Method B: the bootstrap filter with the same two-mode prediction as method C."""
-    if particles < 1 or not 0 <= threshold <= 1:
-        raise InputError(f"sir-jm: need particles >= 1 and 0 <= threshold <= 1, got {particles}, {threshold}")
+                name: str | None = None, clutter_density: float = 0.0,
+                regularisation: float = 0.0) -> FilterSpec:
+    """Method B: the bootstrap filter with the same two-mode prediction as method C; ``clutter_density > 0``
+    adds the clutter term of the mixture likelihood (:func:`sir_update`), ``regularisation > 0`` jitters the
+    resampled particles (:func:`regularise`; off by default: it widened B's cloud in the low-SNR segment)."""
+    if particles < 1 or not 0 <= threshold <= 1 or clutter_density < 0 or regularisation < 0:
+        raise InputError(f"sir-jm: need particles >= 1, 0 <= threshold <= 1, clutter_density >= 0 and "
+                         f"regularisation >= 0, got {particles}, {threshold}, {clutter_density}, {regularisation}")
     _check_modes("sir-jm", switch_on, switch_off, manoeuvre_scale)
     return FilterSpec(
         name=name or "sir-jm",
@@ -240,11 +339,13 @@ def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float =
                  f"{switch_off:g}), N={particles}"),
         init=partial(init, particles=particles),
         predict=_predict(switch_on, switch_off, manoeuvre_scale),
-        update=partial(sir_update, threshold=threshold),
+        update=partial(sir_update, threshold=threshold, clutter_density=clutter_density,
+                       regularisation=regularisation),
         estimate=estimate,
         capabilities=frozenset({"stochastic"}),
         params={"particles": particles, "threshold": threshold, "switch_on": switch_on, "switch_off": switch_off,
-                "manoeuvre_scale": manoeuvre_scale},
+                "manoeuvre_scale": manoeuvre_scale, "clutter_density": clutter_density,
+                "regularisation": regularisation},
         diagnostics=diagnostics,
     )
 
@@ -272,10 +373,18 @@ def nis_predict(state: AdaptiveGaussian, motion: MotionModel, rng=None, *, scale
 
 
 def nis_update(state: AdaptiveGaussian, scan: Scan, model: MeasurementModel, rng=None, *,
-               nis_threshold: float) -> AdaptiveGaussian:
+               nis_threshold: float, clutter_density: float = 0.0) -> AdaptiveGaussian:
     """The EKF update; an item whose normalised innovation ``nu^T S^-1 nu`` exceeds ``nis_threshold``
     switches to the manoeuvre noise for the next prediction, and back when it falls below (an item
-    without a measurement keeps its flag)."""
+    without a measurement keeps its flag).
+
+    With ``clutter_density = lambda > 0`` (per unit measurement volume) the update is the probabilistic data
+    association filter's for one validated measurement (Bar-Shalom and Tse): the measurement is clutter with
+    probability ``beta_0 = lambda / (lambda + N(nu; 0, S))``, and::
+
+        x = x- + (1 - beta_0) K nu,   P = beta_0 P- + (1 - beta_0) P+ + beta_0 (1 - beta_0) K nu nu^T K^T
+
+    Only a measurement taken as the target's (``beta_0 < 1/2``) can switch on the manoeuvre noise."""
     z, present = single_measurement(scan, "ekf-nis")
     if not present.any():
         return state
@@ -285,8 +394,26 @@ def nis_update(state: AdaptiveGaussian, scan: Scan, model: MeasurementModel, rng
     S = symmetrise(H @ g.cov @ np.swapaxes(H, -1, -2) + model.R)
     nu = model.residual(z, model.h(g.mean))
     nis = np.einsum("bi,bi->b", nu, psd_solve(S, nu[..., None])[..., 0])
-    flag = np.where(present, nis > nis_threshold, state.manoeuvre)
-    return AdaptiveGaussian(ekf_update(g, scan, model), flag)
+    updated = ekf_update(g, scan, model)
+    if clutter_density <= 0.0:
+        flag = np.where(present, nis > nis_threshold, state.manoeuvre)
+        return AdaptiveGaussian(updated, flag)
+    m = nu.shape[-1]
+    # log N(nu; 0, S_bar) with |S_bar| = |R_bar| |S| for a whitened model (R = I), |S| otherwise
+    log_det = np.linalg.slogdet(S)[1] + log_noise_determinant(model, g.batch) - np.linalg.slogdet(model.R)[1]
+    log_n = -0.5 * (nis + m * np.log(2.0 * np.pi) + log_det)
+    # beta_0 = lambda / (lambda + N(nu; 0, S))
+    log_lam = log_clutter_density(model, clutter_density, g.batch)
+    beta0 = np.exp(log_lam - np.logaddexp(log_lam, log_n))
+    beta0 = np.where(present, beta0, 1.0)
+    shift = updated.mean - g.mean  # K nu (zero where no measurement)
+    # x = x- + (1 - beta_0) K nu
+    mean = g.mean + (1.0 - beta0)[:, None] * shift
+    # P = beta_0 P- + (1 - beta_0) P+ + beta_0 (1 - beta_0) K nu nu^T K^T
+    b = beta0[:, None, None]
+    cov = symmetrise(b * g.cov + (1.0 - b) * updated.cov + b * (1.0 - b) * shift[:, :, None] * shift[:, None, :])
+    flag = np.where(present, (nis > nis_threshold) & (beta0 < 0.5), state.manoeuvre)
+    return AdaptiveGaussian(Gaussian(mean, cov), flag)
 
 
 def nis_estimate(state: AdaptiveGaussian) -> Gaussian:
@@ -294,22 +421,23 @@ def nis_estimate(state: AdaptiveGaussian) -> Gaussian:
 
 
 def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float = float(chi2.ppf(0.99, 4)),
-                 name: str | None = None) -> FilterSpec:
+                 name: str | None = None, clutter_density: float = 0.0) -> FilterSpec:
     """Method A: the EKF with the two-level noise switched by the NIS of the pseudo-measurement (the
     Gaussian filter's counterpart of the two-mode particle prediction: quiet ``W``, manoeuvre
-    ``scale^2 W``; Bar-Shalom, Li and Kirubarajan's noise-level switching by manoeuvre detection)."""
-    if manoeuvre_scale < 1.0 or nis_threshold <= 0.0:
-        raise InputError(f"ekf-nis: need manoeuvre_scale >= 1 and nis_threshold > 0, got {manoeuvre_scale}, "
-                         f"{nis_threshold}")
+    ``scale^2 W``; Bar-Shalom, Li and Kirubarajan's noise-level switching by manoeuvre detection);
+    ``clutter_density > 0`` makes the update the PDAF's for one validated measurement (:func:`nis_update`)."""
+    if manoeuvre_scale < 1.0 or nis_threshold <= 0.0 or clutter_density < 0.0:
+        raise InputError(f"ekf-nis: need manoeuvre_scale >= 1, nis_threshold > 0 and clutter_density >= 0, got "
+                         f"{manoeuvre_scale}, {nis_threshold}, {clutter_density}")
     return FilterSpec(
         name=name or "ekf-nis",
         summary=f"EKF with NIS-switched process noise (x{manoeuvre_scale:g} above NIS {nis_threshold:.2f})",
         init=nis_init,
         predict=partial(nis_predict, scale=manoeuvre_scale),
-        update=partial(nis_update, nis_threshold=nis_threshold),
+        update=partial(nis_update, nis_threshold=nis_threshold, clutter_density=clutter_density),
         estimate=nis_estimate,
         capabilities=frozenset({"gaussian", "needs_jacobian"}),
-        params={"manoeuvre_scale": manoeuvre_scale, "nis_threshold": nis_threshold},
+        params={"manoeuvre_scale": manoeuvre_scale, "nis_threshold": nis_threshold, "clutter_density": clutter_density},
     )
 
 
