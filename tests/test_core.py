@@ -6,7 +6,7 @@ import pytest
 from workbench.linalg import cholupdate, joseph_update, psd_solve, safe_cholesky, tria, wrap_angle
 from workbench.models import (constant_velocity, random_walk_velocity, range_bearing, range_bearing_jacobian,
                               range_rate_model)
-from workbench.rng import NORMAL_SPLIT_MIN, chunk_bounds, generator, standard_normal_blocks
+from workbench.rng import chunk_bounds, generator
 from workbench.trajectory import Leg, piecewise_trajectory, sample_motion
 from workbench.types import CLUTTER, Gaussian, InputError, Scan, Scans, Truth
 
@@ -167,41 +167,6 @@ def test_streams_are_reproducible_and_independent_of_chunking():
     assert chunk_bounds(10, 4) == [(0, 4), (4, 8), (8, 10)]
     with pytest.raises(ValueError):
         generator(-1)
-
-
-@pytest.mark.parametrize("shape", [(37, 600, 4), (3, 30000)])
-def test_block_normals_do_not_depend_on_threads(monkeypatch, shape):
-    draws = []
-    for threads in ("1", "2", "5"):
-        monkeypatch.setenv("WORKBENCH_THREADS", threads)
-        rng = generator(4, "normals")
-        first = standard_normal_blocks(rng, shape)
-        draws.append((first, standard_normal_blocks(rng, shape), rng.random()))
-    for other in draws[1:]:
-        for a, b in zip(draws[0], other):
-            assert np.array_equal(a, b)
-    first, second, _ = draws[0]
-    assert not np.array_equal(first, second)  # the next call gets new children
-    # standard normal: mean 0 and variance 1 within 5 standard errors; rows of different blocks uncorrelated
-    flat = first.reshape(shape[0], -1)
-    n = flat.size
-    assert abs(flat.mean()) < 5 / np.sqrt(n) and abs(flat.var() - 1.0) < 5 * np.sqrt(2.0 / n)
-    r = np.corrcoef(flat[0], flat[-1])[0, 1]
-    assert abs(r) < 5 / np.sqrt(flat.shape[1])
-
-
-def test_small_normal_draws_come_from_the_generator_itself():
-    shape = (4, NORMAL_SPLIT_MIN // 8 - 1, 2)
-    assert np.array_equal(standard_normal_blocks(generator(1, "a"), shape), generator(1, "a").standard_normal(shape))
-    one_row = (1, NORMAL_SPLIT_MIN * 2)
-    assert np.array_equal(standard_normal_blocks(generator(1, "a"), one_row),
-                          generator(1, "a").standard_normal(one_row))
-
-
-def test_draw_threads_rejects_a_bad_setting(monkeypatch):
-    monkeypatch.setenv("WORKBENCH_THREADS", "two")
-    with pytest.raises(ValueError, match="WORKBENCH_THREADS"):
-        standard_normal_blocks(generator(0), (8, NORMAL_SPLIT_MIN))
 
 
 def test_sample_motion_statistics():

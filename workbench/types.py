@@ -174,6 +174,15 @@ def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):
     return out
 
 
+def _validated(cls, **values):
+    """An instance of the frozen dataclass ``cls`` from values already validated by an instance of the same
+    kind (a slice of a checked :class:`Scans`, a checked :class:`Scan` without its labels): no second check."""
+    out = object.__new__(cls)
+    for key, value in values.items():
+        object.__setattr__(out, key, value)
+    return out
+
+
 @dataclass(frozen=True)
 class Scan:
     """The detections of one scan for a batch, padded to a common count ``M``.
@@ -213,7 +222,8 @@ class Scan:
 
     def for_filter(self) -> "Scan":
         """The same scan without the origin labels."""
-        return replace(self, origin=None)
+        return _validated(Scan, z=self.z, valid=self.valid, snr=self.snr, doppler=self.doppler, origin=None,
+                          time=self.time)
 
     @classmethod
     def empty(cls, batch: int, dim: int, time: float = 0.0) -> "Scan":
@@ -267,8 +277,8 @@ class Scans:
     def scan(self, k: int) -> Scan:
         """Scan ``k`` as a :class:`Scan`."""
         pick = lambda a: None if a is None else a[:, k]  # noqa: E731
-        return Scan(self.z[:, k], self.valid[:, k], pick(self.snr), pick(self.doppler), pick(self.origin),
-                    time=float(self.times[k]))
+        return _validated(Scan, z=self.z[:, k], valid=self.valid[:, k], snr=pick(self.snr),
+                          doppler=pick(self.doppler), origin=pick(self.origin), time=float(self.times[k]))
 
     def with_valid(self, valid) -> "Scans":
         """The same detections with a narrower mask (what a clutter remover returns)."""

@@ -36,10 +36,10 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.kernels.crpf_step import crpf_step
+from workbench.kernels.counter_normals import draw_key
+from workbench.kernels.crpf_step import crpf_step, propagation_normals
 from workbench.models import MeasurementModel, MotionModel
 from workbench.resampling import normalise_log_weights, systematic_resample
-from workbench.rng import standard_normal_blocks
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
 
@@ -206,10 +206,10 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
     lam = params.lam
     moving = present & state.pending
     if moving.all() and _fused(model, params):
-        # the same draws in the same order as below: selection offsets, then the propagation normals
+        # the same draws in the same order as below: selection offsets, then the key of the propagation normals
         u0 = rng.random((B, 1))
-        e = standard_normal_blocks(rng, (B, N, n))
-        new_x, costs, mean, cov = crpf_step(x, c, state.F, z, e, u0, params.jitter_std(n), lam, params.beta,
+        key = draw_key(rng)
+        new_x, costs, mean, cov = crpf_step(x, c, state.F, z, key, u0, params.jitter_std(n), lam, params.beta,
                                             params.delta, params.q, params.cost == "arc-length",
                                             model.params["sensor"], backend=params.backend)
         return CRPFState(new_x, costs, Gaussian(mean, cov), np.zeros(B, dtype=bool), None,
@@ -223,7 +223,7 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
         parents = xf.reshape(B * N, n).take(flat, axis=0).reshape(B, N, n)
         c_sel = c.ravel().take(flat).reshape(B, N)
         # x_t ~ N(f(x_{t-1}^(k)), sigma^2 diag(s^2))
-        x_new = standard_normal_blocks(rng, (B, N, n))
+        x_new = propagation_normals(draw_key(rng), B, N, n)
         x_new *= params.jitter_std(n)
         x_new += parents  # in place: fresh (B, N, n) temporaries are costly
         keep_x = x_new if moving.all() else np.where(moving[:, None, None], x_new, x)

@@ -283,8 +283,7 @@ def dask_executor(host: PluginHost, scheduler: str | None = None, workers: int |
         return DaskExecutor(Client(scheduler), block)
     # One thread per worker process, kernels included: the workers already share the cores between
     # them, and threaded kernels (Numba, BLAS) in every worker would oversubscribe them.
-    single = {name: "1" for name in ("WORKBENCH_THREADS", "NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                     "MKL_NUM_THREADS")}
+    single = {name: "1" for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
     cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None,
                            env=single)
     return DaskExecutor(Client(cluster), block, cluster=cluster)

@@ -1,0 +1,98 @@
+"""The Numba twin of :mod:`workbench.kernels.counter_normals` (imported only when it is used).
+
+``row_normals(key, b, out)`` fills ``out (count,)`` with row ``b``'s normals of stream ``key`` (a
+``np.uint64``), the numbers of ``counter_normals(key, rows, count)[b]``; it is inlined where it is
+called and vectorises.  Module-level functions, so that Numba's on-disk cache holds across processes.
+"""
+
+import functools
+import math
+
+import numba
+import numpy as np
+from numba import types
+from numba.extending import intrinsic
+
+from .counter_normals import COS_SERIES, GAMMA, LN2_HI, LN2_LO, LOG_SERIES, MIX1, MIX2, SIN_SERIES, SQRT2
+
+
+@intrinsic
+def bits_of(typingctx, x):  # reinterpret float64 as int64
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.int64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def double_of(typingctx, bits):  # reinterpret int64 as float64
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+    return types.float64(types.int64), codegen
+
+
+gamma, mix1, mix2 = np.uint64(GAMMA), np.uint64(MIX1), np.uint64(MIX2)
+u2, u12, u27, u30, u31, u62 = (np.uint64(k) for k in (2, 12, 27, 30, 31, 62))
+l0, l1, l2, l3, l4, l5, l6, l7, l8, l9, l10 = LOG_SERIES
+s0, s1, s2, s3, s4, s5, s6, s7, s8 = SIN_SERIES
+c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = COS_SERIES
+ln2_hi, ln2_lo, sqrt2, half_pi = LN2_HI, LN2_LO, SQRT2, 0.5 * math.pi
+mant, one_exp = np.int64(0x000FFFFFFFFFFFFF), np.int64(0x3FF0000000000000)
+jit = functools.partial(numba.njit, error_model="numpy", inline="always")
+
+
+@jit
+def splitmix(key, counter):
+    s = key + np.uint64(counter) * gamma
+    s = (s ^ (s >> u30)) * mix1
+    s = (s ^ (s >> u27)) * mix2
+    return s ^ (s >> u31)
+
+
+@jit
+def unit(bits):
+    return float(np.int64(bits >> u12) * 2 + 1) * 2.0 ** -53
+
+
+@jit
+def log_pos(x):  # log_poly
+    bits = bits_of(x)
+    m = double_of((bits & mant) | one_exp)
+    big = m > sqrt2
+    m = 0.5 * m if big else m
+    e = float((bits >> 52) - 1023 + (1 if big else 0))
+    s = (m - 1.0) / (m + 1.0)
+    z = s * s
+    poly = ((((((((((l10 * z + l9) * z + l8) * z + l7) * z + l6) * z + l5) * z + l4) * z + l3) * z + l2) * z
+             + l1) * z + l0)
+    return e * ln2_hi + (e * ln2_lo + s * poly)
+
+
+@jit
+def row_normals(key, b, out):
+    count = out.shape[0]
+    pairs = (count + 1) // 2
+    for j in range(pairs):
+        g = b * pairs + j
+        a = splitmix(key, 2 * g + 1)
+        c = splitmix(key, 2 * g + 2)
+        # rad = sqrt(-2 log p)
+        rad = math.sqrt(-2.0 * log_pos(unit(a)))
+        quadrant = np.int64(c >> u62)
+        w = unit(c << u2)
+        flip = w > 0.5
+        t = (1.0 - w if flip else w) * half_pi
+        z = t * t
+        st = t * ((((((((s8 * z + s7) * z + s6) * z + s5) * z + s4) * z + s3) * z + s2) * z + s1) * z + s0)
+        ct = (((((((((c9 * z + c8) * z + c7) * z + c6) * z + c5) * z + c4) * z + c3) * z + c2) * z + c1) * z
+              + c0)
+        s_psi = ct if flip else st
+        c_psi = st if flip else ct
+        odd = (quadrant & 1) == 1
+        cos = -s_psi if odd else c_psi
+        sin = c_psi if odd else s_psi
+        sign = -rad if quadrant >= 2 else rad
+        out[2 * j] = sign * cos
+        if 2 * j + 1 < count:
+            out[2 * j + 1] = sign * sin

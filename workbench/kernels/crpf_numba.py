@@ -1,0 +1,245 @@
+"""The Numba backend of :func:`workbench.kernels.crpf_step.crpf_step` (imported only when it is used).
+
+The functions live at module level, not in a factory, so that Numba's on-disk cache finds them again
+in a new process (a closure's cache key includes its cells, which differ from process to process, and
+every process compiled the kernel anew: 7-12 s).  See :mod:`workbench.kernels.crpf_step` for the step.
+"""
+
+import functools
+import math
+
+import numba
+import numpy as np
+
+from .counter_normals_numba import row_normals
+from .crpf_step import ATAN_P, ATAN_Q, TAN_PI_8, TWO_PI
+
+p0, p1, p2, p3, p4 = ATAN_P
+q0, q1, q2, q3, q4 = ATAN_Q
+tan_pi_8, pi, two_pi = TAN_PI_8, math.pi, TWO_PI
+# error_model="numpy": a float division by zero gives inf instead of raising, so the loops below
+# carry no exception branch and LLVM can vectorise them; no fastmath (the NaN checks must hold).
+jit = functools.partial(numba.njit, error_model="numpy")
+
+
+@jit(inline="always")
+def atan2(y, x):  # atan2_poly, select by select
+    ax = abs(x)
+    ay = abs(y)
+    swap = ay > ax
+    mx = ay if swap else ax
+    mn = ax if swap else ay
+    a = mn / (mx if mx > 0.0 else 1.0)
+    big = a > tan_pi_8
+    t = (a - 1.0 if big else a) / (a + 1.0 if big else 1.0)
+    z = t * t
+    r = t + t * z * ((((p0 * z + p1) * z + p2) * z + p3) * z + p4) / (((((z + q0) * z + q1) * z + q2) * z + q3)
+                                                                        * z + q4)
+    r = r + (0.25 * pi if big else 0.0)
+    r = 0.5 * pi - r if swap else r
+    r = pi - r if math.copysign(1.0, x) < 0.0 else r  # the sign bit: atan2(+-0, -0) = +-pi
+    return math.copysign(r, y)
+
+
+@jit(inline="always")
+def cost(px, py, zr, zt, sx, sy, q, arc):
+    dx = px - sx
+    dy = py - sy
+    dr = zr - math.sqrt(dx * dx + dy * dy)
+    a = zt - atan2(dy, dx)
+    # wrap to (-pi, pi]: a - 2 pi ceil((a - pi) / 2 pi)
+    dt = a - two_pi * math.ceil((a - pi) * (1.0 / two_pi))
+    dt = dt * abs(zr) if arc else dt
+    return dr * dr + dt * dt
+
+
+@jit(inline="always")
+def costs_into(out, base, px, py, zr, zt, sx, sy, q, arc):
+    """out_i = base_i + dC(p_i | z) over contiguous rows: one vectorisable loop (q = 2), then the power."""
+    N = out.shape[0]
+    for i in range(N):
+        out[i] = cost(px[i], py[i], zr, zt, sx, sy, q, arc)
+    if q != 2.0:
+        # dC = ||z - h(x)||^q
+        for i in range(N):
+            out[i] = out[i] ** (0.5 * q)
+    for i in range(N):
+        out[i] += base[i]
+
+
+@jit(inline="always")
+def pmf(vals, N, beta, delta, w):
+    """w_i ~ (v_i - min v + delta)^-beta (scaled so the best is 1); returns the sum."""
+    m = math.inf
+    bad = False
+    for i in range(N):
+        v = vals[i]
+        if v != v:
+            bad = True
+        elif v < m:
+            m = v
+    bad = bad or not (m < math.inf)
+    if bad:
+        for i in range(N):
+            w[i] = 1.0
+        return float(N)
+    # pi ~ (C - min C + delta)^-beta = ((C - min C + delta) / delta)^-beta up to a constant
+    inv = 1.0 / delta
+    if beta == 2.0:
+        for i in range(N):
+            t = (vals[i] - m + delta) * inv
+            w[i] = 1.0 / (t * t)
+    else:
+        for i in range(N):
+            w[i] = ((vals[i] - m + delta) * inv) ** (-beta)
+    total = 0.0
+    for i in range(N):
+        total += w[i]
+    return total
+
+
+@jit(inline="always")
+def select(w, total, u0, parent, edges):
+    """Systematic selection without a data-dependent branch: with ``e_i = clip(ceil(N cdf_i - u0), 0, N)``
+    (non-decreasing, ``e_{N-1} = N``), particle ``i`` fills the slots ``[e_{i-1}, e_i)``, so the parent
+    of slot ``j`` is ``#{i : e_i <= j}``: a histogram of the edges and its running sum."""
+    N = w.shape[0]
+    for j in range(N + 1):
+        edges[j] = 0
+    cum = 0.0
+    for i in range(N):
+        cum += w[i]
+        frac = 1.0 if i == N - 1 else cum / total  # the last cdf entry is exactly 1
+        edges[int(min(max(math.ceil(N * frac - u0), 0.0), float(N)))] += 1
+    run = 0
+    for j in range(N):
+        run += edges[j]
+        parent[j] = run
+
+
+@jit
+def one_run(xb, cb, F, zr, zt, key, b, u0, std, scal, xn, cn, mean, cov, w):
+    """The step of one run.  (Compiled as a function of its own: written inline in the prange body,
+    its loops vectorised less and the kernel was 1.5x slower.)  The state of every paper is 4-D
+    ``[x, y, vx, vy]``; that case has its loops over components written out (2x faster)."""
+    N, n = xb.shape
+    lam, beta, delta, q = scal[0], scal[1], scal[2], scal[3]
+    arc = scal[4] != 0.0
+    sx, sy = scal[5], scal[6]
+    px = np.empty(N)
+    py = np.empty(N)
+    base = np.empty(N)
+    parent = np.empty(N, dtype=np.int64)
+    edges = np.empty(N + 1, dtype=np.int64)
+    eb = np.empty(N * n)
+    row_normals(key, b, eb)  # this run's propagation normals, e[j, r] = eb[j n + r]
+    # R = lam C + dC(F x | z): the noise-free positions gathered first, so the cost loop vectorises
+    for i in range(N):
+        ax = 0.0
+        ay = 0.0
+        for k in range(n):
+            ax += F[0, k] * xb[i, k]
+            ay += F[1, k] * xb[i, k]
+        px[i] = ax
+        py[i] = ay
+        base[i] = lam * cb[i]
+    costs_into(w, base, px, py, zr, zt, sx, sy, q, arc)
+    total = pmf(w, N, beta, delta, w)
+    select(w, total, u0, parent, edges)
+    # x' = F x_parent + std e ;  C' = lam C_parent + dC(x' | z)
+    if n == 4:
+        f00, f01, f02, f03 = F[0, 0], F[0, 1], F[0, 2], F[0, 3]
+        f10, f11, f12, f13 = F[1, 0], F[1, 1], F[1, 2], F[1, 3]
+        f20, f21, f22, f23 = F[2, 0], F[2, 1], F[2, 2], F[2, 3]
+        f30, f31, f32, f33 = F[3, 0], F[3, 1], F[3, 2], F[3, 3]
+        s0, s1, s2, s3 = std[0], std[1], std[2], std[3]
+        for j in range(N):
+            i = parent[j]
+            x0, x1, x2, x3 = xb[i, 0], xb[i, 1], xb[i, 2], xb[i, 3]
+            y0 = f00 * x0 + f01 * x1 + f02 * x2 + f03 * x3 + s0 * eb[4 * j]
+            y1 = f10 * x0 + f11 * x1 + f12 * x2 + f13 * x3 + s1 * eb[4 * j + 1]
+            xn[j, 0] = y0
+            xn[j, 1] = y1
+            xn[j, 2] = f20 * x0 + f21 * x1 + f22 * x2 + f23 * x3 + s2 * eb[4 * j + 2]
+            xn[j, 3] = f30 * x0 + f31 * x1 + f32 * x2 + f33 * x3 + s3 * eb[4 * j + 3]
+            px[j] = y0
+            py[j] = y1
+            base[j] = lam * cb[i]
+    else:
+        for j in range(N):
+            i = parent[j]
+            for r in range(n):
+                acc = 0.0
+                for k in range(n):
+                    acc += F[r, k] * xb[i, k]
+                xn[j, r] = acc + std[r] * eb[j * n + r]
+            px[j] = xn[j, 0]
+            py[j] = xn[j, 1]
+            base[j] = lam * cb[i]
+    costs_into(cn, base, px, py, zr, zt, sx, sy, q, arc)
+    # estimate: pi' ~ (C' - min C' + delta)^-beta, weighted mean and covariance
+    total = pmf(cn, N, beta, delta, w)
+    if n == 4:
+        m0 = m1 = m2 = m3 = 0.0
+        for i in range(N):
+            wi = w[i]
+            m0 += wi * xn[i, 0]
+            m1 += wi * xn[i, 1]
+            m2 += wi * xn[i, 2]
+            m3 += wi * xn[i, 3]
+        m0 /= total
+        m1 /= total
+        m2 /= total
+        m3 /= total
+        s00 = s10 = s11 = s20 = s21 = s22 = s30 = s31 = s32 = s33 = 0.0
+        for i in range(N):
+            wi = w[i]
+            d0 = xn[i, 0] - m0
+            d1 = xn[i, 1] - m1
+            d2 = xn[i, 2] - m2
+            d3 = xn[i, 3] - m3
+            s00 += wi * d0 * d0
+            s10 += wi * d1 * d0
+            s11 += wi * d1 * d1
+            s20 += wi * d2 * d0
+            s21 += wi * d2 * d1
+            s22 += wi * d2 * d2
+            s30 += wi * d3 * d0
+            s31 += wi * d3 * d1
+            s32 += wi * d3 * d2
+            s33 += wi * d3 * d3
+        mean[0], mean[1], mean[2], mean[3] = m0, m1, m2, m3
+        sums = (s00, s10, s11, s20, s21, s22, s30, s31, s32, s33)
+        k = 0
+        for r in range(4):
+            for t in range(r + 1):
+                cov[r, t] = sums[k] / total
+                cov[t, r] = sums[k] / total
+                k += 1
+        return
+    m = np.zeros(n)
+    for i in range(N):  # every component's sum in one pass: independent chains
+        for r in range(n):
+            m[r] += w[i] * xn[i, r]
+    for r in range(n):
+        m[r] /= total
+        mean[r] = m[r]
+    s = np.zeros((n, n))
+    d = np.empty(n)
+    for i in range(N):
+        for r in range(n):
+            d[r] = xn[i, r] - m[r]
+        for r in range(n):
+            for t in range(r + 1):
+                s[r, t] += w[i] * d[r] * d[t]
+    for r in range(n):
+        for t in range(r + 1):
+            cov[r, t] = s[r, t] / total
+            cov[t, r] = s[r, t] / total
+
+
+@jit(parallel=True, cache=True)
+def kernel(x, c, F, z, key, u0, std, scal, x_new, c_new, mean, cov, scratch):
+    for b in numba.prange(x.shape[0]):
+        one_run(x[b], c[b], F, z[b, 0], z[b, 1], key, b, u0[b], std, scal, x_new[b], c_new[b], mean[b],
+                cov[b], scratch[b])
