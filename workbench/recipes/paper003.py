@@ -104,15 +104,16 @@ Choices where the paper is silent (brief § 3.2-3.4; details in docs/paper003.md
   Chosen from a sweep: kappa in {0.1, 1, 10} x s in {iso = (1,1,1,1), pos = (1,1,0,0), vel0.1 = (1,1,0.1,0.1),
   vel0.01, dwna} (the ablation table recomputes iso, vel0.1 and dwna; pos makes the particle covariance
   singular and is recorded in docs/paper003.md only), CRPF-100, plain norm, 300 runs per level, seed 0, by one rule for every
-  level (never per level): the smallest geometric mean over L1-L3 of the time-averaged MSE. (Mean rank over
-  the levels would pick dwna with kappa 0.1; ranks ignore the size of the differences, and at L3 every
-  variant loses > 90 % of the tracks.) The brief's literal default (kappa 1, isotropic) is the ablation row
+  level (never per level): the smallest geometric mean over L1-L3 of the time-averaged MSE. (The mean rank
+  over the levels, shown beside it, is not the rule: ranks ignore the size of the differences, and at L3
+  every variant loses > 90 % of the tracks, so its ranks are noise.) The brief's literal default (kappa 1, isotropic) is the ablation row
   crpf-100-iso. No jitter setting stops the plain-norm CRPF from diverging: the cost ||y - h(x)||^2 adds
   m^2 and rad^2, so the bearing hardly enters and the cross-range error random-walks; the arc-length cost
   rows show that the cost scaling, not the jitter, is what loses the track. Every CRPF filter runs the fused
-  kernel workbench.kernels.crpf_step (Numba on the CPU, else Taichi) for the range-bearing sensor; the
-  random numbers are drawn in NumPy in the same order as the array code, so both give the same numbers
-  up to float round-off.
+  kernel workbench.kernels.crpf_step (Numba on the CPU, else Taichi) for the range-bearing sensor; its
+  propagation normals are counter-based (workbench.kernels.counter_normals, keyed by one draw of the
+  filter's generator per step), the same numbers in the kernel and the array code, so both give the
+  same particles up to float round-off.
 - MSE(t) = mean over runs of the squared position error; the scalar is its mean over t. RMSE = sqrt(MSE).
   "Median" = the median over runs of each run's time-averaged squared error. Lost track: final position
   error > 50 m (the brief's "10 x the nominal cross-range noise, or > 50 m": with the nominal
