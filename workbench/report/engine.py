@@ -289,10 +289,13 @@ def dask_executor(host: PluginHost, scheduler: str | None = None, workers: int |
     # them, and threaded kernels (Numba, BLAS) in every worker would oversubscribe them.
     env = {name: "1" for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
     # Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536 (its pre-spawn environment, read by
-    # glibc at process start), so glibc hands every freed array of the particle filters back to the
-    # system and the next step page-faults it in again: the paper-003 CRPF ran 1.6x slower in a worker
-    # than in a plain process.  A short-lived local cluster keeps up to 256 MiB.
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": str(256 * 2 ** 20)}):
+    # glibc at process start).  Any explicit value also turns off glibc's dynamic mmap threshold, so
+    # every freed array of the particle filters goes back to the system and the next step page-faults it
+    # in again: the paper-003 CRPF ran 1.7x slower in a worker than in a plain process.  The workers of
+    # this short-lived local cluster allocate as a plain Python process does (the variable unset).
+    spawn_env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+                 if not k.startswith("MALLOC_")}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": spawn_env}):
         cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
                                dashboard_address=None, env=env)
     return DaskExecutor(Client(cluster), block, cluster=cluster)
