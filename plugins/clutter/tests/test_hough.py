@@ -389,14 +389,8 @@ def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
 
 
 def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> dict:
-    kept = {}
-    for p in group:
-        mask = np.zeros(len(cache.pts[p]), dtype=bool)
-        for q in group:
-            if q != p and abs(q - p) <= gap:
-                mask |= _has_partner(cache, p, q, v_max * dt * abs(q - p))
-        kept[p] = mask
-    return kept
+    # the remover's loop over ping pairs, with the reference k-d tree partner test
+    return hough._gate(cache, group, v_max, dt, gap, has_partner=_has_partner)
 
 
 def _counts(cache: _RunCache, grid: HoughGrid, p: int, mask: np.ndarray) -> np.ndarray:
