@@ -25,11 +25,12 @@ Shapes: :func:`counter_normals` ``(key, rows, count) -> (rows, count)``.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 
 import numpy as np
 
-__all__ = ["counter_normals", "draw_key", "log_poly", "numba_row_normals", "sincos_poly"]
+__all__ = ["counter_normals", "counter_normals_numpy", "draw_key", "log_poly", "sincos_poly"]
 
 GAMMA = 0x9E3779B97F4A7C15  # 2^64 / golden ratio, SplitMix64's increment
 MIX1 = 0xBF58476D1CE4E5B9
@@ -97,7 +98,23 @@ def sincos_poly(quadrant: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def counter_normals(key: int, rows: int, count: int) -> np.ndarray:
-    """``count`` standard normals for each of ``rows`` rows of stream ``key``: ``(rows, count)``."""
+    """``count`` standard normals for each of ``rows`` rows of stream ``key``: ``(rows, count)``.
+
+    Computed by the Numba twin when Numba is installed (about 2 ns a number, on every core), else by
+    :func:`counter_normals_numpy` (about 120 ns); the two give the same numbers bit for bit (tested).
+    """
+    if importlib.util.find_spec("numba") is None:
+        return counter_normals_numpy(key, rows, count)
+    from .counter_normals_numba import fill_rows
+
+    out = np.empty((int(rows), int(count)))
+    if out.size:
+        fill_rows(np.uint64(key), out)
+    return out
+
+
+def counter_normals_numpy(key: int, rows: int, count: int) -> np.ndarray:
+    """The NumPy twin of :func:`counter_normals`, written from the formulas in the module docstring."""
     pairs = (count + 1) // 2
     g = np.arange(rows * pairs, dtype=np.uint64)
     a = _splitmix(key, 2 * g + 1)
@@ -109,10 +126,3 @@ def counter_normals(key: int, rows: int, count: int) -> np.ndarray:
     out[:, 0::2] = (rad * cos).reshape(rows, pairs)
     out[:, 1::2] = (rad * sin).reshape(rows, pairs)
     return out[:, :count]
-
-
-def numba_row_normals():
-    """The Numba twin, :func:`workbench.kernels.counter_normals_numba.row_normals` (imports Numba)."""
-    from .counter_normals_numba import row_normals
-
-    return row_normals

@@ -96,3 +96,10 @@ def row_normals(key, b, out):
         out[2 * j] = sign * cos
         if 2 * j + 1 < count:
             out[2 * j + 1] = sign * sin
+
+
+@numba.njit(parallel=True, error_model="numpy", cache=True)
+def fill_rows(key, out):
+    """``out (rows, count)`` = the normals of rows ``0 .. rows - 1`` of stream ``key``, one row per iteration."""
+    for b in numba.prange(out.shape[0]):
+        row_normals(key, b, out[b])

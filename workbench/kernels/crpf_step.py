@@ -40,7 +40,7 @@ import numpy as np
 from ..linalg import wrap_angle
 from ..models import range_bearing
 from ..resampling import normalise_log_weights, systematic_counts
-from .counter_normals import counter_normals, numba_row_normals
+from .counter_normals import counter_normals, counter_normals_numpy
 from .runtime import ensure_taichi
 from .tbd_weights import numba_available, resolve_backend
 
@@ -65,9 +65,10 @@ def _check(x, c, F, z, u0, std):
     return x, c, F, z, u0, std
 
 
-def propagation_normals(key: int, B: int, N: int, n: int) -> np.ndarray:
-    """The standard normals ``e (B, N, n)`` of the propagation for stream ``key``."""
-    return counter_normals(key, B, N * n).reshape(B, N, n)
+def propagation_normals(key: int, B: int, N: int, n: int, twin: bool = False) -> np.ndarray:
+    """The standard normals ``e (B, N, n)`` of the propagation for stream ``key`` (``twin``: computed by
+    the pure NumPy :func:`~workbench.kernels.counter_normals.counter_normals_numpy`; the same numbers)."""
+    return (counter_normals_numpy if twin else counter_normals)(key, B, N * n).reshape(B, N, n)
 
 
 def _cost_numpy(z, points, model, q, arc):
@@ -92,7 +93,7 @@ def crpf_step_numpy(x, c, F, z, key, u0, std, lam, beta, delta, q=2.0, arc=False
     """The NumPy twin every kernel backend is held to (same inputs and outputs as :func:`crpf_step`)."""
     x, c, F, z, u0, std = _check(x, c, F, z, u0, std)
     B, N, n = x.shape
-    e = propagation_normals(key, B, N, n)
+    e = propagation_normals(key, B, N, n, twin=True)
     model = range_bearing(1.0, 1.0, sensor)
     xf = x @ F.T  # f(x) = F x
     # R = lam C + dC(F x | z)
