@@ -40,6 +40,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
+from workbench.kernels.tbd_weights import numba_available
 from workbench.linalg import cholupdate, safe_cholesky, symmetrise, tria
 from workbench.models import MeasurementModel, MotionModel
 from workbench.specs import FilterSpec
@@ -183,9 +184,34 @@ def _gain(Pxy: np.ndarray, chol_yy: np.ndarray) -> np.ndarray:
     return np.swapaxes(_solve_upper(np.swapaxes(chol_yy, 1, 2), _solve_lower(chol_yy, np.swapaxes(Pxy, 1, 2))), 1, 2)
 
 
+def _compiled():
+    """The Numba loops of the UKF (:mod:`workbench.kernels.sigma_numba`), or ``None`` without Numba."""
+    if not numba_available():
+        return None
+    from workbench.kernels import sigma_numba
+
+    return sigma_numba
+
+
+def _compiled_points(x: np.ndarray, P: np.ndarray, spread: float):
+    """``(X, S)`` from the compiled loops, or ``None`` (no Numba, or some ``P`` not positive definite)."""
+    fast = _compiled()
+    if fast is None:
+        return None
+    B, n = x.shape
+    X, S = np.empty((B, 2 * n + 1, n)), np.empty((B, n, n))
+    return (X, S) if fast.chol_sigma(x, P, float(spread), X, S) else None
+
+
 def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weights: SigmaWeights) -> SigmaPointState:
     x, P = state.mean, state.cov
     n = x.shape[1]
+    points = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
+    if points is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
+        Xf = np.ascontiguousarray(motion.f(points[0]))
+        mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
+        _compiled().predicted_moments(Xf, weights.mean, weights.cov, np.asarray(motion.Q, dtype=float), mean, cov)
+        return SigmaPointState(mean, cov, state.jitters)
     S, jit = _cholesky(P)
     Xf = motion.f(sigma_points(x, S, weights.spread))  # X* = f(X)
     mean = weights.mean @ Xf  # x- = sum Wm X*
@@ -207,6 +233,14 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
     _check_finite(z, present, who)
     x, P = state.mean, state.cov
     n = x.shape[1]
+    points = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
+    if points is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
+        X = points[0]
+        Y = np.ascontiguousarray(model.h(X), dtype=float)
+        mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
+        if _compiled().unscented_update(x, P, X, Y, weights.mean, weights.cov, model.angle_mask, model.R,
+                                        np.ascontiguousarray(z, dtype=float), present, mean, cov):
+            return SigmaPointState(mean, cov, state.jitters)
     S, jit = _cholesky(P)
     X = sigma_points(x, S, weights.spread)  # redraw from (x-, P-)
     Y = model.h(X)

@@ -1,0 +1,52 @@
+"""The UKF's compiled loops (workbench.kernels.sigma_numba) against the filter's NumPy code."""
+
+import numpy as np
+import pytest
+
+from workbench.filtering import run_filter
+from workbench.kernels.tbd_weights import numba_available
+from workbench.models import linear_measurement, random_walk_velocity, range_bearing
+from workbench.rng import generator
+from workbench.trajectory import sample_motion
+from workbench.types import Gaussian, Scans
+from workbench_filters import sigma_point
+
+pytestmark = pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
+
+
+def _scenario(model, B=40, steps=30, seed=0):
+    rng = generator(seed, "sigma-numba")
+    motion = random_walk_velocity(2, 1.0, 0.3)
+    truth = sample_motion(np.tile([100.0, -20.0, -1.0, 2.0], (B, 1)), motion, steps, rng)
+    z = model.h(truth.states) + rng.standard_normal(truth.states.shape[:2] + (model.dim,)) @ np.linalg.cholesky(model.R).T
+    valid = rng.random((B, steps)) > 0.1  # missed detections: absent items keep their state
+    scans = Scans(z[:, :, None, :], valid[:, :, None], np.arange(steps, dtype=float))
+    prior = Gaussian.broadcast([110.0, -10.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), B)
+    return prior, motion, scans
+
+
+@pytest.mark.parametrize("model", [range_bearing(1.0, 0.1, sensor=(3.0, -2.0)),
+                                   linear_measurement(np.eye(2, 4), np.diag([2.0, 3.0]))],
+                         ids=["range-bearing", "linear"])
+def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model):
+    from workbench.plugins import load_host
+
+    spec = load_host().filter("ukf")
+    prior, motion, scans = _scenario(model)
+    fast = run_filter(spec, prior, motion, model, scans, None)
+    monkeypatch.setattr(sigma_point, "_compiled", lambda: None)
+    slow = run_filter(spec, prior, motion, model, scans, None)
+    assert np.allclose(fast.mean, slow.mean, rtol=1e-10, atol=1e-9)
+    assert np.allclose(fast.cov, slow.cov, rtol=1e-9, atol=1e-9)
+
+
+def test_compiled_update_declines_a_covariance_that_is_not_positive_definite():
+    from workbench.kernels import sigma_numba
+
+    x = np.zeros((2, 4))
+    P = np.tile(np.eye(4), (2, 1, 1))
+    P[1, 2, 2] = -1.0
+    X, S = np.empty((2, 9, 4)), np.empty((2, 4, 4))
+    assert not sigma_numba.chol_sigma(x, P, 2.0, X, S)
+    assert sigma_numba.chol_sigma(x[:1], P[:1], 2.0, X[:1], S[:1]) and np.allclose(S[0], np.eye(4))
+    assert np.allclose(X[0, 1:5], 2.0 * np.eye(4)) and np.allclose(X[0, 5:], -2.0 * np.eye(4))
