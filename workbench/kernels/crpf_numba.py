@@ -42,7 +42,8 @@ def atan2(y, x):  # atan2_poly, select by select
 
 
 @jit(inline="always")
-def cost(px, py, zr, zt, sx, sy, q, arc):
+def cost(px, py, zr, zt, sx, sy, arc):
+    """(dr^2 + (a dtheta)^2) for one point, dtheta wrapped; a = |z_r| for the arc-length cost, else 1."""
     dx = px - sx
     dy = py - sy
     dr = zr - math.sqrt(dx * dx + dy * dy)
@@ -58,7 +59,7 @@ def costs_into(out, base, px, py, zr, zt, sx, sy, q, arc):
     """out_i = base_i + dC(p_i | z) over contiguous rows: one vectorisable loop (q = 2), then the power."""
     N = out.shape[0]
     for i in range(N):
-        out[i] = cost(px[i], py[i], zr, zt, sx, sy, q, arc)
+        out[i] = cost(px[i], py[i], zr, zt, sx, sy, arc)
     if q != 2.0:
         # dC = ||z - h(x)||^q
         for i in range(N):
