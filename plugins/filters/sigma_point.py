@@ -193,22 +193,23 @@ def _compiled():
     return sigma_numba
 
 
-def _compiled_points(x: np.ndarray, P: np.ndarray, spread: float):
-    """``(X, S)`` from the compiled loops, or ``None`` (no Numba, or some ``P`` not positive definite)."""
+def _compiled_points(x: np.ndarray, P: np.ndarray, spread: float) -> np.ndarray | None:
+    """The sigma points ``X`` from the compiled loops, or ``None`` (no Numba, or some ``P`` not positive
+    definite)."""
     fast = _compiled()
     if fast is None:
         return None
     B, n = x.shape
-    X, S = np.empty((B, 2 * n + 1, n)), np.empty((B, n, n))
-    return (X, S) if fast.chol_sigma(x, P, float(spread), X, S) else None
+    X = np.empty((B, 2 * n + 1, n))
+    return X if fast.chol_sigma(x, P, float(spread), X, np.empty((B, n, n))) else None
 
 
 def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weights: SigmaWeights) -> SigmaPointState:
     x, P = state.mean, state.cov
     n = x.shape[1]
-    points = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
-    if points is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
-        Xf = np.ascontiguousarray(motion.f(points[0]))
+    X = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
+    if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
+        Xf = np.ascontiguousarray(motion.f(X))
         mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
         _compiled().predicted_moments(Xf, weights.mean, weights.cov, np.asarray(motion.Q, dtype=float), mean, cov)
         return SigmaPointState(mean, cov, state.jitters)
@@ -233,9 +234,8 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
     _check_finite(z, present, who)
     x, P = state.mean, state.cov
     n = x.shape[1]
-    points = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
-    if points is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
-        X = points[0]
+    X = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
+    if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
         Y = np.ascontiguousarray(model.h(X), dtype=float)
         mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
         if _compiled().unscented_update(x, P, X, Y, weights.mean, weights.cov, model.angle_mask, model.R,
