@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .criteria import Criterion
+
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from matplotlib.figure import Figure
 
@@ -216,16 +218,6 @@ class TableSpec:
     id: str
     caption: str
     make: Callable[[Results], Table]
-
-
-@dataclass(frozen=True)
-class Criterion:
-    """One 'reproduced if' criterion of the brief, evaluated on our numbers."""
-
-    id: str
-    text: str
-    met: bool
-    detail: str
 
 
 @dataclass(frozen=True)
