@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from workbench.bench_paper000 import kernel_inputs, naive_log_weight_sums
+from workbench.kernels.reference import kernel_inputs, naive_log_weight_sums
 from workbench.kernels.reference import tbd_log_weight_sums_reference
 from workbench.kernels.runtime import TaichiUnavailable, ensure_taichi, taichi_available_arches
 from workbench.kernels.tbd_weights import (EXP_FLOOR, numba_available, pack_measurements, poly_exp, resolve_backend,
@@ -120,7 +120,7 @@ def test_backends_resolve_and_reject_unknown_names():
 
 
 def test_taichi_runtime_is_lazy_and_checks_its_arch():
-    code = ("import sys, workbench.kernels.tbd_weights, workbench.radar; "
+    code = ("import sys, workbench.kernels.tbd_weights, workbench.sensing.radar; "
             "import workbench_filters.tbd; print('taichi' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]

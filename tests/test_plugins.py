@@ -23,7 +23,6 @@ def test_builtins_load_through_entry_points():
     ("teleport", broken_plugins.UNKNOWN_HOOK, "not a workbench hook"),
     ("raiser", broken_plugins.RAISES, "boom from a plugin"),
     ("wrongtype", broken_plugins.WRONG_TYPE, "expected FilterSpec"),
-    ("impostor", broken_plugins.DUPLICATE, "already provided by plugin 'kalman'"),
 ])
 def test_broken_plugin_is_reported_and_the_rest_work(name, obj, fragment):
     host = load_host(extra_plugins=[(name, obj)])
@@ -31,6 +30,25 @@ def test_broken_plugin_is_reported_and_the_rest_work(name, obj, fragment):
     assert info.status == "broken"
     assert fragment in info.error and name in info.error
     assert host.filter("kf").summary.startswith("Kalman")  # the built-in is untouched
+
+
+def test_a_third_party_component_reusing_a_builtin_name_is_refused_with_a_warning_and_the_rest_kept():
+    # a plugin name that sorts before the built-in one must not take the name over or disable the built-in
+    host = load_host(extra_plugins=[("aaa-impostor", broken_plugins.DUPLICATE_AND_OWN)])
+    info = next(p for p in host.plugins if p.name == "aaa-impostor")
+    assert info.status == "ok" and ("filter", "own-filter") in info.provides
+    assert len(info.warnings) == 1
+    assert "'kf'" in info.warnings[0] and "plugin 'kalman' (distribution workbench)" in info.warnings[0]
+    assert "built-in names are reserved" in info.warnings[0]
+    assert host.filter("kf").summary.startswith("Kalman")
+    assert next(p for p in host.plugins if p.name == "kalman").status == "ok"
+    assert host.warnings == info.warnings
+
+
+def test_a_component_whose_defaults_fail_its_own_declarations_makes_its_plugin_broken():
+    host = load_host(extra_plugins=[("baddecl", broken_plugins.BAD_DECLARATION)])
+    info = next(p for p in host.plugins if p.name == "baddecl")
+    assert info.status == "broken" and "not valid for its own declaration" in info.error and "particles" in info.error
 
 
 def test_import_failure_is_reported_with_its_distribution():

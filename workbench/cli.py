@@ -150,7 +150,7 @@ def cmd_bench(args) -> int:
     from .bench import run_bench
 
     host = _host(args)
-    return run_bench(host, quick=args.quick, json_path=Path(args.json), only=args.only)
+    return run_bench(host, quick=args.quick, json_path=Path(args.json), only=args.only, block=tuple(args.block))
 
 
 COMMANDS = {"plugins": cmd_plugins, "report": cmd_report, "run": cmd_run, "check-plugin": cmd_check_plugin,

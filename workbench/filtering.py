@@ -1,9 +1,8 @@
-"""Drive a filter over a scan series, and helpers filter authors share."""
+"""Helpers filter authors share, and :func:`run_filter`, the direct-association form of the time loop."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 
@@ -11,24 +10,7 @@ from .models import MeasurementModel, MotionModel
 from .specs import FilterSpec
 from .types import Gaussian, InputError, Scan, Scans
 
-__all__ = ["Estimates", "run_filter", "single_measurement", "keep_where"]
-
-
-@dataclass(frozen=True)
-class Estimates:
-    """A filter's output over a scan series.
-
-    Shapes
-    ------
-    mean, predicted_mean : (B, T, n)
-    cov : (B, T, n, n)
-    """
-
-    filter: str
-    mean: np.ndarray
-    cov: np.ndarray
-    predicted_mean: np.ndarray
-    diagnostics: Mapping[str, float]
+__all__ = ["run_filter", "single_measurement", "keep_where"]
 
 
 def single_measurement(scan: Scan, who: str = "this filter") -> tuple[np.ndarray, np.ndarray]:
@@ -56,28 +38,14 @@ def keep_where(present: np.ndarray, updated: np.ndarray, previous: np.ndarray) -
 
 
 def run_filter(spec: FilterSpec, prior: Gaussian, motion: MotionModel, model: MeasurementModel, scans: Scans,
-               rng: np.random.Generator, *, progress: Callable[[float], None] | None = None) -> Estimates:
-    """Run ``spec`` over ``scans``: update with scan 0 from ``prior``, then predict/update for each later scan.
+               rng: np.random.Generator, *, progress: Callable[[float], None] | None = None,
+               predict_first: bool = False):
+    """Run ``spec`` over ``scans``: update with scan 0 from ``prior`` (or predict first with ``predict_first``),
+    then predict/update for each later scan.  :func:`workbench.tracking.run` with the direct association.
 
-    ``origin`` labels are stripped before the filter sees a scan.
+    ``origin`` labels are stripped before the filter sees a scan.  Returns a :class:`~workbench.tracking.Track`.
     """
-    if prior.batch != scans.batch:
-        raise InputError(f"prior has batch {prior.batch} but the scans have batch {scans.batch}")
-    T = scans.steps
-    B, n = prior.mean.shape
-    mean = np.empty((B, T, n))
-    cov = np.empty((B, T, n, n))
-    pred = np.empty((B, T, n))
-    state = spec.init(prior, rng)
-    for k in range(T):
-        if k > 0:
-            state = spec.predict(state, motion, rng)
-        pred[:, k] = spec.estimate(state).mean
-        state = spec.update(state, scans.scan(k).for_filter(), model, rng)
-        est = spec.estimate(state)
-        mean[:, k] = est.mean
-        cov[:, k] = est.cov
-        if progress is not None:
-            progress((k + 1) / T)
-    diag = dict(spec.diagnostics(state)) if spec.diagnostics is not None else {}
-    return Estimates(spec.name, mean, cov, pred, diag)
+    from .tracking import Direct, run
+
+    return run(spec, scans, motion, model, association=Direct(), prior=prior, rng=rng, predict_first=predict_first,
+               progress=progress)

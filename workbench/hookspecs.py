@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from .specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
+    from .specs import BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
 
 PROJECT = "workbench"
 ENTRY_POINT_GROUP = "workbench"
@@ -68,3 +68,10 @@ def workbench_clutter_removers() -> list["ClutterRemoverSpec"]:
 def workbench_report_recipes() -> list["RecipeSpec"]:
     """Return report recipes: one per paper, each declaring its tasks, figures, tables, quick and
     full sizes, the published values it compares against and its 'reproduced if' criteria."""
+
+
+@hookspec
+def workbench_benchmarks() -> list["BenchmarkSpec"]:
+    """Return benchmark groups for ``workbench bench``: each a :class:`~workbench.specs.BenchmarkSpec` whose
+    ``run(quick)`` returns its figures (targets as ``target_*``, whether they were met as ``met_*``).  Group
+    names must be unique across plugins."""

@@ -1,7 +1,8 @@
-"""Linear Kalman-filter steps shared by filter plugins, batch-first.
+"""Kalman-filter steps shared by filter plugins, batch-first.
 
 Plugins may not import each other, so the pieces that more than one Kalman-type filter needs live
-here: a linear predict and a linear update in which every batch item has its own measurement
+here: a linear predict, the KF/EKF update of a scan (:func:`kf_update`, :func:`ekf_update`, which honour a
+scan's per-detection covariances), and a linear update in which every batch item has its own measurement
 covariance ``R_b`` (a converted-measurement filter builds ``R`` from each item's own range and
 bearing).
 
@@ -26,12 +27,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .filtering import keep_where
+from .filtering import keep_where, single_measurement
 from .linalg import joseph_update, psd_solve, symmetrise
-from .models import MotionModel
-from .types import Gaussian, InputError
+from .models import MeasurementModel, MotionModel
+from .types import Gaussian, InputError, Scan
 
-__all__ = ["linear_predict", "linear_update"]
+__all__ = ["linear_predict", "linear_update", "kalman_update", "kf_update", "ekf_update", "measurement_covariance"]
 
 
 def linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
@@ -73,3 +74,54 @@ def linear_update(state: Gaussian, z: np.ndarray, present: np.ndarray, H: np.nda
     mean = state.mean + np.einsum("bij,bj->bi", K, nu)
     cov = joseph_update(P, K, H, R_safe)
     return Gaussian(keep_where(present, mean, state.mean), keep_where(present, cov, P))
+
+
+def measurement_covariance(scan: Scan, model: MeasurementModel, present: np.ndarray) -> np.ndarray:
+    """The noise covariance of each item's measurement: the scan's own ``cov`` of the valid row where the scan
+    carries one, else the model's ``R``.  ``(m, m)`` (the model's, shared) or ``(B, m, m)``."""
+    if scan.cov is None:
+        return model.R
+    row = np.argmax(scan.valid, axis=1) if scan.z.shape[1] else np.zeros(scan.batch, dtype=int)
+    m = model.dim
+    cov = scan.cov[np.arange(scan.batch), row] if scan.z.shape[1] else np.broadcast_to(np.eye(m), (scan.batch, m, m))
+    return np.where(present[:, None, None], cov, np.eye(m))
+
+
+def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.ndarray, who: str) -> Gaussian:
+    """The Kalman update of a scan with at most one valid row per item, linearised as ``H (B, m, n)``::
+
+        S = H P- H^T + R              innovation covariance (R: the detection's own where the scan has one)
+        K = P- H^T S^-1               gain (solved, never inverted)
+        x = x- + K wrap(z - h(x-))    residual wraps angular components
+        P = (I - K H) P- (I - K H)^T + K R K^T   Joseph form
+
+    Items without a measurement come back unchanged.
+    """
+    z, present = single_measurement(scan, who)
+    if not present.any():
+        return state
+    R = measurement_covariance(scan, model, present)
+    P = state.cov
+    S = symmetrise(H @ P @ np.swapaxes(H, -1, -2) + R)  # S = H P- H^T + R
+    PHt = P @ np.swapaxes(H, -1, -2)
+    K = np.swapaxes(psd_solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # K = P- H^T S^-1
+    nu = model.residual(z, model.h(state.mean))  # wrap(z - h(x-))
+    mean = state.mean + np.einsum("bij,bj->bi", K, nu)
+    cov = joseph_update(P, K, H, R)
+    return Gaussian(keep_where(present, mean, state.mean), keep_where(present, cov, P))
+
+
+def kf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:
+    """The Kalman filter's update (the model's ``H``)."""
+    if model.H is None:
+        raise InputError(f"the Kalman filter needs a linear measurement model; {model.name!r} has no H "
+                         "(use the EKF, UKF or CDKF)")
+    H = np.broadcast_to(model.H, (state.batch, *model.H.shape))
+    return kalman_update(state, scan, model, H, "kf")
+
+
+def ekf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:
+    """The extended Kalman filter's update (the model's Jacobian at the prediction)."""
+    if model.jacobian is None:
+        raise InputError(f"the EKF needs the Jacobian of {model.name!r}, which the sensor does not publish")
+    return kalman_update(state, scan, model, model.jacobian(state.mean), "ekf")

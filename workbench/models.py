@@ -22,6 +22,7 @@ from .types import InputError
 __all__ = [
     "MotionModel",
     "MeasurementModel",
+    "DetectionModel",
     "constant_velocity",
     "random_walk_velocity",
     "range_rate_model",
@@ -45,10 +46,31 @@ class MotionModel:
     Q: np.ndarray
     Q_sqrt: np.ndarray
     dt: float
+    rebuild: Callable[[float], "MotionModel"] | None = field(default=None, compare=False, repr=False)
 
     @property
     def dim(self) -> int:
         return self.F.shape[0]
+
+    @property
+    def position_dims(self) -> int:
+        """How many leading state components are a position (the layout is positions, then velocities)."""
+        return self.dim // 2
+
+    def for_interval(self, dt: float) -> "MotionModel":
+        """The same model over a time step of ``dt`` seconds (itself when ``dt`` equals its own step).
+
+        Drivers call this for every step of a scan series with irregular time stamps.  A model without a
+        ``rebuild`` function (a hand-made ``F``, ``Q``) only serves its own step.
+        """
+        if np.isclose(dt, self.dt, rtol=1e-9, atol=1e-12):
+            return self
+        if not dt > 0:
+            raise InputError(f"motion model {self.name!r}: time steps must increase, got a step of {dt} s")
+        if self.rebuild is None:
+            raise InputError(f"motion model {self.name!r} is built for steps of {self.dt} s and cannot be rebuilt "
+                             f"for a step of {dt} s")
+        return self.rebuild(float(dt))
 
     def f(self, x: np.ndarray) -> np.ndarray:
         """Noise-free propagation of states ``x (..., n)``."""
@@ -84,11 +106,12 @@ def constant_velocity(dims: int, dt: float, sigma_a: float | Sequence[float]) ->
     G = np.zeros((n, dims))
     G[:dims] = g[0] * np.diag(sig)
     G[dims:] = g[1] * np.diag(sig)
-    return MotionModel(f"cv{dims}d", F, G @ G.T, _lower_factor(G), float(dt))
+    return MotionModel(f"cv{dims}d", F, G @ G.T, _lower_factor(G), float(dt),
+                       rebuild=lambda step: constant_velocity(dims, step, sigma_a))
 
 
 def random_walk_velocity(dims: int, dt: float, sigma_a: float) -> MotionModel:
-    """``r_t = r_{t-1} + T v_{t-1}``, ``v_t = v_{t-1} + a_t``, ``a_t ~ N(0, sigma_a^2 I)`` (paper 003).
+    """``r_t = r_{t-1} + T v_{t-1}``, ``v_t = v_{t-1} + a_t``, ``a_t ~ N(0, sigma_a^2 I)``.
 
     The position noise is exactly zero, so ``Q = blockdiag(0, sigma_a^2 I)`` is singular and
     ``Q_sqrt = blockdiag(0, sigma_a I)``.
@@ -100,13 +123,15 @@ def random_walk_velocity(dims: int, dt: float, sigma_a: float) -> MotionModel:
     F[:dims, dims:] = dt * np.eye(dims)
     Q_sqrt = np.zeros((n, n))
     Q_sqrt[dims:, dims:] = sigma_a * np.eye(dims)
-    return MotionModel(f"rwv{dims}d", F, Q_sqrt @ Q_sqrt.T, Q_sqrt, float(dt))
+    return MotionModel(f"rwv{dims}d", F, Q_sqrt @ Q_sqrt.T, Q_sqrt, float(dt),
+                       rebuild=lambda step: random_walk_velocity(dims, step, sigma_a))
 
 
 def range_rate_model(dt: float, sigma_a: float) -> MotionModel:
-    """The ``[R, Rdot]`` model of paper 002: constant range-rate with white-noise acceleration."""
+    """The ``[R, Rdot]`` model: constant range-rate with white-noise acceleration (e.g. a bistatic range)."""
     model = constant_velocity(1, dt, sigma_a)
-    return MotionModel("range-rate", model.F, model.Q, model.Q_sqrt, model.dt)
+    return MotionModel("range-rate", model.F, model.Q, model.Q_sqrt, model.dt,
+                       rebuild=lambda step: range_rate_model(step, sigma_a))
 
 
 def _lower_factor(g: np.ndarray) -> np.ndarray:
@@ -118,6 +143,33 @@ def _lower_factor(g: np.ndarray) -> np.ndarray:
     low = r.T[:n, :n]
     sign = np.where(np.diagonal(low) < 0, -1.0, 1.0)
     return low * sign[None, :]
+
+
+@dataclass(frozen=True)
+class DetectionModel:
+    """How a sensor's detection quality follows the detection's own SNR (declared by the sensor).
+
+    Filters that weight each detection by its strength (track-before-detect, PDA-style pseudo-measurements)
+    read these instead of the sensor's internals.
+
+    Attributes
+    ----------
+    log_pd : callable
+        ``log_pd(snr_db) -> log P_D``: the log probability of detection of a target return of that SNR
+        (dB), elementwise.
+    position_sigma : callable
+        ``position_sigma(snr_db, range_m) -> sigma (m)``: the isotropic position standard deviation of a
+        detection of that SNR at that range, elementwise.
+    doppler_sigma : float
+        The radial-velocity standard deviation (m/s).
+    pfa : float
+        The false-alarm probability per cell of the detector.
+    """
+
+    log_pd: Callable[[np.ndarray], np.ndarray]
+    position_sigma: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    doppler_sigma: float
+    pfa: float
 
 
 @dataclass(frozen=True)
@@ -136,9 +188,16 @@ class MeasurementModel:
         Which of the ``m`` components are angles in radians; residuals and means wrap them.
     H : ndarray (m, n) or None
         Set for a linear model (``h(x) = H x``).
-    params : dict
-        The sensor parameters the model was built from (e.g. ``sigma_r``), for filters that need them
-        (the converted-measurement filter reads ``sigma_r`` and ``sigma_b``).
+    frame : str
+        The measurement frame of ``h(x)`` (:data:`workbench.frames.FRAMES`); ``""`` when undeclared.
+    std : tuple of float or None
+        The nominal standard deviation of each component, as the sensor states it (``R`` is
+        ``diag(std^2)`` for an uncorrelated model); read by filters that need the stated accuracies
+        themselves (the converted-measurement filter).
+    sensor_position : tuple of float or None
+        Where the sensor is, in the state's position coordinates.
+    detection : DetectionModel or None
+        How detection quality follows SNR, for sensors that report one.
     """
 
     name: str
@@ -147,19 +206,44 @@ class MeasurementModel:
     jacobian: Callable[[np.ndarray], np.ndarray] | None = None
     angular: tuple[bool, ...] = ()
     H: np.ndarray | None = None
-    params: dict = field(default_factory=dict)
+    frame: str = ""
+    std: tuple[float, ...] | None = None
+    sensor_position: tuple[float, ...] | None = None
+    detection: DetectionModel | None = None
 
     def __post_init__(self) -> None:
         R = np.asarray(self.R, dtype=float)
         if R.ndim != 2 or R.shape[0] != R.shape[1]:
             raise InputError(f"MeasurementModel {self.name!r}: R must be square, got shape {R.shape}")
+        if not np.all(np.isfinite(R)):
+            raise InputError(f"MeasurementModel {self.name!r}: R holds a non-finite value")
         if not np.allclose(R, R.T) or np.any(np.linalg.eigvalsh(R) < -1e-12):
             raise InputError(f"MeasurementModel {self.name!r}: R must be symmetric positive semi-definite")
         angular = tuple(self.angular) if self.angular else (False,) * R.shape[0]
         if len(angular) != R.shape[0]:
             raise InputError(f"MeasurementModel {self.name!r}: angular has {len(angular)} entries for m={R.shape[0]}")
+        if self.std is not None:
+            std = tuple(float(v) for v in self.std)
+            if len(std) != R.shape[0] or not all(np.isfinite(v) and v >= 0 for v in std):
+                raise InputError(f"MeasurementModel {self.name!r}: std must hold {R.shape[0]} finite values >= 0, "
+                                 f"got {self.std}")
+            object.__setattr__(self, "std", std)
+        if self.sensor_position is not None:
+            object.__setattr__(self, "sensor_position", tuple(float(v) for v in self.sensor_position))
+        if self.frame:
+            from .frames import frame as _frame
+
+            declared = _frame(self.frame)
+            if declared.dim != R.shape[0]:
+                raise InputError(f"MeasurementModel {self.name!r}: frame {self.frame!r} has {declared.dim} "
+                                 f"components, R has {R.shape[0]}")
         object.__setattr__(self, "R", R)
         object.__setattr__(self, "angular", angular)
+
+    @property
+    def stated_std(self) -> np.ndarray:
+        """The stated standard deviations (``std``), or ``sqrt(diag(R))`` when none are declared."""
+        return np.asarray(self.std) if self.std is not None else np.sqrt(np.diag(self.R))
 
     @property
     def dim(self) -> int:
@@ -204,8 +288,8 @@ class MeasurementModel:
         return np.where(self.angle_mask, wrap_angle(unwrapped), plain)
 
 
-def linear_measurement(H, R, name: str = "linear") -> MeasurementModel:
-    """``z = H x + v``."""
+def linear_measurement(H, R, name: str = "linear", frame: str = "", std=None) -> MeasurementModel:
+    """``z = H x + v``; ``frame`` and ``std`` as :class:`MeasurementModel` declares them."""
     H = np.asarray(H, dtype=float)
     return MeasurementModel(
         name=name,
@@ -213,6 +297,8 @@ def linear_measurement(H, R, name: str = "linear") -> MeasurementModel:
         R=np.asarray(R, dtype=float),
         jacobian=lambda x: np.broadcast_to(H, (x.shape[0], *H.shape)),
         H=H,
+        frame=frame,
+        std=std,
     )
 
 
@@ -256,7 +342,9 @@ def range_bearing(sigma_r: float, sigma_theta: float, sensor=(0.0, 0.0)) -> Meas
         R=np.diag([sigma_r**2, sigma_theta**2]),
         jacobian=lambda x: range_bearing_jacobian(x, (sx, sy)),
         angular=(False, True),
-        params={"sigma_r": float(sigma_r), "sigma_b": float(sigma_theta), "sensor": (sx, sy)},
+        frame="range-bearing",
+        std=(float(sigma_r), float(sigma_theta)),
+        sensor_position=(sx, sy),
     )
 
 

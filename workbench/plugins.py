@@ -15,11 +15,17 @@ from typing import Any, Iterable, Mapping
 import pluggy
 
 from . import hookspecs
-from .specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
+from .params import check_value
+from .specs import BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
+from .types import InputError
 
-__all__ = ["PluginInfo", "PluginHost", "load_host", "blocked_from_env", "UnknownComponent"]
+__all__ = ["PluginInfo", "PluginHost", "load_host", "blocked_from_env", "UnknownComponent", "BUILTIN_DISTRIBUTION"]
 
 BLOCK_ENV = "WORKBENCH_BLOCK"
+
+#: The distribution whose components' names are reserved: a third-party component that reuses one is not
+#: registered (the built-in keeps its name; a warning names both distributions).
+BUILTIN_DISTRIBUTION = "workbench"
 
 #: hook name -> (kind label, spec type, attribute used as the unique name)
 KINDS: dict[str, tuple[str, type, str]] = {
@@ -28,6 +34,7 @@ KINDS: dict[str, tuple[str, type, str]] = {
     "workbench_clutter_generators": ("clutter generator", ClutterGeneratorSpec, "name"),
     "workbench_clutter_removers": ("clutter remover", ClutterRemoverSpec, "name"),
     "workbench_report_recipes": ("recipe", RecipeSpec, "paper"),
+    "workbench_benchmarks": ("benchmark", BenchmarkSpec, "group"),
 }
 
 
@@ -49,6 +56,7 @@ class PluginInfo:
     status: str  # "ok", "broken" or "blocked"
     error: str = ""
     provides: tuple[tuple[str, str], ...] = ()  # (kind, component name)
+    warnings: tuple[str, ...] = ()  # components not registered (a name another plugin holds), and why
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,20 @@ class PluginHost:
     def recipe(self, paper: str) -> RecipeSpec:
         return self._get("workbench_report_recipes", paper)
 
+    def benchmark(self, group: str) -> BenchmarkSpec:
+        return self._get("workbench_benchmarks", group)
+
+    def component(self, kind: str, name: str):
+        """Any component by its kind label (``"filter"``, ``"sensor"``, ``"clutter generator"``...) and name."""
+        hooks = [h for h, (label, _, _) in KINDS.items() if label == kind]
+        if not hooks:
+            raise UnknownComponent(f"unknown component kind {kind!r} (kinds: {', '.join(k for k, _, _ in KINDS.values())})")
+        return self._get(hooks[0], name)
+
+    def find(self, name: str) -> list[tuple[str, Any]]:
+        """Every component called ``name``, whatever its kind: ``[(kind, spec), ...]``."""
+        return [(KINDS[h][0], table[name]) for h, table in self.components.items() if name in table]
+
     @property
     def filters(self) -> Mapping[str, FilterSpec]:
         return self.components["workbench_filters"]
@@ -94,6 +116,15 @@ class PluginHost:
     @property
     def recipes(self) -> Mapping[str, RecipeSpec]:
         return self.components["workbench_report_recipes"]
+
+    @property
+    def benchmarks(self) -> Mapping[str, BenchmarkSpec]:
+        return self.components["workbench_benchmarks"]
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """Every plugin's warnings (e.g. a component name that another distribution holds)."""
+        return tuple(w for p in self.plugins for w in p.warnings)
 
     def plugin_of(self, hook: str, name: str) -> PluginInfo:
         plugin = self.owner[(hook, name)]
@@ -172,6 +203,9 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
 
     components: dict[str, dict[str, Any]] = {hook: {} for hook in KINDS}
     owner: dict[tuple[str, str], str] = {}
+    owner_dist: dict[tuple[str, str], str] = {}
+    # the built-in distribution registers first: its names are reserved (see BUILTIN_DISTRIBUTION)
+    loaded.sort(key=lambda item: (item[3] != BUILTIN_DISTRIBUTION, item[0]))
     for name, obj, module, dist, ver in loaded:
         who = f"plugin {name!r} ({module}, distribution {dist} {ver})"
         try:
@@ -180,6 +214,7 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
             infos.append(PluginInfo(name, module, dist, ver, "broken", f"invalid hook implementation: {exc}"))
             continue
         problem = ""
+        warnings: list[str] = []
         provided: list[tuple[str, str, Any]] = []
         for caller in pm.get_hookcallers(obj) or []:
             if not caller.has_spec():
@@ -203,15 +238,26 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
                                    f"expected {spec_type.__name__}")
                         break
                     comp = getattr(item, key)
-                    if not isinstance(comp, str) or not comp:
-                        problem = f"hook {caller.name} returned a {spec_type.__name__} without a {key}"
+                    if not isinstance(comp, str) or not comp or any(c in comp for c in "/\\\0") or comp != comp.strip():
+                        problem = (f"hook {caller.name} returned a {spec_type.__name__} without a valid {key} "
+                                   f"(a non-empty name without slashes or surrounding spaces), got {comp!r}")
+                        break
+                    if any(h == caller.name and c == comp for h, c, _ in provided):
+                        problem = f"{kind} name {comp!r} is provided twice by this plugin"
+                        break
+                    declared = _declaration_problem(item)
+                    if declared:
+                        problem = f"{kind} {comp!r}: {declared}"
                         break
                     taken = owner.get((caller.name, comp))
-                    if taken is None and any(h == caller.name and c == comp for h, c, _ in provided):
-                        taken = name
-                    if taken:
-                        problem = f"{kind} name {comp!r} is already provided by plugin {taken!r}"
-                        break
+                    if taken is not None:
+                        holder = owner_dist[(caller.name, comp)]
+                        rule = ("built-in names are reserved" if holder == BUILTIN_DISTRIBUTION
+                                else "the first plugin in name order keeps it")
+                        warnings.append(f"{kind} {comp!r} of distribution {dist} is not registered: the name is "
+                                        f"already provided by plugin {taken!r} (distribution {holder}); {rule}. "
+                                        f"Rename it in {dist} to use it")
+                        continue
                     provided.append((caller.name, comp, item))
                 if problem:
                     break
@@ -224,8 +270,34 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
         for hook, comp, item in provided:
             components[hook][comp] = item
             owner[(hook, comp)] = name
+            owner_dist[(hook, comp)] = dist
         infos.append(PluginInfo(name, module, dist, ver, "ok", "",
-                                tuple((KINDS[h][0], c) for h, c, _ in provided)))
+                                tuple((KINDS[h][0], c) for h, c, _ in provided), tuple(warnings)))
     pm.check_pending()
     infos.sort(key=lambda p: p.name)
     return PluginHost(tuple(infos), components, owner, pm)
+
+
+def _declaration_problem(spec) -> str:
+    """What is wrong with a component's parameter declarations, or ``""``.
+
+    Every declared parameter needs a current value that passes its own check, and (when the component
+    declares any) every value needs a declaration.
+    """
+    parameters = getattr(spec, "parameters", None)
+    if not parameters:
+        return ""
+    params = dict(getattr(spec, "params", {}) or {})
+    names = [p.name for p in parameters]
+    if len(set(names)) != len(names):
+        return f"parameter declared twice: {sorted({n for n in names if names.count(n) > 1})}"
+    missing = [n for n in names if n not in params]
+    extra = [k for k in params if k not in names]
+    if missing or extra:
+        return (f"params and parameter declarations disagree (no value for {missing}, undeclared {extra})")
+    for p in parameters:
+        try:
+            check_value(p, params[p.name], f"parameter {p.name}")
+        except InputError as exc:
+            return f"its value is not valid for its own declaration: {exc}"
+    return ""

@@ -24,7 +24,7 @@ def key_int(part) -> int:
 
 
 def generator(seed: int, *key) -> np.random.Generator:
-    """The generator for ``seed`` and a key such as ``("paper003", "L2", "chunk", 3)``."""
+    """The generator for ``seed`` and a key such as ``("monte-carlo", "L2", "chunk", 3)``."""
     if not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     seq = np.random.SeedSequence(int(seed), spawn_key=tuple(key_int(k) for k in key))

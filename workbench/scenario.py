@@ -16,7 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .filtering import Estimates, run_filter
+from .filtering import run_filter
 from .metrics import position_sq_error
 from .models import MotionModel, constant_velocity, random_walk_velocity, range_rate_model
 from .plugins import PluginHost, UnknownComponent
@@ -262,8 +262,7 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | N
     """Truth and detections (sensor, then clutter, then removers) for all runs; recorded detections
     (no truth) when the scenario names a file."""
     if scenario.detections is not None:
-        from .recorded import load_sonar_csv
-        from .recorded_pcl import load_pcl_candidates
+        from .recorded import load_pcl_candidates, load_sonar_csv
 
         loader = load_sonar_csv if scenario.detections_format == "sonar" else load_pcl_candidates
         scans = loader(scenario.detections)
@@ -293,14 +292,14 @@ def _position_dims(motion: MotionModel) -> int:
     return motion.dim // 2
 
 
-def _track_single(scenario, spec, model, scans, seed) -> Estimates:
+def _track_single(scenario, spec, model, scans, seed):
     """Direct (one detection per scan) or nearest-neighbour tracking of one target, batched over runs."""
     rng = generator(seed, "filter", spec.name)
     B = scans.batch
     if scenario.tracker == "direct":
         prior = Gaussian.broadcast(scenario.prior_mean, np.diag(scenario.prior_std**2), B)
         return run_filter(spec, prior, scenario.motion, model, scans, rng)
-    from .nearest_neighbour import strongest_candidate_prior, track_nearest_neighbour
+    from .tracking import NearestNeighbour, run, strongest_candidate_prior
 
     cov0 = np.diag(scenario.prior_std**2)
     if np.isnan(scenario.prior_mean).any():
@@ -310,10 +309,12 @@ def _track_single(scenario, spec, model, scans, seed) -> Estimates:
         prior, index = strongest_candidate_prior(scans.scan(0), cov0, np.zeros(scenario.motion.dim))
     else:
         prior, index = Gaussian.broadcast(scenario.prior_mean, cov0, B), None
-    track = track_nearest_neighbour(spec, prior, scenario.motion, model, scans, rng, gate=scenario.gate,
-                                    prior_index=index)
-    return Estimates(spec.name, track.mean, track.cov, track.predicted_mean, {
-        "frames_updated": float(track.updated.sum()), "frames_coasted": float((~track.updated[:, 1:]).sum())})
+    track = run(spec, scans, scenario.motion, model, association=NearestNeighbour(scenario.gate, prior_index=index),
+                prior=prior, rng=rng)
+    updated = track.records["updated"]
+    return track.__class__(track.filter, track.mean, track.cov, track.predicted_mean, {
+        "frames_updated": float(updated.sum()), "frames_coasted": float((~updated[:, 1:]).sum())}, track.records,
+        track.seconds)
 
 
 def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | None = None) -> ScenarioResult:
@@ -347,7 +348,7 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
         spec = host.filter(fname)
         try:
             if scenario.tracker == "multi-target":
-                from .tracker import CONFIRMED, TrackerConfig, run_tracker
+                from .tracking import CONFIRMED, TrackerConfig, run_tracker
 
                 config = TrackerConfig(gate=scenario.gate) if scenario.gate else TrackerConfig()
                 log = run_tracker(scans, spec, scenario.motion, model, config, seed=seed, key=("tracker", fname))

@@ -7,12 +7,14 @@ report recipes, the CLI and the test kit.  See ``docs/writing-a-plugin.md``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
 from .criteria import Criterion
+from .params import Param, check_values, format_value, infer_params
+from .types import InputError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from matplotlib.figure import Figure
@@ -34,6 +36,9 @@ __all__ = [
     "TableSpec",
     "Table",
     "Criterion",
+    "BenchmarkSpec",
+    "Param",
+    "configured_name",
 ]
 
 #: Capabilities a filter may declare; the test kit picks its checks from these (never from names).
@@ -47,11 +52,39 @@ CAPABILITIES = {
     "position_doppler_3d": "the filter takes 3-D position + radial-velocity detections [x, y, z, vr] with SNR "
                            "(a 6-D constant-velocity state), as a track-before-detect radar filter does",
     "range_bearing_input": "the filter takes range-bearing measurements only (e.g. a converted-measurement KF)",
+    "detection_covariance": "update uses each detection's own covariance (Scan.cov) where the scan carries one",
+    "clutter_density": "update accounts for clutter with the scan's declared clutter density (Scan.clutter_density)",
+    "ignores_noise_statistics": "the filter never reads Q or R (e.g. a cost-reference particle filter), so handing it "
+                                "other noise statistics changes nothing",
 }
 
 
+def configured_name(base: str, changed: Mapping[str, Any]) -> str:
+    """The label of a configured component: ``sir(particles=2000)``; ``base`` when nothing changed."""
+    if not changed:
+        return base
+    return f"{base}(" + ", ".join(f"{k}={format_value(v)}" for k, v in changed.items()) + ")"
+
+
+class _Configurable:
+    """What every component spec shares: declared parameters, their current values, one checked way in."""
+
+    @property
+    def declared(self) -> tuple[Param, ...]:
+        """The declared parameters (inferred from ``params`` for a plugin that declares none)."""
+        return tuple(self.parameters) if self.parameters else infer_params(self.params)
+
+    def check(self, **values) -> dict[str, Any]:
+        """``values`` checked against the declarations and converted to SI (:func:`workbench.params.check_values`)."""
+        return check_values(self.declared, values, f"{self.kind} {self.name!r}")
+
+    def changed(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """The entries of ``values`` that differ from the current ``params``."""
+        return {k: v for k, v in values.items() if k not in self.params or self.params[k] != v}
+
+
 @dataclass(frozen=True)
-class FilterSpec:
+class FilterSpec(_Configurable):
     """A recursive Bayesian filter, batch-first and functional.
 
     The four functions never mutate their inputs; each returns a new state.  The state's type is the
@@ -80,6 +113,11 @@ class FilterSpec:
         Keys of :data:`CAPABILITIES`.
     params : mapping
         The parameter values the functions were built with (shown in reports, part of cache keys).
+    parameters : tuple of :class:`~workbench.params.Param`
+        The declared parameters (name, type, default, unit, range, doc): what :meth:`configure` accepts.
+    build : callable or None
+        ``build(**params) -> FilterSpec``: the factory that makes this filter from parameter values; needed by
+        :meth:`configure`.
     diagnostics : callable or None
         ``diagnostics(state) -> dict[str, float]``: counters a filter must not hide (Cholesky
         downdate fallbacks, jitter events, resampling counts).
@@ -97,10 +135,33 @@ class FilterSpec:
     params: Mapping[str, Any] = field(default_factory=dict)
     diagnostics: Callable[[Any], Mapping[str, float]] | None = None
     expected_failures: Mapping[str, str] = field(default_factory=dict)
+    parameters: tuple[Param, ...] = ()
+    build: Callable[..., "FilterSpec"] | None = None
+
+    kind = "filter"
+
+    def configure(self, name: str | None = None, **values) -> "FilterSpec":
+        """This filter with some parameters set: ``spec.configure(particles=2000)``.
+
+        The values are checked against :attr:`parameters` (type, unit, range) and the filter is rebuilt by
+        :attr:`build` from its current ``params`` updated with them.  The result is named
+        ``base(key=value, ...)`` for the values that changed, unless ``name`` is given.  Without values (and
+        without ``name``) the spec itself is returned.
+        """
+        if not values and name is None:
+            return self
+        checked = self.check(**values)
+        changed = self.changed(checked)
+        if not changed and name is None:
+            return self
+        if self.build is None:
+            raise InputError(f"filter {self.name!r} declares no build function, so it cannot be configured")
+        built = self.build(**{**self.params, **checked})
+        return replace(built, name=name or configured_name(self.name, changed))
 
 
 @dataclass(frozen=True)
-class SensorSpec:
+class SensorSpec(_Configurable):
     """A sensor: turns truth into detections and publishes its measurement model.
 
     Attributes
@@ -111,7 +172,13 @@ class SensorSpec:
         ``simulate(truth: Truth, rng, **params) -> Scans``: target detections only (clutter comes
         from clutter generators), ``origin`` set to the truth object's index.
     params : mapping
-        Default parameter values, each overridable from a scenario file.
+        The current parameter values (the defaults, unless configured), each overridable from a scenario
+        file.
+    parameters : tuple of :class:`~workbench.params.Param`
+        The declared parameters.
+    frame : str or callable
+        The measurement frame of the detections it simulates (a name of :data:`workbench.frames.FRAMES`), or
+        ``frame(params) -> str`` when a parameter chooses it.
     """
 
     name: str
@@ -119,34 +186,92 @@ class SensorSpec:
     measurement_model: Callable[..., "MeasurementModel"]
     simulate: Callable[..., "Scans"]
     params: Mapping[str, Any] = field(default_factory=dict)
+    parameters: tuple[Param, ...] = ()
+    frame: str | Callable[[Mapping[str, Any]], str] = ""
+
+    kind = "sensor"
+
+    def configure(self, **values) -> "SensorSpec":
+        """This sensor with some parameter values set (checked, converted to SI)."""
+        return replace(self, params={**self.params, **self.check(**values)}) if values else self
+
+    def detection_frame(self, **values) -> str:
+        """The frame of the detections this sensor simulates with ``values`` (its ``params`` otherwise)."""
+        return _frame_of(self.frame, {**self.params, **values})
 
 
 @dataclass(frozen=True)
-class ClutterGeneratorSpec:
+class ClutterGeneratorSpec(_Configurable):
     """Clutter detections: ``generate(truth: Truth, rng, **params) -> Scans`` with ``origin = CLUTTER``.
 
     The returned scans have the same ``times`` and measurement dimension as the sensor's, so the host
-    joins them with :meth:`workbench.types.Scans.merge`.
+    joins them with :meth:`workbench.types.Scans.merge`.  ``frame`` names the measurement frame of the
+    points it makes (or is ``frame(params) -> str``); the clutter's declared mean count per scan and its
+    region and amplitude law, where it has them, are what the clutter test kit checks.
+
+    ``expected_count(truth, **params) -> (B, T)``, ``region(truth, **params) -> (low (T, m), high (T, m))`` and
+    ``amplitude_cdf(snr_db, **params) -> probability`` are optional declarations for the test kit.
     """
 
     name: str
     summary: str
     generate: Callable[..., "Scans"]
     params: Mapping[str, Any] = field(default_factory=dict)
+    parameters: tuple[Param, ...] = ()
+    frame: str | Callable[[Mapping[str, Any]], str] = ""
+    expected_count: Callable[..., np.ndarray] | None = None
+    region: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
+    amplitude_cdf: Callable[..., np.ndarray] | None = None
+
+    kind = "clutter generator"
+
+    def configure(self, **values) -> "ClutterGeneratorSpec":
+        """This clutter model with some parameter values set (checked, converted to SI)."""
+        return replace(self, params={**self.params, **self.check(**values)}) if values else self
+
+    def detection_frame(self, **values) -> str:
+        """The frame of the clutter points made with ``values`` (its ``params`` otherwise)."""
+        return _frame_of(self.frame, {**self.params, **values})
 
 
 @dataclass(frozen=True)
-class ClutterRemoverSpec:
+class ClutterRemoverSpec(_Configurable):
     """Clutter removal: ``remove(scans: Scans, **params) -> Scans`` with a narrower ``valid`` mask.
 
     A remover must be causal (the decision for scan ``k`` uses scans ``<= k`` only) and must not read
-    ``scans.origin``.
+    ``scans.origin``.  ``frames`` lists the measurement frames it works in (empty: any).
     """
 
     name: str
     summary: str
     remove: Callable[..., "Scans"]
     params: Mapping[str, Any] = field(default_factory=dict)
+    parameters: tuple[Param, ...] = ()
+    frames: tuple[str, ...] = ()
+
+    kind = "clutter remover"
+
+    def configure(self, **values) -> "ClutterRemoverSpec":
+        """This remover with some parameter values set (checked, converted to SI)."""
+        return replace(self, params={**self.params, **self.check(**values)}) if values else self
+
+
+def _frame_of(frame, params: Mapping[str, Any]) -> str:
+    return frame(params) if callable(frame) else frame
+
+
+@dataclass(frozen=True)
+class BenchmarkSpec:
+    """A benchmark group for ``workbench bench``.
+
+    ``run(quick: bool) -> dict`` returns flat figures (numbers or short strings); it runs in a fresh process
+    of its own (the host finds it again there by ``group``), so its peak memory is its own.  A figure named
+    ``target_*`` states a target and ``met_*`` whether it was met.
+    """
+
+    group: str
+    summary: str
+    run: Callable[[bool], Mapping[str, Any]]
 
 
 # -- report recipes ---------------------------------------------------------------------------------
@@ -236,7 +361,7 @@ class RecipeSpec:
         ``tasks(options: RecipeOptions) -> list[Task]``.
     figures, tables : tuples of specs
     criteria : callable or None
-        ``criteria(results) -> list[Criterion]``: the brief's 'reproduced if' checks.
+        ``criteria(results) -> list[Criterion]``: the paper's 'reproduced if' checks.
     published : mapping
         The paper's published numbers or claims this recipe compares against (shown in the report).
     notes : str

@@ -152,6 +152,27 @@ class Particles:
         return Gaussian(mean, cov)
 
 
+def _scan_cov(cls_name: str, cov, z: np.ndarray, valid: np.ndarray):
+    """Per-detection covariances ``(..., M, m, m)``: symmetric, finite and PSD on the valid rows."""
+    if cov is None:
+        return None
+    m = z.shape[-1]
+    cov = np.asarray(cov, dtype=float)
+    if cov.shape != z.shape + (m,):
+        raise InputError(f"{cls_name}.cov must have shape {z.shape + (m,)}, got {cov.shape}")
+    rows = cov[valid]
+    if not np.all(np.isfinite(rows)):
+        raise InputError(f"{cls_name}.cov holds NaN or inf for a valid detection")
+    if rows.size:
+        if not np.allclose(rows, np.swapaxes(rows, -1, -2), rtol=1e-9, atol=1e-12):
+            raise InputError(f"{cls_name}.cov must be symmetric for every valid detection")
+        scale = np.maximum(np.abs(rows).max(axis=(-2, -1)), 1e-300)
+        if np.any(np.linalg.eigvalsh(rows).min(axis=-1) < -1e-9 * scale):
+            raise InputError(f"{cls_name}.cov must be positive semi-definite for every valid detection")
+    eye = np.broadcast_to(np.eye(m), cov.shape)
+    return np.where(valid[..., None, None], cov, eye)
+
+
 def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):
     z = _array(f"{cls_name}.z", z, lead + 2)
     valid = _array(f"{cls_name}.valid", valid, lead + 1, dtype=bool)
@@ -196,6 +217,10 @@ class Scan:
     valid : (B, M) bool
     snr, doppler : (B, M) or None (SNR in dB, Doppler as the sensor defines it)
     origin : (B, M) int or None
+    cov : (B, M, m, m) or None, each detection's own measurement covariance (used in place of the model's
+        ``R`` by filters with the ``detection_covariance`` capability)
+    clutter_density : (B, M) or None, the density of clutter at each detection per unit measurement volume
+        (used by filters with the ``clutter_density`` capability)
     """
 
     z: np.ndarray
@@ -204,12 +229,18 @@ class Scan:
     doppler: np.ndarray | None = None
     origin: np.ndarray | None = None
     time: float = 0.0
+    cov: np.ndarray | None = None
+    clutter_density: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         fields_ = _scan_fields("Scan", self.z, self.valid,
-                               {"snr": self.snr, "doppler": self.doppler, "origin": self.origin}, 1)
+                               {"snr": self.snr, "doppler": self.doppler, "origin": self.origin,
+                                "clutter_density": self.clutter_density}, 1)
         for key, value in fields_.items():
             object.__setattr__(self, key, value)
+        object.__setattr__(self, "cov", _scan_cov("Scan", self.cov, self.z, self.valid))
+        if not np.isfinite(self.time):
+            raise InputError(f"Scan.time must be finite, got {self.time}")
 
     @property
     def batch(self) -> int:
@@ -223,18 +254,21 @@ class Scan:
     def for_filter(self) -> "Scan":
         """The same scan without the origin labels."""
         return _validated(Scan, z=self.z, valid=self.valid, snr=self.snr, doppler=self.doppler, origin=None,
-                          time=self.time)
+                          time=self.time, cov=self.cov, clutter_density=self.clutter_density)
 
     @classmethod
     def empty(cls, batch: int, dim: int, time: float = 0.0) -> "Scan":
         return cls(np.zeros((batch, 0, dim)), np.zeros((batch, 0), dtype=bool), time=time)
 
     @classmethod
-    def single(cls, z, present=None, time: float = 0.0) -> "Scan":
-        """One measurement per batch item, ``z (B, m)``; ``present (B,)`` marks missed detections."""
+    def single(cls, z, present=None, time: float = 0.0, cov=None, clutter_density=None) -> "Scan":
+        """One measurement per batch item, ``z (B, m)``; ``present (B,)`` marks missed detections; ``cov
+        (B, m, m)`` and ``clutter_density (B,)`` as :class:`Scan` declares them."""
         z = np.asarray(z, dtype=float)
         present = np.ones(z.shape[0], dtype=bool) if present is None else np.asarray(present, dtype=bool)
-        return cls(z[:, None, :], present[:, None], time=time)
+        return cls(z[:, None, :], present[:, None], time=time,
+                   cov=None if cov is None else np.asarray(cov, dtype=float)[:, None],
+                   clutter_density=None if clutter_density is None else np.asarray(clutter_density)[:, None])
 
 
 @dataclass(frozen=True)
@@ -245,8 +279,9 @@ class Scans:
     ------
     z : (B, T, M, m)
     valid : (B, T, M)
-    snr, doppler, origin : (B, T, M) or None
-    times : (T,)
+    snr, doppler, origin, clutter_density : (B, T, M) or None
+    cov : (B, T, M, m, m) or None
+    times : (T,), finite and strictly increasing
     """
 
     z: np.ndarray
@@ -255,15 +290,24 @@ class Scans:
     snr: np.ndarray | None = None
     doppler: np.ndarray | None = None
     origin: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    clutter_density: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         fields_ = _scan_fields("Scans", self.z, self.valid,
-                               {"snr": self.snr, "doppler": self.doppler, "origin": self.origin}, 2)
+                               {"snr": self.snr, "doppler": self.doppler, "origin": self.origin,
+                                "clutter_density": self.clutter_density}, 2)
         for key, value in fields_.items():
             object.__setattr__(self, key, value)
+        object.__setattr__(self, "cov", _scan_cov("Scans", self.cov, self.z, self.valid))
         times = _array("Scans.times", self.times, 1)
         if times.shape[0] != self.z.shape[1]:
             raise InputError(f"Scans.times must have length {self.z.shape[1]}, got {times.shape[0]}")
+        _require_finite("Scans.times", times)
+        if times.size > 1 and np.any(np.diff(times) <= 0):
+            k = int(np.argmax(np.diff(times) <= 0))
+            raise InputError(f"Scans.times must be strictly increasing; scan {k + 1} at {times[k + 1]} s does not "
+                             f"follow scan {k} at {times[k]} s")
         object.__setattr__(self, "times", times)
 
     @property
@@ -278,7 +322,29 @@ class Scans:
         """Scan ``k`` as a :class:`Scan`."""
         pick = lambda a: None if a is None else a[:, k]  # noqa: E731
         return _validated(Scan, z=self.z[:, k], valid=self.valid[:, k], snr=pick(self.snr),
-                          doppler=pick(self.doppler), origin=pick(self.origin), time=float(self.times[k]))
+                          doppler=pick(self.doppler), origin=pick(self.origin), time=float(self.times[k]),
+                          cov=pick(self.cov), clutter_density=pick(self.clutter_density))
+
+    def head(self, steps: int) -> "Scans":
+        """The first ``steps`` scans."""
+        pick = lambda a: None if a is None else a[:, :steps]  # noqa: E731
+        return _validated(Scans, z=self.z[:, :steps], valid=self.valid[:, :steps], times=self.times[:steps],
+                          snr=pick(self.snr), doppler=pick(self.doppler), origin=pick(self.origin),
+                          cov=pick(self.cov), clutter_density=pick(self.clutter_density))
+
+    def take(self, index) -> "Scans":
+        """The sub-batch ``index`` of runs (an int keeps a batch axis of one)."""
+        index = np.atleast_1d(index) if np.isscalar(index) else index
+        pick = lambda a: None if a is None else a[index]  # noqa: E731
+        return _validated(Scans, z=self.z[index], valid=self.valid[index], times=self.times, snr=pick(self.snr),
+                          doppler=pick(self.doppler), origin=pick(self.origin), cov=pick(self.cov),
+                          clutter_density=pick(self.clutter_density))
+
+    @property
+    def intervals(self) -> np.ndarray:
+        """The time step before each scan, ``(T,)`` (the first is the second's, or 0 for a single scan)."""
+        dt = np.diff(self.times)
+        return np.concatenate([dt[:1] if dt.size else np.zeros(1), dt])
 
     def with_valid(self, valid) -> "Scans":
         """The same detections with a narrower mask (what a clutter remover returns)."""
@@ -299,9 +365,20 @@ class Scans:
             b = np.full(other.valid.shape, fill) if b is None else b
             return np.concatenate([a, b], axis=2)
 
+        def cat_cov(a, b):
+            if a is None and b is None:
+                return None
+            if a is None or b is None:
+                raise InputError("cannot merge a scan series that carries per-detection covariances (cov) with one "
+                                 "that does not; give both, or neither")
+            return np.concatenate([a, b], axis=2)
+
+        if not np.allclose(self.times, other.times, rtol=1e-12, atol=1e-9):
+            raise InputError("cannot merge scan series with different time stamps")
         return Scans(np.concatenate([self.z, other.z], axis=2), np.concatenate([self.valid, other.valid], axis=2),
                      self.times, cat(self.snr, other.snr, np.nan), cat(self.doppler, other.doppler, np.nan),
-                     cat(self.origin, other.origin, CLUTTER))
+                     cat(self.origin, other.origin, CLUTTER), cat_cov(self.cov, other.cov),
+                     cat(self.clutter_density, other.clutter_density, np.nan))
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.linalg import joseph_update, symmetrise
 from workbench.models import converted_covariance, polar_to_cartesian
+from workbench.params import Param
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError
 
@@ -42,9 +43,10 @@ def _position_measurement(z, model, d):
             raise InputError(f"alpha-beta needs position measurements (H = [I 0]); model {model.name!r} measures "
                              "something else")
         return z, np.broadcast_to(model.R, (z.shape[0], d, d))
-    if d == 2 and model.angular == (False, True) and "sigma_r" in model.params:
-        sensor = model.params.get("sensor", (0.0, 0.0))
-        cov = converted_covariance(z[:, 0], z[:, 1], model.params["sigma_r"], model.params["sigma_b"])
+    if d == 2 and model.frame == "range-bearing":
+        sensor = model.sensor_position or (0.0, 0.0)
+        sigma_r, sigma_b = model.stated_std
+        cov = converted_covariance(z[:, 0], z[:, 1], sigma_r, sigma_b)
         return polar_to_cartesian(z, sensor), cov
     raise InputError(f"alpha-beta cannot use measurement model {model.name!r}: it takes positions or range-bearing")
 
@@ -63,9 +65,16 @@ def update(state, scan, model, rng=None, alpha=0.5, beta=0.2, dt=1.0):
     return Gaussian(keep_where(present, mean, state.mean), keep_where(present, cov, state.cov))
 
 
+PARAMETERS = (
+    Param("alpha", 0.5, "position gain", above=0.0, maximum=1.0),
+    Param("beta", 0.2, "velocity gain (times T)", above=0.0),
+    Param("dt", 1.0, "sampling time T the velocity gain is scaled by", unit="time", above=0.0),
+)
+
+
 def make_alpha_beta(alpha: float = 0.5, beta: float = 0.2, dt: float = 1.0) -> FilterSpec:
     if not (0 < alpha < 1 and 0 < beta < 4 - 2 * alpha):
-        raise ValueError(f"alpha-beta gains outside the stable region: alpha={alpha}, beta={beta}")
+        raise InputError(f"alpha-beta gains outside the stable region: alpha={alpha}, beta={beta}")
     return FilterSpec(
         name="alpha-beta",
         summary=f"Alpha-beta fixed-gain tracker (alpha={alpha}, beta={beta})",
@@ -75,6 +84,8 @@ def make_alpha_beta(alpha: float = 0.5, beta: float = 0.2, dt: float = 1.0) -> F
         estimate=lambda state: state,
         capabilities=frozenset({"gaussian"}),
         params={"alpha": alpha, "beta": beta, "dt": dt},
+        parameters=PARAMETERS,
+        build=make_alpha_beta,
     )
 
 

@@ -55,6 +55,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench import hookimpl
+from workbench.params import Param
 from workbench.specs import ClutterRemoverSpec
 from workbench.types import InputError, Scans
 
@@ -667,11 +668,34 @@ def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt
     return scans.with_valid(keep)
 
 
+PARAMETERS = (
+    Param("window", 5, "pings per group W (groups A and B, shifted by s pings)", "int", minimum=2),
+    Param("shift", 1, "shift s between groups A and B (pings)", "int", minimum=1),
+    Param("v_max", 8.0, "largest target speed (units per ping period): the gate between pings", above=0.0),
+    Param("dt", 1.0, "ping period", unit="time", above=0.0),
+    Param("gate_gap", 2, "a detection votes when another ping within this many pings lies within the gate", "int",
+          minimum=1),
+    Param("d_rho", 1.0, "accumulator rho bin", above=0.0),
+    Param("d_theta_deg", 1.0, "accumulator theta bin, in degrees", above=0.0),
+    Param("v_min", 3, "distinct pings a line needs to be a peak", "int", minimum=1),
+    Param("sim_rho", 3.0, "rho tolerance of similar lines (A and B)", minimum=0.0),
+    Param("sim_theta_deg", 3.0, "theta tolerance of similar lines, in degrees", minimum=0.0),
+    Param("eps", 4.0, "distance from a similar line within which a detection is kept", minimum=0.0),
+    Param("support_reach", None, "distance from the line's latest support within which a detection is kept "
+          "(none: 2 v_max dt)", "float?", above=0.0),
+    Param("support", "latest", "which detections of the line support a kept detection", "str",
+          choices=("latest", "any")),
+    Param("warmup", "drop", "pings before group A is full: no output (drop) or every detection (keep)", "str",
+          choices=("drop", "keep")),
+)
+
 HOUGH = ClutterRemoverSpec(
     name="hough",
     summary="Hough-transform clutter removal over accumulated pings (two groups, similarity, inverse HT)",
     remove=remove,
     params=DEFAULTS,
+    parameters=PARAMETERS,
+    frames=("cartesian-2d",),
 )
 
 

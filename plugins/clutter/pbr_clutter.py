@@ -1,4 +1,4 @@
-"""Passive-radar clutter for paper 002: false candidates of a range-Doppler map, and the zero-Doppler notch.
+"""Passive-radar clutter: false candidates of a range-Doppler map, and the zero-Doppler notch.
 
 Generator ``pbr-false-alarms`` (per frame, per Monte Carlo run):
 
@@ -13,15 +13,18 @@ Remover ``pbr-zero-doppler``: drops every candidate with ``|f_D| < bins * dopple
 zero-Doppler bins, where the direct path and static clutter live) before association.  It reads only
 ``doppler``, never ``origin``, and each frame's decision uses that frame alone (causal).
 
-Doppler and range-rate follow :mod:`workbench.bistatic`: ``Rdot = -lambda f_D``.
+Doppler and range-rate follow :mod:`workbench.sensing.bistatic`: ``Rdot = -lambda f_D``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from scipy.stats import norm
+
 from workbench import hookimpl
-from workbench.bistatic import range_rate_to_doppler, wavelength
+from workbench.params import Param
+from workbench.sensing.bistatic import range_rate_to_doppler, wavelength
 from workbench.specs import ClutterGeneratorSpec, ClutterRemoverSpec
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
@@ -103,11 +106,67 @@ def remove_zero_doppler(scans: Scans, **params) -> Scans:
     return scans.with_valid(keep)
 
 
+GENERATOR_PARAMETERS = (
+    Param("frequency_hz", 701e6, "carrier frequency (for the Doppler of each candidate)", unit="frequency", above=0.0),
+    Param("residue_rate", 3.0, "mean zero-Doppler residue candidates per frame", minimum=0.0),
+    Param("residue_sigma_range_rate", 0.3, "range-rate spread of the residue", unit="speed", minimum=0.0),
+    Param("residue_strength_db", 25.0, "mean strength of a residue candidate", unit="decibel"),
+    Param("residue_strength_sigma_db", 3.0, "strength spread of the residue", unit="decibel", minimum=0.0),
+    Param("false_alarm_rate", 4.0, "mean false alarms per frame", minimum=0.0),
+    Param("false_alarm_range_rate_max", 20.0, "false-alarm range rates are uniform in +-this", unit="speed",
+          minimum=0.0),
+    Param("false_alarm_pfa", 1e-4, "the CA-CFAR's false-alarm probability (sets the false alarms' strength)",
+          above=0.0, maximum=1.0),
+    Param("range_max", 3000.0, "range extent of the map", unit="length", above=0.0),
+)
+REMOVER_PARAMETERS = (
+    Param("doppler_bin_hz", 2.0, "Doppler bin width (1 / CPI)", unit="frequency", above=0.0),
+    Param("bins", 1.0, "drop candidates with |f_D| < bins x doppler_bin_hz", minimum=0.0),
+)
+
+#: How far (in residue sigmas) the declared region reaches for the Gaussian zero-Doppler residue.
+RESIDUE_REACH = 8.0
+
+
+def expected_count(truth: Truth, **params) -> np.ndarray:
+    """Mean candidates per frame, ``(B, T)``: ``residue_rate + false_alarm_rate``."""
+    p = {**GENERATOR_DEFAULTS, **params}
+    return np.full((truth.batch, truth.steps), p["residue_rate"] + p["false_alarm_rate"])
+
+
+def region(truth: Truth, **params) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of ``[R, Rdot]``: ``R`` in ``[0, range_max]``, ``|Rdot|`` within the false alarms' range or 8 residue
+    sigmas (the residue is Gaussian), ``(B, T, 2)`` twice."""
+    p = {**GENERATOR_DEFAULTS, **params}
+    vmax = max(p["false_alarm_range_rate_max"], RESIDUE_REACH * p["residue_sigma_range_rate"])
+    shape = (truth.batch, truth.steps, 1)
+    return (np.concatenate([np.zeros(shape), np.full(shape, -vmax)], axis=-1),
+            np.concatenate([np.full(shape, p["range_max"]), np.full(shape, vmax)], axis=-1))
+
+
+def amplitude_cdf(snr_db, **params) -> np.ndarray:
+    """``P(strength <= s)``: the rate-weighted mixture of the residue's ``N(25, 3^2)`` dB and the false alarms'
+    ``10 log10(ln(1/Pfa) + Exp(1))``."""
+    p = {**GENERATOR_DEFAULTS, **params}
+    s = np.asarray(snr_db, dtype=float)
+    res = norm.cdf((s - p["residue_strength_db"]) / max(p["residue_strength_sigma_db"], 1e-300))
+    fa = 1.0 - np.exp(-np.maximum(10.0 ** (s / 10.0) - np.log(1.0 / p["false_alarm_pfa"]), 0.0))
+    total = p["residue_rate"] + p["false_alarm_rate"]
+    if total == 0:
+        return np.zeros_like(s)
+    return (p["residue_rate"] * res + p["false_alarm_rate"] * fa) / total
+
+
 PBR_FALSE_ALARMS = ClutterGeneratorSpec(
     name="pbr-false-alarms",
     summary="Passive-radar map clutter: zero-Doppler residue Poisson(3) + uniform false alarms Poisson(4) per frame",
     generate=generate,
     params=GENERATOR_DEFAULTS,
+    parameters=GENERATOR_PARAMETERS,
+    frame="bistatic-range-rate",
+    expected_count=expected_count,
+    region=region,
+    amplitude_cdf=amplitude_cdf,
 )
 
 PBR_ZERO_DOPPLER = ClutterRemoverSpec(
@@ -115,6 +174,7 @@ PBR_ZERO_DOPPLER = ClutterRemoverSpec(
     summary="Drop candidates in the zero-Doppler bins (|f_D| < 1 bin) before association",
     remove=remove_zero_doppler,
     params=REMOVER_DEFAULTS,
+    parameters=REMOVER_PARAMETERS,
 )
 
 

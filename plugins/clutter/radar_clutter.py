@@ -1,4 +1,4 @@
-"""Radar clutter along the target's path (paper 000): Poisson points with Rayleigh amplitude.
+"""Radar clutter along the target's path: Poisson points with Rayleigh amplitude.
 
 Each scan has Poisson(``rate``) clutter candidates, uniform in a cube of side ``cube`` (m) centred on
 the *true* target position; candidates with altitude outside ``[z_min, z_max]`` are discarded.
@@ -16,19 +16,21 @@ from __future__ import annotations
 import numpy as np
 
 from workbench import hookimpl
-from workbench.radar import clutter_pass_fraction, db, from_db
+from workbench.params import Param, defaults
+from workbench.sensing.radar import clutter_pass_fraction, db, from_db
 from workbench.specs import ClutterGeneratorSpec
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
-PARAMS = {
-    "rate": 1000.0,  # lambda_c: mean number of candidates per scan in the cube
-    "cube": 10_000.0,  # side of the cube around the target (m)
-    "z_min": 0.0,
-    "z_max": 6000.0,
-    "mean_power": 2.0,  # mean clutter-to-noise ratio, linear (3 dB)
-    "doppler_max": 300.0,  # m/s
-    "threshold_db": 5.0,  # SNR threshold; None keeps every candidate
-}
+PARAMETERS = (
+    Param("rate", 1000.0, "mean number of candidates per scan in the cube (before the threshold)", minimum=0.0),
+    Param("cube", 10_000.0, "side of the cube around the true target position", unit="length", above=0.0),
+    Param("z_min", 0.0, "lowest altitude of a candidate", unit="length"),
+    Param("z_max", 6000.0, "highest altitude of a candidate", unit="length"),
+    Param("mean_power", 2.0, "mean clutter-to-noise power ratio, linear (2 = 3 dB)", above=0.0),
+    Param("doppler_max", 300.0, "radial velocities are uniform in +-doppler_max", unit="speed", minimum=0.0),
+    Param("threshold_db", 5.0, "SNR threshold (none keeps every candidate)", "float?", unit="decibel"),
+)
+PARAMS = defaults(PARAMETERS)
 
 
 def generate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
@@ -58,11 +60,50 @@ def generate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
     return Scans(z, valid, truth.times, snr=db(power), doppler=vr, origin=np.full((B, T, M), CLUTTER))
 
 
+def _inside_band(truth: Truth, p: dict) -> np.ndarray:
+    """Fraction of the cube around each true position that lies inside the altitude band, ``(B, T)``."""
+    zc = truth.states[..., 2]
+    half = p["cube"] / 2
+    return np.clip(np.minimum(zc + half, p["z_max"]) - np.maximum(zc - half, p["z_min"]), 0.0, None) / p["cube"]
+
+
+def expected_count(truth: Truth, **params) -> np.ndarray:
+    """Mean clutter count per scan, ``(B, T)``: ``rate x P(power >= t) x`` the cube's share inside the band."""
+    p = {**PARAMS, **params}
+    passing = 1.0 if p["threshold_db"] is None else float(clutter_pass_fraction(p["threshold_db"], p["mean_power"]))
+    return p["rate"] * passing * _inside_band(truth, p)
+
+
+def region(truth: Truth, **params) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of every component ``[x, y, z, vr]`` per run and scan: ``(B, T, 4)`` twice."""
+    p = {**PARAMS, **params}
+    pos = truth.states[..., :3]
+    half = p["cube"] / 2
+    low = np.concatenate([pos - half, np.full(pos.shape[:2] + (1,), -p["doppler_max"])], axis=-1)
+    high = np.concatenate([pos + half, np.full(pos.shape[:2] + (1,), p["doppler_max"])], axis=-1)
+    low[..., 2] = np.maximum(low[..., 2], p["z_min"])
+    high[..., 2] = np.minimum(high[..., 2], p["z_max"])
+    return low, high
+
+
+def amplitude_cdf(snr_db, **params) -> np.ndarray:
+    """``P(SNR <= s)`` of a returned candidate: its power is ``t + Exp(mean_power)`` above the threshold ``t``."""
+    p = {**PARAMS, **params}
+    t = 0.0 if p["threshold_db"] is None else float(from_db(p["threshold_db"]))
+    excess = np.maximum(from_db(np.asarray(snr_db, dtype=float)) - t, 0.0)
+    return 1.0 - np.exp(-excess / p["mean_power"])
+
+
 RADAR_CLUTTER = ClutterGeneratorSpec(
     name="radar-clutter",
     summary="Poisson clutter in a cube around the target, Rayleigh amplitude, uniform Doppler, SNR threshold",
     generate=generate,
     params=PARAMS,
+    parameters=PARAMETERS,
+    frame="position-doppler-3d",
+    expected_count=expected_count,
+    region=region,
+    amplitude_cdf=amplitude_cdf,
 )
 
 

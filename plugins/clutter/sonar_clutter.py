@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from workbench import hookimpl
+from workbench.params import Param
 from workbench.specs import ClutterGeneratorSpec
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
@@ -84,11 +85,56 @@ def generate(truth: Truth, rng: np.random.Generator, pfa: float = 5e-4, area=(0.
     return Scans(z, valid, truth.times, snr=level, origin=np.full(valid.shape, CLUTTER))
 
 
+PARAMETERS = (
+    Param("pfa", 5e-4, "false-alarm probability per resolution cell", minimum=0.0, maximum=1.0),
+    Param("area", (0.0, 250.0, 0.0, 250.0), "surveillance area (xmin, xmax, ymin, ymax)", "vector", unit="length",
+          length=4),
+    Param("cell_area", 1.0, "area of one resolution cell", above=0.0),
+    Param("mean_snr_db", 10.0, "mean clutter level (Rayleigh amplitude)", unit="decibel"),
+    Param("rate_scale", 1.0, "factor on the clutter rate", minimum=0.0),
+    Param("persistent_sites", 0, "stationary clutter sites per run (e.g. wrecks, rocks)", "int", minimum=0),
+    Param("persistent_pd", 0.7, "probability that a site is seen per ping", minimum=0.0, maximum=1.0),
+    Param("persistent_sigma", 2.0, "position noise of a site's detections", unit="length", minimum=0.0),
+)
+
+#: How far (in site sigmas) the declared region reaches beyond the area for the persistent sites' detections.
+SITE_REACH = 8.0
+
+
+def expected_count(truth: Truth, **params) -> np.ndarray:
+    """Mean clutter count per ping, ``(B, T)``: ``pfa x cells x rate_scale + persistent_sites x persistent_pd``."""
+    p = {**DEFAULTS, **params}
+    lam = clutter_rate(p["pfa"], p["area"], p["cell_area"], p["rate_scale"])
+    return np.full((truth.batch, truth.steps), lam + int(p["persistent_sites"]) * p["persistent_pd"])
+
+
+def region(truth: Truth, **params) -> tuple[np.ndarray, np.ndarray]:
+    """The area (widened by 8 site sigmas when there are persistent sites), ``(B, T, 2)`` twice."""
+    p = {**DEFAULTS, **params}
+    x0, x1, y0, y1 = (float(v) for v in p["area"])
+    reach = SITE_REACH * p["persistent_sigma"] if int(p["persistent_sites"]) else 0.0
+    shape = (truth.batch, truth.steps, 2)
+    return (np.broadcast_to([x0 - reach, y0 - reach], shape).copy(),
+            np.broadcast_to([x1 + reach, y1 + reach], shape).copy())
+
+
+def amplitude_cdf(level_db, **params) -> np.ndarray:
+    """``P(level <= s)`` of Rayleigh amplitudes: ``1 - exp(-10^(s/10) / 10^(mean/10))``."""
+    p = {**DEFAULTS, **params}
+    power = 10.0 ** (np.asarray(level_db, dtype=float) / 10.0)
+    return 1.0 - np.exp(-power / 10.0 ** (p["mean_snr_db"] / 10.0))
+
+
 SONAR_POISSON = ClutterGeneratorSpec(
     name="sonar-poisson",
     summary="Active-sonar clutter: Poisson(pfa x cells) uniform points, Rayleigh levels; optional persistent sites",
     generate=generate,
     params=DEFAULTS,
+    parameters=PARAMETERS,
+    frame="cartesian-2d",
+    expected_count=expected_count,
+    region=region,
+    amplitude_cdf=amplitude_cdf,
 )
 
 

@@ -16,7 +16,8 @@ covariance, linearised at the measurement (eqs 15-17 of paper 001)::
 i.e. ``R_c = A diag(sigma_r^2, sigma_b^2) A^T`` with ``A = d(x, y)/d(r, b) = [[cos b, -r sin b],
 [sin b, r cos b]]``.  (With a compass bearing, ``x = r sin b``, ``y = r cos b``, sin and cos swap; this
 plugin does not accept that convention.)  ``sigma_r`` and ``sigma_b`` are read from
-``model.params`` (``sigma_b`` in radians), as :func:`workbench.models.range_bearing` publishes them.
+the model's declared ``std`` (``sigma_b`` in radians) and the sensor position from its declared
+``sensor_position``, as :func:`workbench.models.range_bearing` publishes them.
 
 Predict and update are :func:`workbench.kalman_core.linear_predict` and
 :func:`workbench.kalman_core.linear_update` (the shared linear KF with a per-item ``R``).
@@ -35,12 +36,11 @@ from workbench.types import Gaussian, InputError, Scan
 
 
 def _polar_params(model: MeasurementModel) -> tuple[float, float, tuple[float, float]]:
-    params = model.params
-    if "sigma_r" not in params or "sigma_b" not in params or model.dim != 2 or tuple(model.angular) != (False, True):
-        raise InputError(f"cmkf-l takes range-bearing measurements only (a model with params sigma_r, sigma_b and "
-                         f"components (range, bearing)); got model {model.name!r} with params {sorted(params)}")
-    sensor = params.get("sensor", (0.0, 0.0))
-    return float(params["sigma_r"]), float(params["sigma_b"]), (float(sensor[0]), float(sensor[1]))
+    if model.frame != "range-bearing" or model.std is None:
+        raise InputError(f"cmkf-l takes range-bearing measurements only (a model declaring the range-bearing frame "
+                         f"and its stated std); got model {model.name!r} in frame {model.frame or 'undeclared'!r}")
+    sensor = model.sensor_position if model.sensor_position is not None else (0.0, 0.0)
+    return float(model.std[0]), float(model.std[1]), (float(sensor[0]), float(sensor[1]))
 
 
 def init(prior: Gaussian, rng=None) -> Gaussian:
@@ -77,7 +77,6 @@ CMKF_L = FilterSpec(
     summary="Converted-measurement KF, linearised conversion covariance (range-bearing input, math bearing)",
     init=init, predict=predict, update=update, estimate=estimate,
     capabilities=frozenset({"gaussian", "range_bearing_input"}),
-    params={"bearing_convention": "math (counter-clockwise from +x)", "debiasing": "none (CMKF-L)"},
 )
 
 

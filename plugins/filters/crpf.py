@@ -39,6 +39,7 @@ from workbench.filtering import keep_where, single_measurement
 from workbench.kernels.counter_normals import draw_key
 from workbench.kernels.crpf_step import crpf_step, propagation_normals
 from workbench.models import MeasurementModel, MotionModel
+from workbench.params import Param
 from workbench.resampling import normalise_log_weights, systematic_resample
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
@@ -47,6 +48,21 @@ COSTS = ("norm", "arc-length")
 #: "auto": the fused kernel (:mod:`workbench.kernels.crpf_step`, Numba on the CPU, else Taichi) for a
 #: range-bearing model; "numpy": always the array code below; "numba"/"taichi": that kernel backend.
 BACKENDS = ("auto", "numpy", "numba", "taichi")
+
+PARAMETERS = (
+    Param("particles", 100, "particles per run", "int", minimum=1),
+    Param("lam", 0.95, "forgetting factor of the cost", above=0.0, maximum=1.0),
+    Param("q", 2.0, "exponent of the incremental cost ||y - h(x)||^q", minimum=1.0),
+    Param("beta", 2.0, "exponent of the selection PMF (R - min R + delta)^-beta", above=0.0),
+    Param("delta", 0.01, "offset of the selection PMF", above=0.0),
+    Param("kappa", 1.0, "propagation variance sigma^2 = kappa / N^(2/n)", above=0.0),
+    Param("scale", None, "per-component scale of the propagation noise (length n; none: isotropic)", "vector?",
+          minimum=0.0),
+    Param("cost", "norm", "incremental cost: the plain norm or the arc-length residual", "str", choices=COSTS),
+    Param("box", 1.0, "half-width of the uniform initial box, in prior standard deviations", above=0.0),
+    Param("backend", "auto", "kernel backend of the fused range-bearing step (auto: the policy's choice)", "str",
+          choices=BACKENDS),
+)
 
 
 @dataclass(frozen=True)
@@ -187,10 +203,10 @@ def predict(state: CRPFState, motion: MotionModel, rng: np.random.Generator, par
 
 
 def _fused(model: MeasurementModel, params: CRPFParams) -> bool:
-    """Whether the fused kernel applies: a range-bearing model (``h`` = range and bearing of ``x, y``
-    from ``params["sensor"]``) and a backend other than ``"numpy"``."""
-    return (params.backend != "numpy" and model.name == "range-bearing" and tuple(model.angular) == (False, True)
-            and len(model.params.get("sensor", ())) == 2)
+    """Whether the fused kernel applies: a model that declares the range-bearing frame (``h`` = range and
+    bearing of ``x, y`` from its declared ``sensor_position``) and a backend other than ``"numpy"``."""
+    return (params.backend != "numpy" and model.frame == "range-bearing" and model.sensor_position is not None
+            and len(model.sensor_position) == 2)
 
 
 def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
@@ -211,7 +227,7 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
         key = draw_key(rng)
         new_x, costs, mean, cov = crpf_step(x, c, state.F, z, key, u0, params.jitter_std(n), lam, params.beta,
                                             params.delta, params.q, params.cost == "arc-length",
-                                            model.params["sensor"], backend=params.backend)
+                                            model.sensor_position, backend=params.backend)
         return CRPFState(new_x, costs, Gaussian(mean, cov), np.zeros(B, dtype=bool), None,
                          state.selections + B, state.blind_moves)
     if moving.any():
@@ -269,11 +285,14 @@ def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: flo
         update=partial(update, params=params),
         estimate=estimate,
         # the arc-length cost reads a range and a bearing: it needs a range-bearing sensor
-        capabilities=frozenset({"stochastic"} | ({"range_bearing_input"} if cost == "arc-length" else set())),
+        capabilities=frozenset({"stochastic", "ignores_noise_statistics"}
+                               | ({"range_bearing_input"} if cost == "arc-length" else set())),
         params={"particles": params.particles, "lam": params.lam, "q": params.q, "beta": params.beta,
                 "delta": params.delta, "kappa": params.kappa, "scale": params.scale, "cost": params.cost,
-                "box": params.box, "uses_noise_statistics": False},
+                "box": params.box, "backend": params.backend},
         diagnostics=diagnostics,
+        parameters=PARAMETERS,
+        build=make_crpf,
     )
 
 

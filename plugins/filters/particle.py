@@ -1,148 +1,37 @@
 """Bootstrap (SIR) particle filter, batch-first and log-domain.
 
-State: :class:`ParticleState` with particles ``(B, N, n)`` and normalised log-weights ``(B, N)``.
+State: :class:`workbench.particle_core.ParticleState` with particles ``(B, N, n)`` and normalised
+log-weights ``(B, N)``.
 
 Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal).
 Update:  ``log w_i <- log w_i + log N(z; h(x_i), R)`` with the residual wrapped for angular
-components; normalise with logsumexp; resample systematically where ``N_eff < threshold * N``
-(``threshold > 1``, e.g. ``inf``, resamples at every update).
-An item with every weight underflowed keeps its previous weights (counted in the diagnostics).
-
-Speed: the particle arrays this filter makes are stored component-major (``(n, B, N)`` in memory,
-seen as ``(B, N, n)``), so that every per-component operation runs over ``B N`` contiguous numbers;
-the small matrix products (``F x``, ``Q_sqrt e``, the whitening by ``chol(R)^-1``) are written out
-one component at a time, skipping zero entries, instead of calling BLAS on ``(N, 4) x (4, 4)``
-shapes.  Any layout of the input particles is accepted.
+components (``R``: the detection's own covariance where the scan carries one); normalise with logsumexp;
+resample systematically where ``N_eff < threshold * N`` (``threshold > 1``, e.g. ``inf``, resamples at
+every update).  An item with every weight underflowed keeps its previous weights (counted in the
+diagnostics).  The shared pieces (state, proposal, likelihood) are :mod:`workbench.particle_core`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import partial
 
 import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.linalg import safe_cholesky
-from workbench.models import MeasurementModel, MotionModel
+from workbench.kalman_core import measurement_covariance
+from workbench.params import Param
+from workbench.particle_core import (ParticleState, diagnostics, estimate, init, log_likelihood, log_likelihood_cov,
+                                     predict)
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
 from workbench.specs import FilterSpec
-from workbench.types import Gaussian, Particles, Scan
+from workbench.types import Particles, Scan
+from workbench.models import MeasurementModel
 
-
-@dataclass(frozen=True)
-class ParticleState:
-    cloud: Particles
-    resamples: int = 0  # total resampling events over the batch
-    underflows: int = 0  # updates in which every weight of an item underflowed
-
-
-def component_major(batch: int, particles: int, dim: int) -> np.ndarray:
-    """An empty ``(B, N, n)`` array stored as ``(n, B, N)``: each ``x[..., j]`` is one contiguous block."""
-    return np.empty((dim, batch, particles)).transpose(1, 2, 0)
-
-
-@lru_cache(maxsize=64)
-def _plan(matrix_bytes: bytes, rows: int, cols: int) -> tuple:
-    """Per output row of a ``(rows, cols)`` matrix: its ``(column, coefficient)`` pairs other than one, and
-    the columns whose coefficient is one (zeros are skipped)."""
-    matrix = np.frombuffer(matrix_bytes, dtype=float).reshape(rows, cols)
-    return tuple((tuple((int(j), float(matrix[i, j])) for j in np.flatnonzero((matrix[i] != 0.0) & (matrix[i] != 1.0))),
-                  tuple(int(j) for j in np.flatnonzero(matrix[i] == 1.0)))
-                 for i in range(rows))
-
-
-def combine_columns(out: np.ndarray, matrix: np.ndarray, *sources: np.ndarray) -> np.ndarray:
-    """``out[..., i] = sum_j matrix[i, j] s[..., j]`` over the columns of ``sources`` side by side.
-
-    The small product ``s @ matrix.T`` written out one output component at a time, skipping zero
-    entries and multiplications by one (``x_0 + x_2`` is one pass); ``out`` must not share memory
-    with a source.
-
-    Shapes
-    ------
-    out : (..., r)
-    matrix : (r, c) with ``c`` the total trailing size of ``sources``
-    sources : (..., c_k) each
-    """
-    matrix = np.ascontiguousarray(matrix, dtype=float)
-    columns = [s[..., j] for s in sources for j in range(s.shape[-1])]
-    scratch = None
-    for i, (scaled, unit) in enumerate(_plan(matrix.tobytes(), *matrix.shape)):
-        col = out[..., i]
-        unit = [columns[j] for j in unit]
-        if scaled:
-            np.multiply(columns[scaled[0][0]], scaled[0][1], out=col)
-            for j, coef in scaled[1:]:
-                if scratch is None:
-                    scratch = np.empty(col.shape)
-                np.multiply(columns[j], coef, out=scratch)
-                col += scratch
-        elif len(unit) >= 2:
-            np.add(unit[0], unit[1], out=col)
-            unit = unit[2:]
-        elif unit:
-            np.copyto(col, unit.pop())
-        else:
-            col[...] = 0.0
-        for src in unit:
-            col += src
-    return out
-
-
-def init(prior: Gaussian, rng: np.random.Generator, particles: int) -> ParticleState:
-    chol, _ = safe_cholesky(prior.cov)
-    e = rng.standard_normal((prior.batch, particles, prior.dim))
-    x = component_major(prior.batch, particles, prior.dim)
-    # x_i = mean + chol e_i
-    x[...] = prior.mean[:, None, :] + np.einsum("bij,bnj->bni", chol, e)
-    return ParticleState(Particles(x, np.full((prior.batch, particles), -np.log(particles))))
-
-
-def _noise_columns(motion: MotionModel) -> np.ndarray:
-    """The non-zero columns of ``Q_sqrt`` (``Q`` may be singular): ``(n, k)``."""
-    return motion.Q_sqrt[:, np.flatnonzero(np.any(motion.Q_sqrt != 0.0, axis=0))]
-
-
-def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator) -> ParticleState:
-    x = state.cloud.particles
-    B, N, n = x.shape
-    g = _noise_columns(motion)
-    # x_i <- F x_i + Q_sqrt e_i, drawing e only for the non-zero columns of Q_sqrt
-    sources = [x]
-    if g.shape[1]:
-        sources.append(rng.standard_normal((B, N, g.shape[1])))
-    moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), *sources)
-    return ParticleState(Particles(moved, state.cloud.log_weights), state.resamples, state.underflows)
-
-
-def _inverse_cholesky(R: np.ndarray) -> np.ndarray:
-    """``L^-1`` for ``R = L L^T`` (``m x m``, computed once per distinct ``R``)."""
-    R = np.ascontiguousarray(R, dtype=float)
-    return _inverse_cholesky_cached(R.tobytes(), R.shape[0])
-
-
-@lru_cache(maxsize=64)
-def _inverse_cholesky_cached(r_bytes: bytes, m: int) -> np.ndarray:
-    out = np.linalg.inv(np.linalg.cholesky(np.frombuffer(r_bytes, dtype=float).reshape(m, m)))
-    out.flags.writeable = False
-    return out
-
-
-def log_likelihood(z: np.ndarray, x: np.ndarray, model: MeasurementModel) -> np.ndarray:
-    """``log N(z_b; h(x_bi), R)`` up to a constant, for ``z (B, m)`` and particles ``x (B, N, n)`` -> ``(B, N)``."""
-    nu = model.residual(z[:, None, :], model.h(x))
-    B, N, m = nu.shape
-    # white = L^-1 nu with R = L L^T
-    white = combine_columns(np.empty((m, B, N)).transpose(1, 2, 0), _inverse_cholesky(model.R), nu)
-    # -1/2 nu^T R^-1 nu = -1/2 |white|^2
-    np.square(white, out=white)
-    out = white[..., 0].copy() if m == 1 else np.add(white[..., 0], white[..., 1])
-    for j in range(2, m):
-        out += white[..., j]
-    out *= -0.5
-    return out
+PARAMETERS = (
+    Param("particles", 500, "particles per run", "int", minimum=1),
+    Param("threshold", 0.5, "resample where N_eff < threshold N (above 1: at every update)", minimum=0.0),
+)
 
 
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
@@ -151,7 +40,10 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
     if not present.any():
         return state
     cloud = state.cloud
-    log_w = log_likelihood(z, cloud.particles, model)
+    if scan.cov is None:
+        log_w = log_likelihood(z, cloud.particles, model)
+    else:
+        log_w = log_likelihood_cov(z, cloud.particles, model, measurement_covariance(scan, model, present))
     log_w += cloud.log_weights
     # every weight of an item underflowed (or a NaN/inf crept in): its max is not finite
     dead = ~np.isfinite(np.max(log_w, axis=1))
@@ -166,14 +58,6 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
                          state.underflows + int((dead & present).sum()))
 
 
-def estimate(state: ParticleState) -> Gaussian:
-    return state.cloud.to_gaussian()
-
-
-def diagnostics(state: ParticleState) -> dict:
-    return {"resamples": state.resamples, "weight_underflows": state.underflows}
-
-
 def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = None) -> FilterSpec:
     """A bootstrap particle filter with ``particles`` particles, resampling when ``N_eff < threshold N``."""
     return FilterSpec(
@@ -183,9 +67,11 @@ def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = No
         predict=predict,
         update=partial(update, threshold=threshold),
         estimate=estimate,
-        capabilities=frozenset({"stochastic"}),
+        capabilities=frozenset({"stochastic", "detection_covariance"}),
         params={"particles": particles, "threshold": threshold},
         diagnostics=diagnostics,
+        parameters=PARAMETERS,
+        build=make_sir,
     )
 
 

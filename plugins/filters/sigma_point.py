@@ -40,9 +40,10 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.kernels.tbd_weights import numba_available
+from workbench.kernels.backend import numba_available
 from workbench.linalg import cholupdate, safe_cholesky, symmetrise, tria
 from workbench.models import MeasurementModel, MotionModel
+from workbench.params import Param
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Scan
 
@@ -373,7 +374,22 @@ def _diagnostics_sqrt(state: SquareRootState) -> dict:
 # -- factories --------------------------------------------------------------------------------------
 
 
-def _spec(name, summary, weights_for, square_root, params, who, downdate="cholupdate") -> FilterSpec:
+UKF_PARAMETERS = (
+    Param("alpha", 1.0, "spread of the sigma points", above=0.0),
+    Param("beta", 2.0, "prior-knowledge weight on the centre point (2 for a Gaussian)"),
+    Param("kappa", 0.0, "secondary scaling of the spread"),
+    Param("square_root", False, "propagate a Cholesky factor (QR + cholupdate) instead of the covariance", "bool"),
+)
+CDKF_PARAMETERS = (
+    Param("h", float(np.sqrt(3.0)), "central-difference step (sqrt(3) is optimal for a Gaussian prior)", above=0.0),
+    Param("square_root", False, "propagate a Cholesky factor instead of the covariance", "bool"),
+    Param("downdate", "cholupdate", "square-root update: the paper's rank-1 downdates or a downdate-free QR", "str",
+          choices=("cholupdate", "qr")),
+)
+
+
+def _spec(name, summary, weights_for, square_root, params, who, downdate="cholupdate", parameters=(),
+          build=None) -> FilterSpec:
     """Build a FilterSpec whose weights are made (and cached) for the state dimension met at run time."""
     cache: dict[int, SigmaWeights] = {}
 
@@ -400,7 +416,8 @@ def _spec(name, summary, weights_for, square_root, params, who, downdate="cholup
 
         init, estimate, diagnostics = _init_full, _estimate_full, _diagnostics_full
     return FilterSpec(name=name, summary=summary, init=init, predict=predict, update=update, estimate=estimate,
-                      capabilities=frozenset({"gaussian", "exact_linear"}), params=params, diagnostics=diagnostics)
+                      capabilities=frozenset({"gaussian", "exact_linear"}), params=params, diagnostics=diagnostics,
+                      parameters=parameters, build=build)
 
 
 def make_ukf(alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, square_root: bool = False,
@@ -412,7 +429,8 @@ def make_ukf(alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, square_r
                  f"{'Square-root ' if square_root else ''}unscented Kalman filter (alpha={alpha}, beta={beta}, "
                  f"kappa={kappa}){', QR + cholupdate' if square_root else ''}",
                  partial(unscented_weights, alpha=alpha, beta=beta, kappa=kappa), square_root,
-                 {"alpha": alpha, "beta": beta, "kappa": kappa, "square_root": square_root}, label)
+                 {"alpha": alpha, "beta": beta, "kappa": kappa, "square_root": square_root}, label,
+                 parameters=UKF_PARAMETERS, build=make_ukf)
 
 
 def make_cdkf(h: float = float(np.sqrt(3.0)), square_root: bool = False, downdate: str = "cholupdate",
@@ -426,13 +444,12 @@ def make_cdkf(h: float = float(np.sqrt(3.0)), square_root: bool = False, downdat
     if downdate not in ("cholupdate", "qr"):
         raise InputError(f"cdkf: downdate must be 'cholupdate' or 'qr', got {downdate!r}")
     label = "sr-cdkf" if square_root else "cdkf"
-    params = {"h": h, "square_root": square_root}
-    if square_root:
-        params["downdate"] = downdate
+    params = {"h": h, "square_root": square_root, "downdate": downdate}
     return _spec(name or label,
                  f"{'Square-root ' if square_root else ''}central difference Kalman filter (h={h:.4g})"
                  f"{', QR + ' + downdate if square_root else ''}",
-                 partial(central_difference_weights, h=h), square_root, params, label, downdate)
+                 partial(central_difference_weights, h=h), square_root, params, label, downdate,
+                 parameters=CDKF_PARAMETERS, build=make_cdkf)
 
 
 @hookimpl

@@ -7,7 +7,9 @@ For particle ``i`` (state ``s_i``) and gated detection ``m`` (position ``p_m``, 
     w_i     = sum_m w_{m,i}                                                              (14)
     log w_k,i = log w_{k-1,i} + log(eps + w_i), normalised over i                        (15, SIS)
 
-``sigma_p,m`` follows the detection's own SNR (:func:`workbench.radar.position_sigma`).  The floor
+``p_i, vr(s_i)`` is the sensor's ``h(s_i)`` (a model in the ``position-doppler-3d`` frame), and ``P_D`` and
+``sigma_p,m`` follow the detection's own SNR as the sensor declares them (``model.detection``, a
+:class:`workbench.models.DetectionModel`).  The floor
 ``eps = floor_density * max_m P_D(snr_m) N(0; 0, sigma_vr^2)`` is the "target missed, every detection
 is clutter" alternative: a spatial density (m^-3, default 5e-11 = 0.05 per km^3, a quarter of the
 5 dB clutter density) in place of the position kernel.  Relative to the kernel's peak it is large
@@ -25,7 +27,7 @@ and Le Gland's regularised particle filter): each resampled particle is jittered
 ``h D e``, ``D D^T`` the cloud's weighted covariance before resampling, ``h = 0.5 h_opt``
 (:func:`regularisation_bandwidth`), so that the copies of the few particles that keep up with a sharp
 manoeuvre become distinct particles (``regularisation = 0`` turns it off).  The state, prediction and
-estimate are those of the bootstrap filter (:mod:`workbench_filters.particle`).
+estimate are those of the bootstrap filter (:mod:`workbench.particle_core`).
 
 The update takes the whole gated scan: ``scan.z = [x, y, z, vr]`` (B, M, 4), ``scan.snr`` (dB).
 
@@ -36,18 +38,19 @@ quiet -> manoeuvre with probability ``SWITCH_ON`` and back with ``SWITCH_OFF`` p
 rides along through resampling.  Filters registered here:
 
 - ``tbd-pf`` (method C) and ``tbd-pf-eps0`` (no floor), both with the two-mode prediction;
-- ``sir-jm`` (method B): the bootstrap filter of :mod:`workbench_filters.particle` (its likelihood),
+- ``sir-jm`` (method B): the bootstrap filter of :mod:`workbench.particle_core` (its likelihood),
   with the same two-mode prediction;
-- ``ekf-nis`` (method A): the EKF (:mod:`workbench_filters.kalman`, its update) whose process noise
+- ``ekf-nis`` (method A): the EKF (:func:`workbench.kalman_core.ekf_update`) whose process noise
   switches to ``MANOEUVRE_SCALE^2 W`` for the next prediction when the normalised innovation squared
   of the pseudo-measurement exceeds the chi-square 99 % point (4 dof), the Gaussian filter's
   counterpart of the two modes (noise-level switching by manoeuvre detection).
 
-Clutter (methods A and B, ``clutter_density = b > 0``, set by the paper-000 recipe from the clutter
-model): the pseudo-measurement may be clutter.  B's likelihood is the mixture ``b + N(z; h(x_i), R)``;
-A's update is the PDAF's for one validated measurement, ``beta_0 = b / (b + N(nu; 0, S))``.  A model
-may scale ``b`` per item by ``params["clutter_amplitude_ratio"]`` (the clutter amplitude law at the
-measurement's SNR) and, when whitened, carries ``log |R_bar|`` in ``params["log_det_R"]``.
+Clutter (methods A and B): where the scan declares the clutter density at the measurement
+(``Scan.clutter_density = b`` per unit measurement volume; the paper-000 pipeline computes it from the
+clutter model and the measurement's amplitude), the measurement may be clutter: B's likelihood is the mixture
+``b + N(z; h(x_i), R)``; A's update is the PDAF's for one validated measurement,
+``beta_0 = b / (b + N(nu; 0, S))``.  ``R`` is the measurement's own covariance where the scan carries one
+(``Scan.cov``, e.g. the pseudo-measurement's ``R_bar``), else the model's.
 """
 
 from __future__ import annotations
@@ -60,17 +63,18 @@ from scipy.stats import chi2
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.kernels.tbd_weights import BACKENDS, tbd_log_weight_sums
+from workbench.kalman_core import ekf_update, measurement_covariance
+from workbench.kernels.backend import BACKENDS
+from workbench.kernels.tbd_weights import tbd_log_weight_sums
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
-from workbench.radar import RadarParameters, log_detection_probability, from_db, position_sigma, radial_velocity
+from workbench.params import Param
+from workbench.particle_core import (ParticleState, combine_columns, component_major, diagnostics, estimate, init,
+                                     log_likelihood_cov, predict)
+from workbench.particle_core import log_likelihood as sir_log_likelihood
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
-from workbench_filters.kalman import ekf_update
-from workbench_filters.particle import (ParticleState, combine_columns, component_major, diagnostics, estimate, init,
-                                        predict)
-from workbench_filters.particle import log_likelihood as sir_log_likelihood
 
 #: two-mode process noise [U, chosen by a sweep, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre -> quiet)
 #: per scan and the manoeuvre mode's factor on sigma_a
@@ -79,13 +83,16 @@ SWITCH_ON, SWITCH_OFF, MANOEUVRE_SCALE = 0.05, 0.2, 4.0
 REGULARISATION = 0.5
 
 
-def _radar(model: MeasurementModel) -> RadarParameters:
-    known = RadarParameters().as_dict()
-    return RadarParameters(**{k: model.params[k] for k in known if k in model.params})
+def _detection(model: MeasurementModel):
+    if model.detection is None or model.frame != "position-doppler-3d":
+        raise InputError(f"tbd-pf needs a measurement model in the position-doppler-3d frame that declares how its "
+                         f"detections' quality follows their SNR (model.detection); {model.name!r} is in frame "
+                         f"{model.frame or 'undeclared'!r} with detection {model.detection!r:.40}")
+    return model.detection
 
 
 def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, sigma_vr: float,
-                   floor_density: float, backend: str = "auto", arch: str = "cpu") -> np.ndarray:
+                   floor_density: float, backend: str = "auto") -> np.ndarray:
     """``log(eps + sum_m w_{m,i})`` for particles ``(B, N, 6)`` and a gated scan -> ``(B, N)``.
 
     ``-inf`` for items without a valid detection.
@@ -94,14 +101,14 @@ def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, s
         raise InputError("tbd-pf needs the measured SNR of every detection (scan.snr, dB)")
     if not (np.all(np.isfinite(scan.z[scan.valid])) and np.all(np.isfinite(scan.snr[scan.valid]))):
         raise InputError("tbd-pf: a valid detection holds a non-finite value (NaN or inf) in z or snr")
-    radar = _radar(model)
+    detection = _detection(model)
     z = scan.z
-    points = np.concatenate([particles[..., :3], radial_velocity(particles)[..., None]], axis=-1)
+    points = model.h(particles)  # [p_i, vr(s_i)]
     snr_db = np.where(scan.valid, scan.snr, 0.0)
-    log_pd = log_detection_probability(from_db(snr_db), radar.pfa)
-    sigma_p = position_sigma(snr_db, np.linalg.norm(z[..., :3], axis=-1), radar)
+    log_pd = detection.log_pd(snr_db)
+    sigma_p = detection.position_sigma(snr_db, np.linalg.norm(z[..., :3], axis=-1))
     # log sum_m P_D(snr_m) N(p_m; p_i, sigma_p,m^2 I_3) N(vr_m; vr_i, sigma_vr^2)     (13), (14)
-    log_sum = tbd_log_weight_sums(points, z, scan.valid, log_pd, sigma_p, sigma_vr, backend=backend, arch=arch)
+    log_sum = tbd_log_weight_sums(points, z, scan.valid, log_pd, sigma_p, sigma_vr, backend=backend)
     if floor_density <= 0.0:
         return log_sum
     # eps = floor_density * max_m P_D(snr_m) N(0; 0, sigma_vr^2)
@@ -209,13 +216,13 @@ def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, thresh
 
 
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
-           threshold: float, floor_density: float, sigma_vr: float, backend: str, arch: str = "cpu",
+           threshold: float, floor_density: float, sigma_vr: float, backend: str,
            regularisation: float = 0.0) -> ParticleState:
     present = scan.valid.any(axis=1)
     if not present.any():
         return state
     cloud = state.cloud
-    log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend, arch)
+    log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend)
     log_w = cloud.log_weights + log_lik
     dead = present & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
@@ -235,8 +242,24 @@ def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) ->
                          f"{switch_on}, {switch_off}, {scale}")
 
 
+TBD_PARAMETERS = (
+    Param("particles", 600, "particles per run", "int", minimum=1),
+    Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
+    Param("floor_density", 5e-11, "spatial density (m^-3) of the 'every detection is clutter' floor eps; 0: the "
+          "literal paper", minimum=0.0),
+    Param("sigma_vr", 15.0, "width of the Doppler kernel", unit="speed", above=0.0),
+    Param("backend", "auto", "kernel backend of the weights (auto: the policy's choice)", "str", choices=BACKENDS),
+    Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
+          minimum=0.0, maximum=1.0),
+    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
+    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
+    Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
+          minimum=0.0),
+)
+
+
 def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor_density: float = 5e-11, sigma_vr: float = 15.0,
-                backend: str = "auto", arch: str = "cpu", name: str | None = None, switch_on: float = SWITCH_ON,
+                backend: str = "auto", name: str | None = None, switch_on: float = SWITCH_ON,
                 switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
                 regularisation: float = REGULARISATION) -> FilterSpec:
     """Method C with ``particles`` particles, floor density ``floor_density`` (m^-3) and Doppler sigma
@@ -259,62 +282,56 @@ def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor_density: flo
         init=partial(init, particles=particles),
         predict=_predict(switch_on, switch_off, manoeuvre_scale),
         update=partial(update, threshold=threshold, floor_density=floor_density, sigma_vr=sigma_vr,
-                       backend=backend, arch=arch, regularisation=regularisation),
+                       backend=backend, regularisation=regularisation),
         estimate=estimate,
-        capabilities=frozenset({"stochastic", "multi_measurement", "position_doppler_3d"}),
+        capabilities=frozenset({"stochastic", "multi_measurement", "position_doppler_3d", "manoeuvre_modes"}),
         params={"particles": particles, "threshold": threshold, "floor_density": floor_density, "sigma_vr": sigma_vr,
                 "backend": backend, "switch_on": switch_on, "switch_off": switch_off,
                 "manoeuvre_scale": manoeuvre_scale, "regularisation": regularisation},
         diagnostics=diagnostics,
+        parameters=TBD_PARAMETERS,
+        build=make_tbd_pf,
     )
 
 
-def log_noise_determinant(model: MeasurementModel, batch: int) -> np.ndarray:
-    """``log |R|`` per batch item: a whitened pseudo-measurement model (``R = I``) carries the log-determinant
-    of its per-item ``R_bar`` in ``params["log_det_R"]`` (B,); any other model gives ``log |model.R|``."""
-    ld = model.params.get("log_det_R")
-    if ld is None:
-        return np.full(batch, np.linalg.slogdet(np.asarray(model.R, dtype=float))[1])
-    ld = np.asarray(ld, dtype=float)
-    if ld.shape != (batch,):
-        raise InputError(f"log_det_R of model {model.name!r} must have shape ({batch},), got {ld.shape}")
-    return ld
-
-
-def log_clutter_density(model: MeasurementModel, clutter_density: float, batch: int) -> np.ndarray:
-    """``log lambda_b`` per batch item: ``clutter_density`` times the measurement's amplitude factor
-    ``params["clutter_amplitude_ratio"]`` (B,) when the model carries one (the relative density of clutter as
-    strong as the measurement, from the clutter amplitude law), else ``log clutter_density``."""
-    ratio = model.params.get("clutter_amplitude_ratio")
-    if ratio is None:
-        return np.full(batch, np.log(clutter_density))
-    ratio = np.asarray(ratio, dtype=float)
-    if ratio.shape != (batch,):
-        raise InputError(f"clutter_amplitude_ratio of model {model.name!r} must have shape ({batch},), got "
-                         f"{ratio.shape}")
+def log_clutter_density(scan: Scan, present: np.ndarray) -> np.ndarray | None:
+    """``log b`` of each item's measurement from the scan's declared clutter density (``None`` when the scan
+    declares none): ``(B,)``, ``-inf`` where the density is 0 (a measurement that is surely the target's)."""
+    if scan.clutter_density is None:
+        return None
+    row = np.argmax(scan.valid, axis=1) if scan.z.shape[1] else np.zeros(scan.batch, dtype=int)
+    density = scan.clutter_density[np.arange(scan.batch), row] if scan.z.shape[1] else np.zeros(scan.batch)
+    density = np.where(present, density, 0.0)
+    if np.any(~np.isfinite(density) | (density < 0)):
+        raise InputError("a scan's clutter_density must be finite and >= 0 at every valid measurement")
     with np.errstate(divide="ignore"):
-        return np.log(clutter_density) + np.log(ratio)
+        return np.log(density)
 
 
 def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
-               threshold: float, clutter_density: float = 0.0, regularisation: float = 0.0) -> ParticleState:
-    """The bootstrap update (``log w_i += log N(z; h(x_i), R)``, :mod:`workbench_filters.particle`), with
+               threshold: float, regularisation: float = 0.0) -> ParticleState:
+    """The bootstrap update (``log w_i += log N(z; h(x_i), R)``, :mod:`workbench.particle_core`), with
     the particles' modes carried through resampling.
 
-    With ``clutter_density = lambda > 0`` (per unit measurement volume) the likelihood is the mixture of a
-    target-originated and a clutter-originated measurement, ``lambda + N(z; h(x_i), R)``: a pseudo-measurement
-    that no particle explains (clutter) pulls the cloud no more than ``lambda`` allows."""
+    Where the scan declares the clutter density ``b`` at the measurement (per unit measurement volume) the
+    likelihood is the mixture of a target-originated and a clutter-originated measurement, ``b + N(z; h(x_i), R)``:
+    a measurement that no particle explains (clutter) pulls the cloud no more than ``b`` allows."""
     z, present = single_measurement(scan, "sir-jm")
     if not present.any():
         return state
     cloud = state.cloud
     m = z.shape[-1]
-    log_det = log_noise_determinant(model, z.shape[0])
-    # log N(z; h(x_i), R) = -|L^-1 (z - h)|^2 / 2 - (m log 2 pi + log |R|) / 2
-    log_lik = sir_log_likelihood(z, cloud.particles, model) - 0.5 * (m * np.log(2.0 * np.pi) + log_det)[:, None]
-    if clutter_density > 0.0:
-        # log(lambda + N(z; h(x_i), R))
-        log_lik = np.logaddexp(log_clutter_density(model, clutter_density, z.shape[0])[:, None], log_lik)
+    if scan.cov is not None:
+        # log N(z; h(x_i), R_b) with the measurement's own covariance
+        log_lik = log_likelihood_cov(z, cloud.particles, model, measurement_covariance(scan, model, present))
+    else:
+        # log N(z; h(x_i), R) = -|L^-1 (z - h)|^2 / 2 - (m log 2 pi + log |R|) / 2
+        log_det = np.linalg.slogdet(np.asarray(model.R, dtype=float))[1]
+        log_lik = sir_log_likelihood(z, cloud.particles, model) - 0.5 * (m * np.log(2.0 * np.pi) + log_det)
+    log_b = log_clutter_density(scan, present)
+    if log_b is not None:
+        # log(b + N(z; h(x_i), R))
+        log_lik = np.logaddexp(log_b[:, None], log_lik)
     log_w = log_lik + cloud.log_weights
     dead = present & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
@@ -322,16 +339,26 @@ def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: n
     return _finish(state, log_w, present, threshold, dead, rng, regularisation)
 
 
+SIR_JM_PARAMETERS = (
+    Param("particles", 600, "particles per run", "int", minimum=1),
+    Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
+    Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
+          minimum=0.0, maximum=1.0),
+    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
+    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
+    Param("regularisation", 0.0, "post-regularisation bandwidth after resampling, x h_opt (0: off)", minimum=0.0),
+)
+
+
 def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float = SWITCH_ON,
                 switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
-                name: str | None = None, clutter_density: float = 0.0,
-                regularisation: float = 0.0) -> FilterSpec:
-    """Method B: the bootstrap filter with the same two-mode prediction as method C; ``clutter_density > 0``
-    adds the clutter term of the mixture likelihood (:func:`sir_update`), ``regularisation > 0`` jitters the
-    resampled particles (:func:`regularise`; off by default: it widened B's cloud in the low-SNR segment)."""
-    if particles < 1 or not 0 <= threshold <= 1 or clutter_density < 0 or regularisation < 0:
-        raise InputError(f"sir-jm: need particles >= 1, 0 <= threshold <= 1, clutter_density >= 0 and "
-                         f"regularisation >= 0, got {particles}, {threshold}, {clutter_density}, {regularisation}")
+                name: str | None = None, regularisation: float = 0.0) -> FilterSpec:
+    """Method B: the bootstrap filter with the same two-mode prediction as method C; where the scan declares a
+    clutter density the likelihood is the clutter mixture (:func:`sir_update`), ``regularisation > 0`` jitters
+    the resampled particles (:func:`regularise`; off by default: it widened B's cloud in the low-SNR segment)."""
+    if particles < 1 or not 0 <= threshold <= 1 or regularisation < 0:
+        raise InputError(f"sir-jm: need particles >= 1, 0 <= threshold <= 1 and regularisation >= 0, got "
+                         f"{particles}, {threshold}, {regularisation}")
     _check_modes("sir-jm", switch_on, switch_off, manoeuvre_scale)
     return FilterSpec(
         name=name or "sir-jm",
@@ -339,14 +366,14 @@ def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float =
                  f"{switch_off:g}), N={particles}"),
         init=partial(init, particles=particles),
         predict=_predict(switch_on, switch_off, manoeuvre_scale),
-        update=partial(sir_update, threshold=threshold, clutter_density=clutter_density,
-                       regularisation=regularisation),
+        update=partial(sir_update, threshold=threshold, regularisation=regularisation),
         estimate=estimate,
-        capabilities=frozenset({"stochastic"}),
+        capabilities=frozenset({"stochastic", "detection_covariance", "clutter_density", "manoeuvre_modes"}),
         params={"particles": particles, "threshold": threshold, "switch_on": switch_on, "switch_off": switch_off,
-                "manoeuvre_scale": manoeuvre_scale, "clutter_density": clutter_density,
-                "regularisation": regularisation},
+                "manoeuvre_scale": manoeuvre_scale, "regularisation": regularisation},
         diagnostics=diagnostics,
+        parameters=SIR_JM_PARAMETERS,
+        build=make_sir_jm,
     )
 
 
@@ -373,14 +400,14 @@ def nis_predict(state: AdaptiveGaussian, motion: MotionModel, rng=None, *, scale
 
 
 def nis_update(state: AdaptiveGaussian, scan: Scan, model: MeasurementModel, rng=None, *,
-               nis_threshold: float, clutter_density: float = 0.0) -> AdaptiveGaussian:
+               nis_threshold: float) -> AdaptiveGaussian:
     """The EKF update; an item whose normalised innovation ``nu^T S^-1 nu`` exceeds ``nis_threshold``
     switches to the manoeuvre noise for the next prediction, and back when it falls below (an item
     without a measurement keeps its flag).
 
-    With ``clutter_density = lambda > 0`` (per unit measurement volume) the update is the probabilistic data
-    association filter's for one validated measurement (Bar-Shalom and Tse): the measurement is clutter with
-    probability ``beta_0 = lambda / (lambda + N(nu; 0, S))``, and::
+    Where the scan declares the clutter density ``b`` at the measurement (per unit measurement volume) the
+    update is the probabilistic data association filter's for one validated measurement (Bar-Shalom and Tse):
+    the measurement is clutter with probability ``beta_0 = b / (b + N(nu; 0, S))``, and::
 
         x = x- + (1 - beta_0) K nu,   P = beta_0 P- + (1 - beta_0) P+ + beta_0 (1 - beta_0) K nu nu^T K^T
 
@@ -390,21 +417,21 @@ def nis_update(state: AdaptiveGaussian, scan: Scan, model: MeasurementModel, rng
         return state
     g = state.gaussian
     H = model.jacobian(g.mean)
+    R = measurement_covariance(scan, model, present)
     # S = H P- H^T + R;  NIS = nu^T S^-1 nu
-    S = symmetrise(H @ g.cov @ np.swapaxes(H, -1, -2) + model.R)
+    S = symmetrise(H @ g.cov @ np.swapaxes(H, -1, -2) + R)
     nu = model.residual(z, model.h(g.mean))
     nis = np.einsum("bi,bi->b", nu, psd_solve(S, nu[..., None])[..., 0])
     updated = ekf_update(g, scan, model)
-    if clutter_density <= 0.0:
+    log_b = log_clutter_density(scan, present)
+    if log_b is None:
         flag = np.where(present, nis > nis_threshold, state.manoeuvre)
         return AdaptiveGaussian(updated, flag)
     m = nu.shape[-1]
-    # log N(nu; 0, S_bar) with |S_bar| = |R_bar| |S| for a whitened model (R = I), |S| otherwise
-    log_det = np.linalg.slogdet(S)[1] + log_noise_determinant(model, g.batch) - np.linalg.slogdet(model.R)[1]
-    log_n = -0.5 * (nis + m * np.log(2.0 * np.pi) + log_det)
-    # beta_0 = lambda / (lambda + N(nu; 0, S))
-    log_lam = log_clutter_density(model, clutter_density, g.batch)
-    beta0 = np.exp(log_lam - np.logaddexp(log_lam, log_n))
+    # log N(nu; 0, S)
+    log_n = -0.5 * (nis + m * np.log(2.0 * np.pi) + np.linalg.slogdet(S)[1])
+    # beta_0 = b / (b + N(nu; 0, S))
+    beta0 = np.exp(log_b - np.logaddexp(log_b, log_n))
     beta0 = np.where(present, beta0, 1.0)
     shift = updated.mean - g.mean  # K nu (zero where no measurement)
     # x = x- + (1 - beta_0) K nu
@@ -420,24 +447,35 @@ def nis_estimate(state: AdaptiveGaussian) -> Gaussian:
     return state.gaussian
 
 
+EKF_NIS_PARAMETERS = (
+    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma after a manoeuvre is detected",
+          minimum=1.0),
+    Param("nis_threshold", float(chi2.ppf(0.99, 4)), "NIS above which the next prediction uses the manoeuvre noise "
+          "(default: the chi-square 99 % point, 4 dof)", above=0.0),
+)
+
+
 def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float = float(chi2.ppf(0.99, 4)),
-                 name: str | None = None, clutter_density: float = 0.0) -> FilterSpec:
+                 name: str | None = None) -> FilterSpec:
     """Method A: the EKF with the two-level noise switched by the NIS of the pseudo-measurement (the
     Gaussian filter's counterpart of the two-mode particle prediction: quiet ``W``, manoeuvre
-    ``scale^2 W``; Bar-Shalom, Li and Kirubarajan's noise-level switching by manoeuvre detection);
-    ``clutter_density > 0`` makes the update the PDAF's for one validated measurement (:func:`nis_update`)."""
-    if manoeuvre_scale < 1.0 or nis_threshold <= 0.0 or clutter_density < 0.0:
-        raise InputError(f"ekf-nis: need manoeuvre_scale >= 1, nis_threshold > 0 and clutter_density >= 0, got "
-                         f"{manoeuvre_scale}, {nis_threshold}, {clutter_density}")
+    ``scale^2 W``; Bar-Shalom, Li and Kirubarajan's noise-level switching by manoeuvre detection); where the
+    scan declares a clutter density the update is the PDAF's for one validated measurement (:func:`nis_update`)."""
+    if manoeuvre_scale < 1.0 or nis_threshold <= 0.0:
+        raise InputError(f"ekf-nis: need manoeuvre_scale >= 1 and nis_threshold > 0, got "
+                         f"{manoeuvre_scale}, {nis_threshold}")
     return FilterSpec(
         name=name or "ekf-nis",
         summary=f"EKF with NIS-switched process noise (x{manoeuvre_scale:g} above NIS {nis_threshold:.2f})",
         init=nis_init,
         predict=partial(nis_predict, scale=manoeuvre_scale),
-        update=partial(nis_update, nis_threshold=nis_threshold, clutter_density=clutter_density),
+        update=partial(nis_update, nis_threshold=nis_threshold),
         estimate=nis_estimate,
-        capabilities=frozenset({"gaussian", "needs_jacobian"}),
-        params={"manoeuvre_scale": manoeuvre_scale, "nis_threshold": nis_threshold, "clutter_density": clutter_density},
+        capabilities=frozenset({"gaussian", "needs_jacobian", "detection_covariance", "clutter_density",
+                                "manoeuvre_modes"}),
+        params={"manoeuvre_scale": manoeuvre_scale, "nis_threshold": nis_threshold},
+        parameters=EKF_NIS_PARAMETERS,
+        build=make_ekf_nis,
     )
 
 

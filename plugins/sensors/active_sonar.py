@@ -31,6 +31,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.models import MeasurementModel, linear_measurement, range_bearing
+from workbench.params import Param
 from workbench.specs import SensorSpec
 from workbench.types import InputError, Scans, Truth
 
@@ -72,7 +73,7 @@ def measurement_model(pd: float = 0.8, sigma_pos: float = 2.0, level_db: float =
     s = sigma_pos if sigma_xy is None else sigma_xy
     H = np.zeros((2, 4))
     H[0, 0] = H[1, 1] = 1.0
-    return linear_measurement(H, s * s * np.eye(2), name="sonar-position")
+    return linear_measurement(H, s * s * np.eye(2), name="sonar-position", frame="cartesian-2d", std=(s, s))
 
 
 def simulate(truth: Truth, rng: np.random.Generator, pd: float = 0.8, sigma_pos: float = 2.0, level_db: float = 20.0,
@@ -91,12 +92,28 @@ def simulate(truth: Truth, rng: np.random.Generator, pd: float = 0.8, sigma_pos:
                  origin=np.zeros((B, T, 1), dtype=int))
 
 
+PARAMETERS = (
+    Param("pd", 0.8, "probability of detection per ping", minimum=0.0, maximum=1.0),
+    Param("sigma_pos", 2.0, "position noise of a detection, per axis", unit="length", minimum=0.0),
+    Param("level_db", 20.0, "mean detection level", unit="decibel"),
+    Param("sigma_level", 0.1, "level noise", unit="decibel", minimum=0.0),
+    Param("frame", "cartesian", "the measurement model the filters get: Cartesian position or polar (range, "
+          "bearing); the detections are Cartesian either way", "str", choices=FRAMES),
+    Param("sigma_r", 0.5, "range sigma of the polar model", unit="length", minimum=0.0),
+    Param("sigma_b_deg", 1.0, "bearing sigma of the polar model, in degrees", minimum=0.0),
+    Param("sigma_xy", None, "position sigma of the Cartesian model (none: sigma_pos)", "float?", unit="length",
+          above=0.0),
+    Param("sensor", (0.0, 0.0), "sensor position of the polar model", "vector", unit="length", length=2),
+)
+
 ACTIVE_SONAR = SensorSpec(
     name="active-sonar",
     summary="Active sonar pings: Cartesian target detections (pd, position and level noise); polar or Cartesian model",
     measurement_model=measurement_model,
     simulate=simulate,
     params=DEFAULTS,
+    parameters=PARAMETERS,
+    frame="cartesian-2d",
 )
 
 

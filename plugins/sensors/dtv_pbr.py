@@ -12,13 +12,13 @@ Measurement model on the filter state ``[R, Rdot]``:
 
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
 from workbench import hookimpl
-from workbench.bistatic import range_and_rate, range_rate_to_doppler, wavelength
+from workbench.sensing.bistatic import range_and_rate, range_rate_to_doppler, wavelength
 from workbench.models import MeasurementModel, linear_measurement
+from workbench.params import Param
 from workbench.specs import SensorSpec
 from workbench.types import InputError, Scans, Truth
 
@@ -56,10 +56,9 @@ def measurement_model(**params) -> MeasurementModel:
     """``z = x + v`` on the state ``[R, Rdot]`` with ``R = diag(sigma_R^2, sigma_Rdot^2)``."""
     p = _params(params)
     # R_cov = diag(sigma_R^2, sigma_Rdot^2)
-    model = linear_measurement(np.eye(2), np.diag([p["model_sigma_range"] ** 2, p["model_sigma_range_rate"] ** 2]),
-                               name="bistatic-range-rate")
-    return replace(model, params={"wavelength": wavelength(p["frequency_hz"]),
-                                  "sigma_r": p["model_sigma_range"], "sigma_rdot": p["model_sigma_range_rate"]})
+    return linear_measurement(np.eye(2), np.diag([p["model_sigma_range"] ** 2, p["model_sigma_range_rate"] ** 2]),
+                              name="bistatic-range-rate", frame="bistatic-range-rate",
+                              std=(p["model_sigma_range"], p["model_sigma_range_rate"]))
 
 
 def simulate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
@@ -84,12 +83,31 @@ def simulate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
                  origin=np.zeros((B, T, 1), dtype=int))
 
 
+PARAMETERS = (
+    Param("tx", DEFAULTS["tx"], "transmitter position (x, y, z)", "vector", unit="length", length=3),
+    Param("rx", DEFAULTS["rx"], "receiver position (x, y, z)", "vector", unit="length", length=3),
+    Param("frequency_hz", 701e6, "carrier frequency of the illuminator", unit="frequency", above=0.0),
+    Param("pd", 0.9, "probability that the target's candidate is reported per frame", minimum=0.0, maximum=1.0),
+    Param("sigma_range", 15.0, "simulated candidate range noise", unit="length", minimum=0.0),
+    Param("sigma_range_rate", 0.4, "simulated candidate range-rate noise", unit="speed", minimum=0.0),
+    Param("model_sigma_range", 15.0, "range sigma of the filters' R (about half a 30 m range bin)", unit="length",
+          above=0.0),
+    Param("model_sigma_range_rate", 0.5, "range-rate sigma of the filters' R (about half a Doppler bin)",
+          unit="speed", above=0.0),
+    Param("strength_db", 18.0, "mean target candidate strength above the CFAR noise estimate", unit="decibel"),
+    Param("strength_sigma_db", 2.0, "candidate strength spread", unit="decibel", minimum=0.0),
+    Param("range_max", 3000.0, "range extent of the range-Doppler map (0 .. range_max)", unit="length", above=0.0),
+    Param("range_rate_max", 50.0, "range-rate extent of the map (+-range_rate_max)", unit="speed", above=0.0),
+)
+
 DTV_PBR = SensorSpec(
     name="dtv-pbr",
     summary="DTV passive bistatic radar (701 MHz): bistatic range and range-rate candidates with P_D",
     measurement_model=measurement_model,
     simulate=simulate,
     params=DEFAULTS,
+    parameters=PARAMETERS,
+    frame="bistatic-range-rate",
 )
 
 

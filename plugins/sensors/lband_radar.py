@@ -11,8 +11,9 @@ Measurement vector ``z = [x, y, z, vr]``; ``Scans.snr`` holds the measured SNR (
 ``Scans.doppler`` the radial velocity again.  The published measurement model is
 ``h(s) = [x, y, z, (p . v)/|p|]`` with its Jacobian and a fixed ``R = diag(s_p^2, s_p^2, s_p^2, s_vr^2)``
 (the brief's default pseudo-measurement noise; the paper-000 recipe replaces it per scan by the PDA-like
-``R_bar`` of :func:`workbench.radar.pseudo_measurement_covariance`); its ``params`` carry the radar
-parameters for filters that weight detections by their own SNR (method C and ``R_bar``).
+``R_bar`` of its pseudo-measurement step); it declares the position-doppler-3d frame and how its detections'
+quality follows their SNR (``detection``: ``log P_D`` by Marcum Q, the position sigma at that SNR and range, the
+radial-velocity sigma), for filters that weight detections by their own SNR.
 """
 
 from __future__ import annotations
@@ -21,25 +22,40 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.models import MeasurementModel
-from workbench.radar import (RadarParameters, angle_accuracy, aspect_rcs_db, cartesian_to_spherical, db, from_db,
-                             position_radial_velocity, position_radial_velocity_jacobian, radar_snr,
-                             radial_velocity, range_accuracy, spherical_to_cartesian)
+from workbench.params import Param, defaults
+from workbench.sensing.radar import (RadarParameters, angle_accuracy, aspect_rcs_db, cartesian_to_spherical, db,
+                                     detection_model, from_db, position_radial_velocity,
+                                     position_radial_velocity_jacobian, radar_snr, radial_velocity, range_accuracy,
+                                     spherical_to_cartesian)
 from workbench.specs import SensorSpec
 from workbench.types import InputError, Scans, Truth
 
 RADAR_KEYS = tuple(RadarParameters().as_dict())
 
-PARAMS = {
-    **RadarParameters().as_dict(),
-    "threshold_db": 5.0,  # SNR threshold; None keeps every target return
-    "rcs_ref_dbsm": -20.0,  # front-aspect RCS (the paper's "Ref")
-    "rcs_offsets_db": (0.0, 5.0, 3.0),  # front, top, side relative to Ref (Table 2)
-    "aspect_change_times": (100.0, 160.0),  # front for t <= 100 s, top for t <= 160 s, then side
-    "rcs_sigma_db": 2.0,  # RCS fluctuation, one draw per scan
-    "sigma_vr": 2.0,  # radial-velocity noise (m/s)
-    "pseudo_sigma_pos": 300.0,  # R of the pseudo-measurement (methods A/B), position (m)
-    "pseudo_sigma_vr": 10.0,  # and radial velocity (m/s)
-}
+PARAMETERS = (
+    Param("frequency", 1.3e9, "carrier frequency", unit="frequency", above=0.0),
+    Param("peak_power", 10e3, "peak transmit power", unit="power", above=0.0),
+    Param("pulse_width", 1e-6, "pulse width (bandwidth 1/tau)", unit="time", above=0.0),
+    Param("pulses", 100, "pulses integrated coherently", "int", minimum=1),
+    Param("gain_tx_db", 35.0, "transmit antenna gain", unit="decibel"),
+    Param("gain_rx_db", 35.0, "receive antenna gain", unit="decibel"),
+    Param("noise_figure_db", 10.0, "receiver noise figure", unit="decibel", minimum=0.0),
+    Param("loss_db", 6.0, "system losses", unit="decibel", minimum=0.0),
+    Param("pfa", 1e-6, "false-alarm probability per cell", above=0.0, maximum=1.0),
+    Param("threshold_db", 5.0, "SNR detection threshold (none keeps every target return)", "float?",
+          unit="decibel"),
+    Param("rcs_ref_dbsm", -20.0, "front-aspect RCS (the paper's Ref)", unit="decibel"),
+    Param("rcs_offsets_db", (0.0, 5.0, 3.0), "RCS of the front, top and side aspects relative to Ref", "vector",
+          unit="decibel"),
+    Param("aspect_change_times", (100.0, 160.0), "times at which the aspect changes (front -> top -> side)",
+          "vector", unit="time"),
+    Param("rcs_sigma_db", 2.0, "RCS fluctuation, one draw per scan", unit="decibel", minimum=0.0),
+    Param("sigma_vr", 2.0, "radial-velocity noise", unit="speed", minimum=0.0),
+    Param("pseudo_sigma_pos", 300.0, "position sigma of the published R (the brief's pseudo-measurement noise)",
+          unit="length", above=0.0),
+    Param("pseudo_sigma_vr", 10.0, "radial-velocity sigma of the published R", unit="speed", above=0.0),
+)
+PARAMS = defaults(PARAMETERS)
 
 
 def _radar(params: dict) -> RadarParameters:
@@ -92,7 +108,10 @@ def measurement_model(**params) -> MeasurementModel:
         h=position_radial_velocity,
         R=R,
         jacobian=position_radial_velocity_jacobian,
-        params={**{k: p[k] for k in RADAR_KEYS}, "beamwidth": _radar(p).beamwidth, "sigma_vr": p["sigma_vr"]},
+        frame="position-doppler-3d",
+        std=(p["pseudo_sigma_pos"],) * 3 + (p["pseudo_sigma_vr"],),
+        sensor_position=(0.0, 0.0, 0.0),
+        detection=detection_model(_radar(p), p["sigma_vr"]),
     )
 
 
@@ -102,6 +121,8 @@ LBAND_RADAR = SensorSpec(
     measurement_model=measurement_model,
     simulate=simulate,
     params=PARAMS,
+    parameters=PARAMETERS,
+    frame="position-doppler-3d",
 )
 
 

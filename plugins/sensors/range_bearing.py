@@ -16,6 +16,7 @@ import numpy as np
 from workbench import hookimpl
 from workbench.linalg import wrap_angle
 from workbench.models import MeasurementModel, range_bearing
+from workbench.params import Param
 from workbench.specs import SensorSpec
 from workbench.types import InputError, Scans, Truth
 
@@ -40,12 +41,19 @@ def simulate(truth: Truth, rng: np.random.Generator, sigma_r: float = 1.0, sigma
                  origin=np.zeros((B, T, 1), dtype=int))
 
 
+PARAMETERS = (
+    Param("sigma_r", 1.0, "range noise standard deviation", unit="length", minimum=0.0),
+    Param("sigma_theta", 0.1, "bearing noise standard deviation", unit="angle", minimum=0.0),
+)
+
 RANGE_BEARING = SensorSpec(
     name="range-bearing",
-    summary="Range and bearing from a sensor at the origin, additive Gaussian noise (paper 003)",
+    summary="Range and bearing from a sensor at the origin, additive Gaussian noise",
     measurement_model=measurement_model,
     simulate=simulate,
     params={"sigma_r": 1.0, "sigma_theta": 0.1},
+    parameters=PARAMETERS,
+    frame="range-bearing",
 )
 
 

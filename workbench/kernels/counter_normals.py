@@ -25,10 +25,11 @@ Shapes: :func:`counter_normals` ``(key, rows, count) -> (rows, count)``.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 
 import numpy as np
+
+from .backend import numba_available
 
 __all__ = ["counter_normals", "counter_normals_numpy", "draw_key", "log_poly", "sincos_poly"]
 
@@ -103,7 +104,7 @@ def counter_normals(key: int, rows: int, count: int) -> np.ndarray:
     Computed by the Numba twin when Numba is installed (about 2 ns a number, on every core), else by
     :func:`counter_normals_numpy` (about 120 ns); the two give the same numbers bit for bit (tested).
     """
-    if importlib.util.find_spec("numba") is None:
+    if not numba_available():
         return counter_normals_numpy(key, rows, count)
     from .counter_normals_numba import fill_rows
 

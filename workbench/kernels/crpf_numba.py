@@ -121,7 +121,7 @@ def select(w, total, u0, parent, edges):
 @jit
 def one_run(xb, cb, F, zr, zt, key, b, u0, std, scal, xn, cn, mean, cov, w):
     """The step of one run.  (Compiled as a function of its own: written inline in the prange body,
-    its loops vectorised less and the kernel was 1.5x slower.)  The state of every paper is 4-D
+    its loops vectorised less and the kernel was 1.5x slower.)  The common state is 4-D
     ``[x, y, vx, vy]``; that case has its loops over components written out (2x faster)."""
     N, n = xb.shape
     lam, beta, delta, q = scal[0], scal[1], scal[2], scal[3]

@@ -1,4 +1,4 @@
-"""One fused step of the cost-reference particle filter (paper 003) for a range-bearing sensor.
+"""One fused step of the cost-reference particle filter for a range-bearing sensor.
 
 For every run ``b`` (one parallel iteration each) and its ``N`` particles, with the measurement
 ``z_b = [r, theta]`` of a sensor at ``s`` and ``h(x) = [|p - s|, atan2(p_y - s_y, p_x - s_x)]``::
@@ -25,7 +25,7 @@ Backends (held to :func:`crpf_step_numpy`, which is written with the workbench's
 - ``"numba"`` (the CPU default): the same loops with ``numba.prange`` over runs, CPU only;
 - ``"numpy"``: :func:`crpf_step_numpy`;
 - ``"auto"``: Numba when the arch is the CPU and Numba is installed, else Taichi
-  (:func:`workbench.kernels.tbd_weights.resolve_backend`).
+  (the policy of :mod:`workbench.kernels.backend`).
 
 Shapes: ``x (B, N, n)`` with position ``x, y`` first, ``c (B, N)``, ``F (n, n)``, ``z (B, 2)``,
 ``key`` an unsigned 64-bit int, ``u0 (B,)``, ``std (n,)`` -> ``x' (B, N, n)``, ``C' (B, N)``, ``mean (B, n)``,
@@ -42,7 +42,7 @@ from ..models import range_bearing
 from ..resampling import normalise_log_weights, systematic_counts
 from .counter_normals import counter_normals, counter_normals_numpy
 from .runtime import ensure_taichi
-from .tbd_weights import numba_available, resolve_backend
+from .backend import current_arch, numba_available, resolve as resolve_backend
 
 __all__ = ["crpf_step", "crpf_step_numpy", "numba_available", "propagation_normals", "resolve_backend"]
 
@@ -111,7 +111,7 @@ def crpf_step_numpy(x, c, F, z, key, u0, std, lam, beta, delta, q=2.0, arc=False
 
 
 def crpf_step(x, c, F, z, key, u0, std, lam, beta, delta, q=2.0, arc=False, sensor=(0.0, 0.0),
-              backend="auto", arch="cpu"):
+              backend="auto", arch=None):
     """One CRPF step (risk, selection, propagation, cost, estimate) for every run; see the module docstring.
 
     Parameters
@@ -124,7 +124,8 @@ def crpf_step(x, c, F, z, key, u0, std, lam, beta, delta, q=2.0, arc=False, sens
     lam, beta, delta, q : forgetting factor, PMF exponent and offset, cost exponent
     arc : arc-length cost (bearing residual times the measured range)
     sensor : sensor position ``(x, y)``
-    backend, arch : ``"auto"``, ``"numba"``, ``"taichi"`` or ``"numpy"``; the Taichi arch
+    backend, arch : ``"auto"``, ``"numba"``, ``"taichi"`` or ``"numpy"``; the arch (default: the policy's,
+        :mod:`workbench.kernels.backend`)
 
     Shapes
     ------
@@ -146,7 +147,7 @@ def crpf_step(x, c, F, z, key, u0, std, lam, beta, delta, q=2.0, arc=False, sens
         if which == "numba":
             _numba_kernel()(x, c, F, z, np.uint64(key), u0, std, scal, x_new, c_new, mean, cov, scratch)
         else:
-            ensure_taichi(arch)
+            ensure_taichi(current_arch() if arch is None else arch)
             e = propagation_normals(key, B, N, n)
             _taichi_kernel()(x, c, F, z, e, u0, std, scal, x_new, c_new, mean, cov, scratch)
     return x_new, c_new, mean, cov

@@ -1,4 +1,5 @@
-"""Method-C particle weights of paper 000 (eqs 13-14): every particle against every gated measurement.
+"""Track-before-detect particle weights: every particle against every gated detection, weighted by each detection's
+own SNR.
 
 For run ``b``, particle ``i`` and valid measurement ``m``::
 
@@ -27,10 +28,10 @@ annotations as objects.)
 """
 
 import functools
-import importlib.util
 
 import numpy as np
 
+from .backend import BACKENDS, current_arch, numba_available, resolve
 from .reference import tbd_log_weight_sums_reference
 from .runtime import ensure_taichi
 
@@ -44,8 +45,6 @@ __all__ = [
     "poly_exp",
     "tbd_log_weight_sums",
 ]
-
-BACKENDS = ("auto", "numba", "taichi", "numpy")
 
 #: Particles per tile of the Numba kernel (its per-tile accumulators stay in L1).
 TILE = 128
@@ -79,21 +78,9 @@ def poly_exp(x: np.ndarray) -> np.ndarray:
     return p * ((n.astype(np.int64) + 1023) << 52).view(np.float64)
 
 
-def numba_available() -> bool:
-    """Whether Numba is installed (a dependency; an install without it falls back to Taichi)."""
-    return importlib.util.find_spec("numba") is not None
-
-
-def resolve_backend(backend: str = "auto", arch: str = "cpu") -> str:
-    """The backend ``"auto"`` stands for here: Numba on the CPU when it is installed, else Taichi."""
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown kernel backend {backend!r}; expected one of {', '.join(BACKENDS)}")
-    if backend == "numba" and not numba_available():
-        raise ValueError("backend 'numba' needs numba, a dependency of the workbench that this install lacks "
-                         "(pip install numba)")
-    if backend != "auto":
-        return backend
-    return "numba" if arch == "cpu" and numba_available() else "taichi"
+def resolve_backend(backend: str = "auto", arch: str | None = None) -> str:
+    """The backend ``"auto"`` stands for (:func:`workbench.kernels.backend.resolve`)."""
+    return resolve(backend, arch)
 
 
 def pack_points(points: np.ndarray) -> np.ndarray:
@@ -134,7 +121,7 @@ def pack_measurements(z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray, sigm
 
 
 def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray,
-                        sigma_p: np.ndarray, sigma_vr: float, backend: str = "auto", arch: str = "cpu") -> np.ndarray:
+                        sigma_p: np.ndarray, sigma_vr: float, backend: str = "auto", arch: str | None = None) -> np.ndarray:
     """``log sum_m w_{m,i}`` for every particle of every run (eqs 13-14), ``-inf`` where a run has no
     valid measurement.
 
@@ -163,7 +150,7 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
             parallel, serial = _numba_kernel()
             (parallel if B * N * int(counts.max()) >= SERIAL_PAIRS else serial)(pts, meas, counts, beta, out)
         else:
-            ensure_taichi(arch)
+            ensure_taichi(current_arch() if arch is None else arch)
             _taichi_kernel()(pts, meas, counts, beta, out)
     out[counts == 0] = -np.inf
     return out

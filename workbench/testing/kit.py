@@ -57,7 +57,7 @@ def _motion():
 
 def _linear_model():
     H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
-    return linear_measurement(H, np.diag([4.0, 4.0]), name="kit-position")
+    return linear_measurement(H, np.diag([4.0, 4.0]), name="kit-position", frame="cartesian-2d", std=(2.0, 2.0))
 
 
 def _polar_model():
@@ -89,7 +89,11 @@ def _position_doppler_model():
         out[:, 3, 3:] = p / r
         return out
 
-    return MeasurementModel("kit-position-doppler", h, np.diag([100.0**2] * 3 + [2.0**2]), jac)
+    from ..sensing.radar import RadarParameters, detection_model
+
+    return MeasurementModel("kit-position-doppler", h, np.diag([100.0**2] * 3 + [2.0**2]), jac,
+                            frame="position-doppler-3d", std=(100.0, 100.0, 100.0, 2.0),
+                            sensor_position=(0.0, 0.0, 0.0), detection=detection_model(RadarParameters(), 2.0))
 
 
 def _problem(spec: FilterSpec, batch: int, seed: int, steps: int = _STEPS, nonlinear: bool = False):

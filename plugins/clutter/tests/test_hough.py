@@ -203,17 +203,20 @@ def test_fast_remover_equals_the_reference_in_dense_clutter():
     assert np.array_equal(remove(scans).valid, _ref_remove(scans))
 
 
-def test_fast_remover_equals_the_reference_on_the_paper_scenario():
+def test_fast_remover_equals_the_reference_on_a_sonar_scenario():
+    # the installed active-sonar sensor and sonar clutter at their defaults, a target crossing the area
     from workbench.plugins import load_host
-    from workbench.recipes import paper001
+    from workbench.trajectory import Leg, piecewise_trajectory
+    from workbench.types import Truth
 
     host = load_host()
-    truth = paper001.target_truth(4)
-    rng = generator(11, "hough-paper-scenario")
-    scans = host.sensor(paper001.SENSOR).simulate(truth, rng, **paper001.SONAR).merge(
-        host.clutter_generator(paper001.CLUTTER_GEN).generate(truth, rng, **paper001.SIM_CLUTTER))
-    got = remove(scans, **paper001.HOUGH).valid
-    assert np.array_equal(got, _ref_remove(scans, **paper001.HOUGH))
+    one = piecewise_trajectory((100.0, 100.0), (4.0, 2.0), (Leg("straight", 19.0),), 1.0)
+    truth = Truth(np.repeat(one.states, 4, axis=0), one.times)
+    rng = generator(11, "hough-sonar-scenario")
+    scans = host.sensor("active-sonar").simulate(truth, rng).merge(
+        host.clutter_generator("sonar-poisson").generate(truth, rng))
+    got = remove(scans).valid
+    assert np.array_equal(got, _ref_remove(scans))
     assert got.any() and (got.sum() < scans.valid.sum())
 
 

@@ -6,7 +6,7 @@ import pytest
 
 from workbench.models import constant_velocity, linear_measurement, range_bearing
 from workbench.rng import generator
-from workbench.tracker import position_covariance
+from workbench.tracking.multi import position_covariance
 from workbench.types import Gaussian, InputError, Scan
 from workbench_filters.cmkf import CMKF_L, converted_covariance, polar_to_cartesian
 

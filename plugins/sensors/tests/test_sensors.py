@@ -9,7 +9,7 @@ detections, and the model's ``R`` matches the spread of the detections it descri
 import numpy as np
 import pytest
 
-from workbench.bistatic import range_and_rate
+from workbench.sensing.bistatic import range_and_rate
 from workbench.plugins import load_host
 from workbench.rng import generator
 from workbench.trajectory import Leg, piecewise_trajectory

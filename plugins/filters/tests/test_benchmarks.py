@@ -1,0 +1,157 @@
+"""The built-in filters' benchmark group ``core`` (``workbench bench --only core``) and the bootstrap PF it times,
+held to a textbook particle filter making the same draws."""
+
+import importlib.util
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.special import logsumexp
+
+from workbench.plugins import load_host
+from workbench.types import BLAS_MOMENT_PARTICLES
+from workbench_filters import benchmarks as bench_core
+from workbench_filters import particle
+
+
+def _expected_fields(stonesoup: bool, ukf: bool) -> dict:
+    """Every figure of ``core --quick`` -> ``"number"`` or the one string it may be instead."""
+    fields = {"cpu_count": "number", "load_avg_1min": "number", "speedup_target": "number",
+              "numpy_version": "string", "stonesoup_version": "string", "peak_rss_mib": "number",
+              "group_wall_s": "number"}
+    for n in bench_core.PF_SIZES["quick"]:
+        for key in ("pf_ns_per_particle_step", "pf_floor_ns_per_particle_step", "pf_pos_rmse_m"):
+            fields[f"{key}_N{n}"] = "number"
+    for n in bench_core.PEER_SIZES:
+        for key in ("stonesoup_ns_per_particle_step", "stonesoup_pos_rmse_m", "pf_over_stonesoup",
+                    "pf_speedup_vs_stonesoup"):
+            fields[f"{key}_N{n}"] = "number" if stonesoup else "not installed"
+    fields["pf_speedup_target_met"] = "bool" if stonesoup else "not installed"
+    for b in bench_core.UKF_BATCHES["quick"]:
+        fields[f"ukf_ns_per_run_step_B{b}"] = "number" if ukf else "ukf not installed"
+    return fields
+
+
+def test_bench_quick_core_reports_every_figure(tmp_path):
+    out = tmp_path / "bench.json"
+    code = "import sys; from workbench.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--only", "core", "--json", str(out)],
+                          capture_output=True, text=True, timeout=900, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(out.read_text())
+    assert report["quick"] is True and list(report["groups"]) == ["core"]
+    core = report["groups"]["core"]
+    assert "error" not in core, core.get("error")
+    stonesoup = importlib.util.find_spec("stonesoup") is not None
+    ukf = "ukf" in load_host().filters
+    expected = _expected_fields(stonesoup, ukf)
+    assert set(core) == set(expected), f"missing {set(expected) - set(core)}, unexpected {set(core) - set(expected)}"
+    for key, kind in expected.items():
+        value = core[key]
+        if kind == "number":
+            assert isinstance(value, (int, float)) and not isinstance(value, bool), (key, value)
+            assert math.isfinite(value) and value >= 0, (key, value)
+        elif kind == "bool":
+            assert isinstance(value, bool), (key, value)
+        elif kind == "string":
+            assert isinstance(value, str) and value, (key, value)
+        else:
+            assert value == kind, (key, value)
+    for n in bench_core.PF_SIZES["quick"]:
+        assert core[f"pf_ns_per_particle_step_N{n}"] > 0
+        # the filter tracks: its position error stays within a few range-noise sigmas of the truth
+        assert core[f"pf_pos_rmse_m_N{n}"] < 20.0
+    assert core["stonesoup_version"] != "not installed" if stonesoup else core["stonesoup_version"] == "not installed"
+    if stonesoup:
+        n = 100_000
+        assert core[f"pf_over_stonesoup_N{n}"] == pytest.approx(1.0 / core[f"pf_speedup_vs_stonesoup_N{n}"])
+        assert core["pf_speedup_target_met"] == (core[f"pf_speedup_vs_stonesoup_N{n}"] >= bench_core.SPEEDUP_TARGET)
+        # Stone Soup solved the same problem: its error is of the same size as ours
+        assert core[f"stonesoup_pos_rmse_m_N{n}"] < 3.0 * core[f"pf_pos_rmse_m_N{n}"] + 1.0
+
+
+def test_sir_every_step_resamples_at_every_update():
+    host = load_host()
+    spec = bench_core.sir_every_step(host, 300)
+    assert spec.params["particles"] == 300 and spec.params["threshold"] > 1.0
+    truth, scans, prior, motion, model = bench_core.problem(2, 6)
+    rng = np.random.default_rng(0)
+    state = spec.init(prior, rng)
+    assert state.cloud.particles.shape == (2, 300, 4)
+    for k in range(6):
+        if k:
+            state = spec.predict(state, motion, rng)
+        state = spec.update(state, scans.scan(k).for_filter(), model, rng)
+    assert spec.diagnostics(state)["resamples"] == 2 * 6
+
+
+# -- resampling ----------------------------------------------------------------------------------------
+
+
+def _reference_sir(prior, scans, motion, model, rng, particles, threshold):
+    """A textbook bootstrap PF (particle-major arrays, BLAS products, SciPy logsumexp, searchsorted
+    resampling) making the same random draws in the same order as the built-in ``sir``."""
+    B, n = prior.mean.shape
+    N = particles
+    x = prior.mean[:, None, :] + rng.standard_normal((B, N, n)) @ np.swapaxes(np.linalg.cholesky(prior.cov), 1, 2)
+    log_w = np.full((B, N), -np.log(N))
+    g = motion.Q_sqrt[:, np.any(motion.Q_sqrt != 0, axis=0)]
+    r_inv = np.linalg.inv(model.R)
+    means, covs = [], []
+    for k in range(scans.steps):
+        if k:
+            x = x @ motion.F.T + rng.standard_normal((B, N, g.shape[1])) @ g.T
+        nu = scans.z[:, k, 0][:, None, :] - model.h(x)
+        nu[..., 1] = np.angle(np.exp(1j * nu[..., 1]))  # bearing wrapped to (-pi, pi]
+        log_w = log_w - 0.5 * np.einsum("bni,ij,bnj->bn", nu, r_inv, nu)
+        log_w = log_w - logsumexp(log_w, axis=1, keepdims=True)
+        rows = np.flatnonzero(1.0 / np.sum(np.exp(2 * log_w), axis=1) < threshold * N)
+        if rows.size:
+            u0 = rng.random((rows.size, 1))
+            for r, u in zip(rows, u0[:, 0]):
+                cdf = np.cumsum(np.exp(log_w[r]))
+                cdf[-1] = 1.0
+                x[r] = x[r][np.searchsorted(cdf, (u + np.arange(N)) / N, side="right")]
+                log_w[r] = -np.log(N)
+        w = np.exp(log_w)
+        means.append(np.stack([np.average(x[b], axis=0, weights=w[b]) for b in range(B)]))
+        covs.append(np.stack([np.cov(x[b].T, aweights=w[b], bias=True) for b in range(B)]))
+    return np.stack(means, axis=1), np.stack(covs, axis=1)
+
+
+@pytest.mark.parametrize("particles, threshold", [(400, 0.5), (BLAS_MOMENT_PARTICLES + 904, 0.5), (3000, 2.0)])
+def test_sir_equals_a_textbook_particle_filter_with_the_same_draws(particles, threshold):
+    truth, scans, prior, motion, model = bench_core.problem(3, 8, seed=4)
+    spec = particle.make_sir(particles, threshold)
+    rng = np.random.default_rng(21)
+    state = spec.init(prior, rng)
+    means, covs = [], []
+    for k in range(scans.steps):
+        if k:
+            state = spec.predict(state, motion, rng)
+        state = spec.update(state, scans.scan(k).for_filter(), model, rng)
+        est = spec.estimate(state)
+        means.append(est.mean)
+        covs.append(est.cov)
+    ref_mean, ref_cov = _reference_sir(prior, scans, motion, model, np.random.default_rng(21), particles, threshold)
+    np.testing.assert_allclose(np.stack(means, axis=1), ref_mean, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(np.stack(covs, axis=1), ref_cov, rtol=1e-8, atol=1e-8)
+    assert 0 < state.resamples <= 3 * 8
+
+
+def test_bench_problem_measurements_are_h_of_truth_plus_noise_of_r():
+    # the timed problem is a real range-bearing tracking problem: whitened residuals of the measurements about
+    # h(truth) are standard normal (a chi-square test of their squared sum) and the bearings are wrapped
+    truth, scans, prior, motion, model = bench_core.problem(40, 25, seed=3)
+    assert scans.z.shape == (40, 25, 1, 2) and np.all(np.abs(scans.z[..., 1]) <= np.pi)
+    resid = model.residual(scans.z[:, :, 0], model.h(truth.states))
+    white = resid / np.sqrt(np.diag(model.R))
+    dof = white.size
+    assert stats.chi2.sf(np.sum(white**2), dof) > 1e-3 and stats.chi2.cdf(np.sum(white**2), dof) > 1e-3
+    # the truth moves as the motion model says: velocity increments have the model's process noise
+    dv = np.diff(truth.states[..., 2:], axis=1) / motion.Q_sqrt[2, 2]
+    assert stats.kstest(dv.ravel(), "norm").pvalue > 1e-3

@@ -1,0 +1,1 @@
+"""The papers the workbench reproduces, one plugin package each (``paper000`` ... ``paper003``)."""

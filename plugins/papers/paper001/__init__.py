@@ -1,0 +1,24 @@
+"""Paper 001: Hough-transform clutter removal and CMKF-L multi-target tracking (active sonar).
+
+The paper's own plugin package: its scenario constants, tasks, figures, tables and "reproduced if" criteria
+(:mod:`.recipe`), the science only this paper uses, its benchmarks (:mod:`.bench`) and its tests (``tests/``).
+It registers through the ``workbench`` entry-point group exactly as a third-party package would, and reaches the
+sensors, clutter models and filters it compares only through the plugin host.  Choices where the paper is silent
+are in ``docs/paper001.md``.
+"""
+
+from workbench import hookimpl
+from workbench.specs import BenchmarkSpec
+
+from . import bench
+from .recipe import RECIPE
+
+
+@hookimpl
+def workbench_report_recipes():
+    return [RECIPE]
+
+
+@hookimpl
+def workbench_benchmarks():
+    return [BenchmarkSpec("paper001", "paper 001: one ping of 10^4 detections through the Hough remover and the tracker, and the full report", bench.bench)]

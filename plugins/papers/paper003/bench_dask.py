@@ -1,0 +1,46 @@
+"""Benchmark group ``dask``: the paper-003 primary Monte Carlo in-process against a local Dask cluster.
+
+The same tasks (3 levels x 8 filters, mismatched noise) run through the report engine's in-process
+executor and through a 2-worker local cluster; every array except wall-clock measurements must be
+bit-identical.  Quick mode runs the quick size, full mode the paper scale (3,000 runs per level).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .bench import _host, run_primary
+from workbench.report.engine import dask_executor
+
+WORKERS = 2
+
+
+def _measured(name: str) -> bool:
+    """Wall-clock measurements differ by nature."""
+    return "seconds" in name or name.endswith("_s")
+
+
+def bench(quick: bool) -> dict:
+    size = "quick" if quick else "full"
+    t_in, inproc = run_primary(size, seed=1)
+    try:
+        executor = dask_executor(_host(), workers=WORKERS)
+    except Exception as exc:  # distributed not installed
+        return {"size": size, "in_process_s": t_in, "dask": f"not available: {exc}"}
+    try:
+        t_dask, remote = run_primary(size, seed=1, executor=executor)
+    finally:
+        executor.close()
+    identical = inproc.keys() == remote.keys() and all(
+        inproc[k].keys() == remote[k].keys()
+        and all(np.array_equal(inproc[k][n], remote[k][n]) for n in inproc[k] if not _measured(n))
+        for k in inproc)
+    return {
+        "size": size,
+        "tasks": len(inproc),
+        "in_process_s": t_in,
+        f"dask_{WORKERS}_workers_s": t_dask,
+        "dask_over_in_process": t_dask / t_in,
+        "target_dask_over_in_process": 1.2,
+        "identical_results": bool(identical),
+    }

@@ -1,0 +1,82 @@
+"""The one kernel-backend policy: which implementation of a compiled kernel runs, and on which arch.
+
+Every kernel of :mod:`workbench.kernels` has a NumPy twin (the reference its tests hold every backend to), a
+Numba version for the CPU and a Taichi version for any arch.  A kernel asks :func:`resolve` which to run:
+
+- ``backend="auto"`` on ``arch="cpu"``: Numba where it is installed (its CPU code vectorises with AVX/FMA), else
+  Taichi;
+- ``backend="auto"`` on ``"cuda"``, ``"vulkan"`` or ``"metal"``: Taichi on that arch;
+- ``"numba"``, ``"taichi"`` or ``"numpy"``: that one (``"numpy"``: the reference twin, for tests and ablations).
+
+The arch is process-wide, as the Taichi runtime is: the report engine and the command line set it for the
+duration of a run with :func:`using` (``workbench report --arch cuda``), and filters never carry it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import importlib.util
+from typing import Iterator
+
+__all__ = ["BACKENDS", "ARCHES", "numba_available", "current_arch", "using", "set_arch", "resolve"]
+
+#: Backend names a kernel call or a filter parameter may give.
+BACKENDS = ("auto", "numba", "taichi", "numpy")
+#: Arch names of the policy (``"auto"``: the first GPU Taichi finds, else the CPU).
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "auto")
+
+_state = {"arch": "cpu"}
+
+
+@functools.lru_cache(maxsize=None)
+def numba_available() -> bool:
+    """Whether Numba is installed (a dependency; an install without it falls back to Taichi on the CPU)."""
+    return importlib.util.find_spec("numba") is not None
+
+
+def current_arch() -> str:
+    """The arch kernels run on now (``"cpu"`` unless :func:`using` or :func:`set_arch` chose another)."""
+    return _state["arch"]
+
+
+def set_arch(arch: str) -> str:
+    """Make ``arch`` the process's kernel arch; returns the previous one."""
+    if arch not in ARCHES:
+        raise ValueError(f"unknown kernel arch {arch!r}; expected one of {', '.join(ARCHES)}")
+    previous, _state["arch"] = _state["arch"], arch
+    return previous
+
+
+@contextlib.contextmanager
+def using(arch: str | None) -> Iterator[str]:
+    """Run the body with kernels on ``arch`` (``None``: leave it as it is)."""
+    if arch is None:
+        yield current_arch()
+        return
+    previous = set_arch(arch)
+    try:
+        yield arch
+    finally:
+        set_arch(previous)
+
+
+def resolve(backend: str = "auto", arch: str | None = None) -> str:
+    """The implementation to run: ``"numba"``, ``"taichi"`` or ``"numpy"`` (see the module docstring).
+
+    ``arch`` defaults to :func:`current_arch`.  Asking for Numba off the CPU, or without Numba installed, is an
+    error rather than a silent substitute.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown kernel backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    arch = current_arch() if arch is None else arch
+    if backend == "numba":
+        if not numba_available():
+            raise ValueError("backend 'numba' needs numba, a dependency of the workbench that this install lacks "
+                             "(pip install numba)")
+        if arch not in ("cpu",):
+            raise ValueError(f"backend 'numba' runs on the CPU only, not on arch {arch!r}")
+        return "numba"
+    if backend != "auto":
+        return backend
+    return "numba" if arch == "cpu" and numba_available() else "taichi"

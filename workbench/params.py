@@ -1,0 +1,206 @@
+"""Declared parameters: what a component can be configured with, checked where values come in.
+
+Every component spec (filter, sensor, clutter generator or remover) declares its parameters as a tuple of
+:class:`Param` (name, type, default, unit, range, one-line doc).  Values reach a component through one
+checked door, :func:`check_values`, from a scenario file, the command line (``"+sir(particles=2000)"``) or
+Python (``spec.configure(particles=2000)``): a wrong type, a NaN, a value out of range or a quantity of the
+wrong unit (``sigma_r = "1 s"``) is refused with a message that names the component, the key and what was
+expected.  Quantities may be written with units (``"10 deg"``, ``"2.5 km"``) and are converted to SI.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable, Mapping
+
+from .types import InputError
+from .units import UNITS, parse_quantity
+
+__all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults"]
+
+#: The value types a parameter may declare.
+TYPES = ("float", "int", "bool", "str", "vector", "float?", "vector?")
+
+
+@dataclass(frozen=True)
+class Param:
+    """One declared parameter of a component.
+
+    Attributes
+    ----------
+    name : str
+        The keyword the component's functions take.
+    default : Any
+        Its default value (in SI units).
+    doc : str
+        One line for ``workbench plugins NAME`` and the docs.
+    type : str
+        ``"float"``, ``"int"``, ``"bool"``, ``"str"``, ``"vector"`` (a tuple of floats), or ``"float?"`` /
+        ``"vector?"`` (the same or ``None``).
+    unit : str or None
+        The unit dimension of a quantity (``"length"``, ``"angle"``, ``"time"``, ``"speed"``, ``"acceleration"``,
+        ``"frequency"``, ``"decibel"``, ``"power"``; see :data:`workbench.units.UNITS`), or ``None`` for a pure
+        number.  Values are SI (angles in radians); a string such as ``"10 deg"`` is converted.
+    minimum, maximum : float or None
+        Inclusive bounds of a number (of every element of a vector).
+    above : float or None
+        A strict lower bound (the value must be greater).
+    choices : tuple or None
+        The allowed values of a ``"str"`` parameter.
+    length : int or None
+        The required length of a ``"vector"``.
+    """
+
+    name: str
+    default: Any
+    doc: str
+    type: str = "float"
+    unit: str | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+    choices: tuple | None = None
+    length: int | None = None
+    above: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.type not in TYPES:
+            raise ValueError(f"Param {self.name!r}: type must be one of {TYPES}, got {self.type!r}")
+        if self.unit is not None and self.unit not in {d for d, _ in UNITS.values()}:
+            raise ValueError(f"Param {self.name!r}: unknown unit dimension {self.unit!r}")
+
+    @property
+    def unit_label(self) -> str:
+        """The SI unit of the value, for listings (``"m"``, ``"rad"``, ``"m/s"``...)."""
+        return _SI.get(self.unit or "", "")
+
+
+_SI = {"length": "m", "angle": "rad", "time": "s", "speed": "m/s", "acceleration": "m/s^2", "frequency": "Hz",
+       "decibel": "dB", "power": "W"}
+
+
+def _number(param: Param, value: Any, where: str, integer: bool = False) -> float | int:
+    if integer:
+        if isinstance(value, bool) or not isinstance(value, (int,)) and not (
+                isinstance(value, float) and value.is_integer()):
+            raise InputError(f"{where}: expected an integer, got {value!r}")
+        number: float | int = int(value)
+    else:
+        number = parse_quantity(value, param.unit, where)
+    if not math.isfinite(number):
+        raise InputError(f"{where}: expected a finite number, got {value!r}")
+    if param.above is not None and not number > param.above:
+        raise InputError(f"{where}: must be > {param.above:g}{_unit(param)}, got {number:g}")
+    if param.minimum is not None and number < param.minimum:
+        raise InputError(f"{where}: must be >= {param.minimum:g}{_unit(param)}, got {number:g}")
+    if param.maximum is not None and number > param.maximum:
+        raise InputError(f"{where}: must be <= {param.maximum:g}{_unit(param)}, got {number:g}")
+    return number
+
+
+def _unit(param: Param) -> str:
+    return f" {param.unit_label}" if param.unit_label else ""
+
+
+def check_value(param: Param, value: Any, where: str) -> Any:
+    """``value`` checked against ``param`` and converted to SI; :class:`InputError` naming ``where`` otherwise."""
+    kind = param.type
+    if kind in ("float?", "vector?") and value is None:
+        return None
+    if kind in ("float", "float?"):
+        return float(_number(param, value, where))
+    if kind == "int":
+        return int(_number(param, value, where, integer=True))
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise InputError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if kind == "str":
+        if not isinstance(value, str):
+            raise InputError(f"{where}: expected a string, got {type(value).__name__} {value!r}")
+        if param.choices is not None and value not in param.choices:
+            raise InputError(f"{where}: expected one of {', '.join(map(str, param.choices))}, got {value!r}")
+        return value
+    # vector, vector?
+    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+        raise InputError(f"{where}: expected a list of numbers, got {value!r}")
+    items = list(value)
+    if param.length is not None and len(items) != param.length:
+        raise InputError(f"{where}: expected {param.length} values, got {len(items)}")
+    return tuple(float(_number(param, v, f"{where}[{i}]")) for i, v in enumerate(items))
+
+
+def check_values(params: Iterable[Param], values: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """Check every entry of ``values`` against the declarations ``params``.
+
+    An undeclared key is an error naming the known ones.  Returns the checked values (SI), only for the
+    keys given.
+    """
+    declared = {p.name: p for p in params}
+    out = {}
+    for key, value in values.items():
+        if key not in declared:
+            known = ", ".join(sorted(declared)) or "none"
+            raise InputError(f"{where}: unknown parameter {key!r} (parameters: {known})")
+        out[key] = check_value(declared[key], value, f"{where}: {key}")
+    return out
+
+
+def defaults(params: Iterable[Param]) -> dict[str, Any]:
+    """``{name: default}`` of the declarations."""
+    return {p.name: p.default for p in params}
+
+
+def infer_params(values: Mapping[str, Any]) -> tuple[Param, ...]:
+    """Declarations guessed from default values, for a third-party component that declares none.
+
+    The type is read from each value; no unit and no range are assumed.
+    """
+    out = []
+    for name, value in values.items():
+        if isinstance(value, bool):
+            kind = "bool"
+        elif isinstance(value, int):
+            kind = "int"
+        elif isinstance(value, float):
+            kind = "float"
+        elif isinstance(value, str):
+            kind = "str"
+        elif value is None:
+            kind = "float?"
+        elif isinstance(value, (list, tuple)) and all(isinstance(v, (int, float)) for v in value):
+            kind = "vector"
+        else:
+            kind = "str"
+        out.append(Param(name, value, "(not declared by the plugin)", kind))
+    return tuple(out)
+
+
+def format_value(value: Any) -> str:
+    """A short, human-readable value: ``2000``, ``0.5``, ``(0.5, 0.5, 1, 1)``, ``none``."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, (tuple, list)):
+        return "(" + ", ".join(format_value(v) for v in value) + ")"
+    return str(value)
+
+
+def describe(params: Iterable[Param], values: Mapping[str, Any] | None = None) -> list[tuple[str, str, str, str, str]]:
+    """Rows ``(name, type, unit, value, doc)`` for listings; ``values`` (default: the defaults) fills the
+    value column."""
+    rows = []
+    for p in params:
+        value = p.default if values is None or p.name not in values else values[p.name]
+        bounds = ""
+        if p.minimum is not None or p.maximum is not None or p.above is not None:
+            lo = f"{p.above:g} < " if p.above is not None else "" if p.minimum is None else f"{p.minimum:g} <= "
+            hi = "" if p.maximum is None else f" <= {p.maximum:g}"
+            bounds = f" [{lo}x{hi}]"
+        if p.choices:
+            bounds = f" [{' | '.join(map(str, p.choices))}]"
+        rows.append((p.name, p.type + bounds, p.unit_label or "-", format_value(value), p.doc))
+    return rows

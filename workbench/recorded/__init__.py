@@ -1,0 +1,7 @@
+"""Readers (and writers) of recorded detections: active-sonar detection lists (:mod:`.sonar`) and passive-radar
+range-Doppler candidate lists (:mod:`.pcl`), both validated CSV formats documented in ``docs/recorded-data.md``."""
+
+from .pcl import load_pcl_candidates, write_pcl_candidates
+from .sonar import load_sonar_csv, write_sonar_csv
+
+__all__ = ["load_sonar_csv", "write_sonar_csv", "load_pcl_candidates", "write_pcl_candidates"]

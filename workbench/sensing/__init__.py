@@ -1,0 +1,3 @@
+"""Sensor physics that several plugins share: monostatic radar (:mod:`.radar`) and bistatic geometry
+(:mod:`.bistatic`).  A sensor, a clutter model and a filter that all need the radar equation or the bistatic
+range rate read it from here, so that plugins never import each other."""

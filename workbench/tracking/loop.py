@@ -1,0 +1,133 @@
+"""The one time loop of the workbench: every driver is this loop with a pluggable association step.
+
+::
+
+    carry = association.start(context, prior)
+    for k, scan in enumerate(scans):                  # the filter never sees scan.origin
+        if k > 0 (or predict_first):
+            motion_k = motion.for_interval(t_k - t_{k-1})  # irregular time stamps honoured
+            carry = association.predict(carry, motion_k, k)
+        carry = association.update(carry, scan, k)
+    return association.finish(carry)
+
+An *association* decides what the filter is updated with at each scan, and records what it decided:
+
+- :class:`~workbench.tracking.single.Direct`: the scan as it is (at most one valid row per item, or any number for a
+  filter with the ``multi_measurement`` capability);
+- :class:`~workbench.tracking.single.Gated`: the detections inside a radius around the predicted position, handed
+  whole to a multi-measurement filter or through a pseudo-measurement step to any other;
+- :class:`~workbench.tracking.single.NearestNeighbour`: the candidate nearest (Mahalanobis) to the predicted
+  measurement, optionally gated, with coasting and restarts;
+- :class:`~workbench.tracking.multi.MofN`: multi-target tracking (gating, greedy nearest neighbour, two-point
+  initiation, M-of-N confirmation and deletion), the live tracks of a run being the filter's batch.
+
+The single-target roles return a :class:`Track` (the estimates over time and the association's records); the
+multi-target role returns a :class:`~workbench.tracking.multi.TrackLog`.  A filter state is the filter's own
+business; the loop only ever calls the filter's four functions through the association.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Protocol
+
+import numpy as np
+
+from ..models import MeasurementModel, MotionModel
+from ..specs import FilterSpec
+from ..types import Gaussian, InputError, Scan, Scans
+
+__all__ = ["Context", "Association", "Track", "run"]
+
+
+@dataclass(frozen=True)
+class Context:
+    """What an association works with: the filter, the measurement model, the motion model (of the nominal step),
+    the scan series' shape and times, and the random generator of the run (``None`` for a role that keys its own
+    per-run streams)."""
+
+    filter: FilterSpec
+    model: MeasurementModel
+    motion: MotionModel
+    batch: int
+    steps: int
+    times: np.ndarray
+    rng: np.random.Generator | None
+
+
+class Association(Protocol):
+    """An association role for :func:`run` (see the module docstring)."""
+
+    def start(self, ctx: Context, prior: Gaussian | None, first: Scan) -> Any: ...
+
+    def predict(self, carry: Any, motion: MotionModel, k: int) -> Any: ...
+
+    def update(self, carry: Any, scan: Scan, k: int) -> Any: ...
+
+    def finish(self, carry: Any) -> Any: ...
+
+
+@dataclass(frozen=True)
+class Track:
+    """A single-target filter's output over a scan series, for a batch of runs.
+
+    Shapes
+    ------
+    mean, predicted_mean : (B, T, n)
+    cov : (B, T, n, n)
+    records : the association's per-step records, each ``(B, T, ...)`` (see each role)
+
+    ``seconds`` is the wall time of the loop; ``diagnostics`` the filter's counters after the last scan.
+    """
+
+    filter: str
+    mean: np.ndarray
+    cov: np.ndarray
+    predicted_mean: np.ndarray
+    diagnostics: Mapping[str, float]
+    records: Mapping[str, np.ndarray] = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementModel, *,
+        association: Association | None = None, prior: Gaussian | None = None,
+        rng: np.random.Generator | None = None, predict_first: bool = False,
+        progress: Callable[[float], None] | None = None):
+    """Drive ``filt`` over ``scans`` with ``association`` (default :class:`~workbench.tracking.single.Direct`).
+
+    Parameters
+    ----------
+    filt : the filter (any :class:`~workbench.specs.FilterSpec`)
+    scans : the detections, ``z (B, T, M, m)``; their ``origin`` labels are stripped before any step sees them
+    motion : the motion model; rebuilt for every step whose interval differs from its own ``dt``
+    model : the measurement model the filter is given
+    association : the role that chooses what the filter is updated with (see the module docstring)
+    prior : the belief at the first scan, ``(B, n)`` (a role may build its own, e.g. from the first scan)
+    rng : the generator of the run's random draws (filters that draw, pseudo steps)
+    predict_first : predict before the first update too (as FilterPy and Stone Soup do, when the prior is the
+        belief one step before the first scan); by default the first scan updates the prior directly
+    progress : called with the finished fraction after each scan
+    """
+    if association is None:
+        from .single import Direct
+
+        association = Direct()
+    if prior is not None and prior.batch != scans.batch:
+        raise InputError(f"prior has batch {prior.batch} but the scans have batch {scans.batch}")
+    if scans.cov is not None and "detection_covariance" not in filt.capabilities:
+        raise InputError(f"the scans carry each detection's own covariance (cov), which filter {filt.name!r} would "
+                         f"ignore (it lacks the detection_covariance capability)")
+    T = scans.steps
+    ctx = Context(filt, model, motion, scans.batch, T, scans.times, rng)
+    carry = association.start(ctx, prior, scans.scan(0).for_filter() if T else Scan.empty(scans.batch,
+                                                                                           scans.z.shape[-1]))
+    intervals = scans.intervals
+    for k in range(T):
+        scan = scans.scan(k).for_filter()
+        if k > 0 or predict_first:
+            carry = association.predict(carry, motion.for_interval(float(intervals[k])) if T > 1 else motion, k)
+        carry = association.update(carry, scan, k)
+        if progress is not None:
+            progress((k + 1) / T)
+    return association.finish(carry)
+

@@ -1,0 +1,652 @@
+"""Multi-target tracking for any filter plugin: classification, two-point initiation, nearest-neighbour
+association, M-of-N track management; the :class:`MofN` association role of :func:`workbench.tracking.run`.
+
+Per ping ``k``, with the live tracks as the batch axis of the filter functions (one ``predict`` and one
+``update`` call per ping for all tracks)::
+
+    1. predict every live track                         filter.predict(state, motion)
+    2. gate    d2 = nu^T S^-1 nu,  nu = wrap(z - h(x-)),  S = J P- J^T + R   (J = model Jacobian at x-)
+               a (track, detection) pair is in the gate when d2 <= gate (9.21 = chi2_2 99 %)
+    3. classify: a detection inside any track's gate is an association detection; the rest are
+               initiation detections
+    4. associate: nearest neighbour, each detection used at most once, greedy by smallest d2
+    5. update every track with its detection (none: the item comes back as predicted)
+    6. manage: confirm at >= M hits in the last N pings (3 of 5); delete after 3 consecutive misses, or a
+               tentative track that can no longer reach M hits in its first N pings
+    7. initiate: a tentative track from every pair (initiation detection of ping k-1, initiation
+               detection of ping k) inside the rectangular gate |dx|, |dy| <= v_max dt, each detection
+               in at most one pair (greedy by smallest Chebyshev distance); the prior is
+               :func:`two_point_prior`
+
+Detections are Cartesian positions ``(x, y)``; the filter sees them through the measurement model as
+``h(p)`` with ``p = [x, y, 0, ...]`` (:func:`measurement_view`).  That is exact for models whose ``h``
+depends on position only (the linear position model, range-bearing); for range-bearing it is the
+conversion ``(r, b) = (|p|, atan2(y, x))``.  The state layout is ``[x, y, vx, vy]``.
+
+The tracker never sees ``origin``; metrics (:mod:`workbench.metrics`) compare its log with the truth
+afterwards.  Every Monte Carlo run keeps its own tracks and its own random stream (track management is per
+run); inside a ping everything is vectorised.  Irregular ping intervals are honoured: the initiation box and the
+two-point velocity use the actual interval.
+
+Filter states are the filter's own business; the tracker subsets and joins them with :func:`take_items`
+and :func:`join_items`, which walk dataclasses, tuples and arrays and treat every array whose leading
+axis is the batch size as batched (the project's batch-first rule).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..models import MeasurementModel, MotionModel
+from ..rng import generator
+from ..specs import FilterSpec
+from ..types import Gaussian, InputError, Scan, Scans
+from .loop import Context
+
+__all__ = [
+    "TENTATIVE",
+    "CONFIRMED",
+    "TrackerConfig",
+    "TrackTable",
+    "TrackerState",
+    "PingTracks",
+    "TrackLog",
+    "measurement_view",
+    "position_covariance",
+    "two_point_prior",
+    "box_pairs",
+    "gate_covariance",
+    "gated_pairs",
+    "greedy_assign",
+    "rectangular_pairs",
+    "mofn_step",
+    "take_items",
+    "join_items",
+    "initial_state",
+    "tracker_step",
+    "MofN",
+    "run_tracker",
+]
+
+TENTATIVE = 0
+CONFIRMED = 1
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Tracker parameters (defaults: an active-sonar tracker of ~2 m position accuracy).
+
+    gate : Mahalanobis gate on ``d2`` (9.21: chi-square 2 dof, 99 %).
+    v_max : initiation box half-width per ping, ``|dx|, |dy| <= v_max dt`` (units per ping).
+    confirm_hits, confirm_window : M-of-N confirmation (3 of 5).
+    delete_misses : consecutive misses that delete a track (3).
+    sigma_v, sigma_c : speed (units/ping) and course (rad) standard deviations of the two-point prior.
+    dense_limit : above this many (track, detection) pairs, candidate pairs come from a spatial grid first.
+    gate_sigma : ``None`` (default): gate with the filter's ``R``.  A number ``s``: gate with the position
+        accuracy ``s`` instead, ``R_g = J_p (s^2 I) J_p^T`` (``J_p = dh/dp`` at the prediction), i.e.
+        ``S_g = J P- J^T + R_g``; the filter's own update still uses its ``R``.
+    """
+
+    gate: float = 9.21
+    v_max: float = 8.0
+    confirm_hits: int = 3
+    confirm_window: int = 5
+    delete_misses: int = 3
+    sigma_v: float = 1.0
+    sigma_c: float = 1.0
+    dense_limit: int = 250_000
+    gate_sigma: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.gate_sigma is not None and not self.gate_sigma > 0:
+            raise InputError(f"TrackerConfig: gate_sigma must be None or > 0, got {self.gate_sigma}")
+        if not (self.gate > 0 and self.v_max > 0 and self.sigma_v >= 0 and self.sigma_c >= 0):
+            raise InputError(f"TrackerConfig: need gate, v_max > 0 and sigma_v, sigma_c >= 0; got {self}")
+        if not (1 <= self.confirm_hits <= self.confirm_window <= 30 and self.delete_misses >= 1):
+            raise InputError(f"TrackerConfig: need 1 <= confirm_hits <= confirm_window <= 30 and delete_misses >= 1; "
+                             f"got {self.confirm_hits}, {self.confirm_window}, {self.delete_misses}")
+
+
+@dataclass(frozen=True)
+class TrackTable:
+    """The live tracks after a ping.
+
+    Shapes
+    ------
+    ids, status, history, misses, age : (K,)   (``history``: bit 0 = hit at the latest ping)
+    mean : (K, n), the filter's estimate
+    state : the filter's state for a batch of K (None when K = 0)
+    """
+
+    ids: np.ndarray
+    status: np.ndarray
+    history: np.ndarray
+    misses: np.ndarray
+    age: np.ndarray
+    mean: np.ndarray
+    state: Any = None
+
+    @property
+    def size(self) -> int:
+        return int(self.ids.shape[0])
+
+
+@dataclass(frozen=True)
+class TrackerState:
+    """Everything the tracker carries from one ping to the next (for one run)."""
+
+    table: TrackTable
+    candidates: np.ndarray  # (P, 2) initiation detections of the last ping not used by a new track
+    next_id: int = 0
+    ping: int = -1
+
+
+@dataclass(frozen=True)
+class PingTracks:
+    """The tracker's output for one ping: every live track after management.
+
+    Shapes: ``ids, status, hit (K,)``, ``mean (K, n)``.
+    """
+
+    ping: int
+    ids: np.ndarray
+    status: np.ndarray
+    hit: np.ndarray
+    mean: np.ndarray
+
+
+@dataclass(frozen=True)
+class TrackLog:
+    """All tracks of all runs, one row per (run, ping, live track).
+
+    Shapes
+    ------
+    run, ping, track_id, status, hit : (R,)
+    mean : (R, n)
+    """
+
+    run: np.ndarray
+    ping: np.ndarray
+    track_id: np.ndarray
+    status: np.ndarray
+    hit: np.ndarray
+    mean: np.ndarray
+    runs: int
+    pings: int
+
+    def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """The log as named arrays (for a task result / NPZ)."""
+        return {f"{prefix}run": self.run, f"{prefix}ping": self.ping, f"{prefix}track_id": self.track_id,
+                f"{prefix}status": self.status, f"{prefix}hit": self.hit, f"{prefix}mean": self.mean,
+                f"{prefix}shape": np.array([self.runs, self.pings])}
+
+    @classmethod
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray], prefix: str = "") -> "TrackLog":
+        runs, pings = (int(v) for v in arrays[f"{prefix}shape"])
+        return cls(np.asarray(arrays[f"{prefix}run"]), np.asarray(arrays[f"{prefix}ping"]),
+                   np.asarray(arrays[f"{prefix}track_id"]), np.asarray(arrays[f"{prefix}status"]),
+                   np.asarray(arrays[f"{prefix}hit"], dtype=bool), np.asarray(arrays[f"{prefix}mean"]), runs, pings)
+
+    def select(self, mask: np.ndarray) -> "TrackLog":
+        return TrackLog(self.run[mask], self.ping[mask], self.track_id[mask], self.status[mask], self.hit[mask],
+                        self.mean[mask], self.runs, self.pings)
+
+    def confirmed_counts(self) -> np.ndarray:
+        """Number of confirmed tracks per run and ping, ``(runs, pings)``."""
+        out = np.zeros((self.runs, self.pings), dtype=int)
+        c = self.status == CONFIRMED
+        np.add.at(out, (self.run[c], self.ping[c]), 1)
+        return out
+
+
+# -- pieces ---------------------------------------------------------------------------------------
+
+
+def measurement_view(model: MeasurementModel, positions: np.ndarray, n: int) -> np.ndarray:
+    """Cartesian detections ``(M, 2)`` in the model's measurement space, ``h([x, y, 0, ...])`` -> ``(M, m)``."""
+    state = np.zeros((positions.shape[0], n))
+    state[:, :2] = positions
+    return np.asarray(model.h(state), dtype=float).reshape(positions.shape[0], model.dim)
+
+
+def _jacobian(model: MeasurementModel, x: np.ndarray) -> np.ndarray:
+    if model.jacobian is not None:
+        return np.asarray(model.jacobian(x), dtype=float)
+    if model.H is not None:
+        return np.broadcast_to(model.H, (x.shape[0], *model.H.shape))
+    raise InputError(f"the tracker gates with the Jacobian of the measurement model; {model.name!r} has none")
+
+
+def position_covariance(model: MeasurementModel, positions: np.ndarray, n: int) -> np.ndarray:
+    """Covariance of the Cartesian position a detection implies, ``A R A^T`` with ``A = (dh/dp)^-1``.
+
+    For the linear position model this is ``R``; for range-bearing it is the linearised conversion
+    covariance of the converted-measurement filter (``R11, R22, R12``).  ``(M, 2) -> (M, 2, 2)``.
+    """
+    if model.dim != 2:
+        raise InputError(f"the tracker needs a 2-component position-like measurement model, got m={model.dim}")
+    state = np.zeros((positions.shape[0], n))
+    state[:, :2] = positions
+    jp = _jacobian(model, state)[:, :, :2]  # dh/dp, (M, 2, 2)
+    # A = (dh/dp)^-1;  A R A^T = solve(J, solve(J, R)^T)^T
+    x = np.linalg.solve(jp, np.broadcast_to(model.R, jp.shape))
+    out = np.linalg.solve(jp, np.swapaxes(x, -1, -2))
+    return 0.5 * (out + np.swapaxes(out, -1, -2))
+
+
+def two_point_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, pos_cov: np.ndarray, sigma_v: float,
+                    sigma_c: float) -> Gaussian:
+    """Two-point track initialisation from gated detections of consecutive pings.
+
+    ``x0 = [p_cur, (p_cur - p_prev) / dt]`` and, with speed ``v`` and course ``c`` of that velocity
+    (``vx = v cos c``, ``vy = v sin c``)::
+
+        P0 = blockdiag(R_c(p_cur), J diag(sigma_v^2, sigma_c^2) J^T),   J = [[cos c, -v sin c], [sin c, v cos c]]
+
+    Shapes: ``p_prev, p_cur (K, 2)``, ``pos_cov (K, 2, 2)`` -> Gaussian ``(K, 4)``.
+    """
+    vel = (p_cur - p_prev) / dt
+    v = np.hypot(vel[:, 0], vel[:, 1])
+    c = np.arctan2(vel[:, 1], vel[:, 0])
+    J = np.empty((p_cur.shape[0], 2, 2))
+    J[:, 0, 0], J[:, 0, 1] = np.cos(c), -v * np.sin(c)
+    J[:, 1, 0], J[:, 1, 1] = np.sin(c), v * np.cos(c)
+    # P_v = J diag(sigma_v^2, sigma_c^2) J^T
+    pv = J @ np.diag([sigma_v**2, sigma_c**2]) @ np.swapaxes(J, -1, -2)
+    cov = np.zeros((p_cur.shape[0], 4, 4))
+    cov[:, :2, :2] = pos_cov
+    cov[:, 2:, 2:] = 0.5 * (pv + np.swapaxes(pv, -1, -2))
+    return Gaussian(np.concatenate([p_cur, vel], axis=1), cov)
+
+
+def _whiten(chol: np.ndarray, nu: np.ndarray) -> np.ndarray:
+    """``L^-1 nu`` for lower-triangular ``chol (..., m, m)`` and ``nu (..., m)`` (broadcasting).
+
+    Forward substitution written out for ``m = 2`` (the tracker's case: no LAPACK call per pair), a
+    batched solve otherwise.
+    """
+    if nu.shape[-1] != 2:
+        return np.linalg.solve(chol, nu[..., None])[..., 0]
+    w1 = nu[..., 0] / chol[..., 0, 0]
+    w2 = (nu[..., 1] - chol[..., 1, 0] * w1) / chol[..., 1, 1]
+    return np.stack([w1, w2], axis=-1)
+
+
+def box_pairs(a: np.ndarray, b: np.ndarray, half, cell: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs ``(i, j)`` with ``|a_i - b_j| <= half_i`` on both axes, by spatial grid hashing.
+
+    ``b`` is binned into square cells of side ``cell`` (default: the median box width, so a box covers a
+    few cells); each ``a_i`` visits the cells its box overlaps, and the candidates of those cells are
+    found with ``searchsorted`` on the sorted cell keys.  Fully vectorised, no ``(Na, Nb)`` matrix and no
+    Python loop over points; the cost is the number of (point, visited cell) and candidate pairs.
+
+    Shapes: ``a (Na, 2)``, ``b (Nb, 2)``, ``half`` scalar, ``(Na,)`` or ``(Na, 2)`` -> ``i, j (P,)``, sorted
+    by ``i``.
+    """
+    a = np.asarray(a, dtype=float).reshape(-1, 2)
+    b = np.asarray(b, dtype=float).reshape(-1, 2)
+    e = np.zeros(0, dtype=np.intp)
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        return e, e
+    half = np.asarray(half, dtype=float)
+    half = np.broadcast_to(half[..., None] if half.ndim == 1 else half, a.shape)
+    if cell is None:
+        cell = float(np.median(2.0 * half))
+    lo = b.min(axis=0)
+    extent = b.max(axis=0) - lo
+    cell = max(float(cell), float(extent.max()) / 4096.0, 1e-9)
+    nb = np.floor((b - lo) / cell).astype(np.int64)
+    ny = int(nb[:, 1].max()) + 1
+    nx = int(nb[:, 0].max()) + 1
+    keys = nb[:, 0] * ny + nb[:, 1]
+    order = np.argsort(keys, kind="stable")
+    skeys = keys[order]
+    c0 = np.floor((a - half - lo) / cell).astype(np.int64)
+    c1 = np.floor((a + half - lo) / cell).astype(np.int64)
+    c0 = np.maximum(c0, 0)
+    c1 = np.minimum(c1, [nx - 1, ny - 1])
+    ncx, ncy = np.maximum(c1[:, 0] - c0[:, 0] + 1, 0), np.maximum(c1[:, 1] - c0[:, 1] + 1, 0)
+    ncell = ncx * ncy
+    total = int(ncell.sum())
+    if total == 0:
+        return e, e
+    # (point, visited cell) pairs
+    rep = np.repeat(np.arange(a.shape[0]), ncell)
+    local = np.arange(total) - np.repeat(np.cumsum(ncell) - ncell, ncell)
+    cx = c0[rep, 0] + local // ncy[rep]
+    cy = c0[rep, 1] + local % ncy[rep]
+    ckey = cx * ny + cy
+    first = np.searchsorted(skeys, ckey, side="left")
+    count = np.searchsorted(skeys, ckey, side="right") - first
+    n = int(count.sum())
+    if n == 0:
+        return e, e
+    # (point, candidate) pairs
+    i = np.repeat(rep, count)
+    j = order[np.repeat(first, count) + np.arange(n) - np.repeat(np.cumsum(count) - count, count)]
+    inside = np.all(np.abs(a[i] - b[j]) <= half[i], axis=1)
+    return i[inside], j[inside]
+
+
+def gate_covariance(est: Gaussian, model: MeasurementModel, config: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Gate innovation covariance ``S = J P- J^T + R_g`` and the Jacobian ``J`` at the prediction.
+
+    ``R_g = R`` (the filter's), or ``J_p (gate_sigma^2 I) J_p^T`` with ``J_p = dh/dp`` when
+    ``config.gate_sigma`` is set.  Shapes: ``(K, m, m)``, ``(K, m, n)``.
+    """
+    J = _jacobian(model, est.mean)
+    if config.gate_sigma is None:
+        R = model.R
+    else:
+        jp = J[:, :, :2]
+        R = config.gate_sigma**2 * (jp @ np.swapaxes(jp, -1, -2))  # R_g = J_p (s^2 I) J_p^T
+    S = J @ est.cov @ np.swapaxes(J, -1, -2) + R  # S = J P- J^T + R_g
+    return 0.5 * (S + np.swapaxes(S, -1, -2)), J
+
+
+def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: MeasurementModel,
+                config: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All (track, detection) pairs with ``d2 <= gate``: ``rows, cols, d2`` (each ``(P,)``).
+
+    ``d2 = nu^T S^-1 nu``, ``nu = wrap(z - h(x-))``, ``S`` from :func:`gate_covariance`.  Dense over all
+    pairs when ``K M <= dense_limit``; otherwise candidates come from a spatial grid
+    (:func:`box_pairs`) over the Cartesian positions: each track's box is the bounding box of its gate
+    ellipse in position space (covariance ``A S A^T``, ``A = (dh/dp)^-1``), widened 1.5x plus one unit
+    for the linearisation of a nonlinear ``h``; ``d2`` is then computed for the candidates only.
+    """
+    K, M = est.batch, zm.shape[0]
+    if K == 0 or M == 0:
+        e = np.zeros(0, dtype=np.intp)
+        return e, e, np.zeros(0)
+    zhat = model.h(est.mean)
+    S, J = gate_covariance(est, model, config)
+    chol = np.linalg.cholesky(S)
+    if K * M <= config.dense_limit:
+        nu = model.residual(zm[None, :, :], zhat[:, None, :])  # (K, M, m)
+        w = _whiten(chol[:, None], nu)  # L^-1 nu
+        d2 = np.einsum("kmi,kmi->km", w, w)
+        rows, cols = np.nonzero(d2 <= config.gate)
+        return rows, cols, d2[rows, cols]
+    # Sparse path: the gate ellipse in position space has covariance A S A^T (A = (dh/dp)^-1).
+    jp = J[:, :, :2]
+    x = np.linalg.solve(jp, S)
+    sc = np.linalg.solve(jp, np.swapaxes(x, -1, -2))
+    var = np.maximum(np.stack([sc[:, 0, 0], sc[:, 1, 1]], axis=1), 0.0)
+    half = 1.5 * np.sqrt(config.gate * var) + 1.0  # bounding box of d2 <= gate, widened
+    rows, cols = box_pairs(est.mean[:, :2], positions, half)
+    if rows.size == 0:
+        e = np.zeros(0, dtype=np.intp)
+        return e, e, np.zeros(0)
+    nu = model.residual(zm[cols], zhat[rows])
+    w = _whiten(chol[rows], nu)
+    d2 = np.einsum("pi,pi->p", w, w)
+    inside = d2 <= config.gate
+    return rows[inside], cols[inside], d2[inside]
+
+
+def greedy_assign(rows: np.ndarray, cols: np.ndarray, cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Greedy one-to-one assignment by smallest cost (ties broken by row, then column).
+
+    Equivalent to repeatedly taking the globally cheapest remaining pair; computed in rounds in which
+    every pair that is the cheapest of both its row and its column is taken at once.
+    """
+    order = np.lexsort((cols, rows, cost))
+    rows, cols = rows[order], cols[order]
+    out_r, out_c = [], []
+    while rows.size:
+        # pairs are sorted by rank, so the first occurrence is the cheapest of its row / column
+        _, first_r = np.unique(rows, return_index=True)
+        _, first_c = np.unique(cols, return_index=True)
+        row_best = np.zeros(rows.size, dtype=bool)
+        row_best[first_r] = True
+        col_best = np.zeros(rows.size, dtype=bool)
+        col_best[first_c] = True
+        mutual = row_best & col_best
+        take_r, take_c = rows[mutual], cols[mutual]
+        out_r.append(take_r)
+        out_c.append(take_c)
+        alive = ~(np.isin(rows, take_r) | np.isin(cols, take_c))
+        rows, cols = rows[alive], cols[alive]
+    if not out_r:
+        e = np.zeros(0, dtype=np.intp)
+        return e, e
+    return np.concatenate(out_r), np.concatenate(out_c)
+
+
+def rectangular_pairs(a: np.ndarray, b: np.ndarray, box: float, dense_limit: int = 250_000):
+    """Pairs ``(i, j)`` with ``|a_i - b_j|_inf <= box`` and their Chebyshev distances (dense below
+    ``dense_limit`` pairs, else the spatial grid of :func:`box_pairs`)."""
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        e = np.zeros(0, dtype=np.intp)
+        return e, e, np.zeros(0)
+    if a.shape[0] * b.shape[0] <= dense_limit:
+        d = np.max(np.abs(a[:, None, :] - b[None, :, :]), axis=-1)
+        i, j = np.nonzero(d <= box)
+        return i, j, d[i, j]
+    i, j = box_pairs(a, b, box, cell=max(2.0 * box, 1e-9))
+    return i, j, np.max(np.abs(a[i] - b[j]), axis=-1)
+
+
+_POPCOUNT = np.array([bin(v).count("1") for v in range(1 << 12)], dtype=np.int64)
+
+
+def _popcount(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=np.int64)
+    out = np.zeros_like(x)
+    while np.any(x):
+        out += _POPCOUNT[x & 0xFFF]
+        x = x >> 12
+    return out
+
+
+def mofn_step(history: np.ndarray, misses: np.ndarray, age: np.ndarray, status: np.ndarray, hit: np.ndarray,
+              config: TrackerConfig):
+    """Advance the M-of-N state machine of every track by one ping.
+
+    Returns ``history, misses, age, status, delete`` (each ``(K,)``)::
+
+        history <- (history << 1 | hit) mod 2^N       hits = popcount(history)
+        confirm   tentative with hits >= M
+        delete    misses >= delete_misses, or tentative with age >= N (never confirmed in its first N
+                  pings) or hits + (N - age) < M (can no longer be)
+    """
+    N, M = config.confirm_window, config.confirm_hits
+    hit = np.asarray(hit, dtype=bool)
+    history = ((np.asarray(history, dtype=np.int64) << 1) | hit) & ((1 << N) - 1)
+    age = np.asarray(age) + 1
+    misses = np.where(hit, 0, np.asarray(misses) + 1)
+    hits = _popcount(history)
+    status = np.where((status == TENTATIVE) & (hits >= M), CONFIRMED, status).astype(np.int8)
+    tentative = status == TENTATIVE
+    delete = (misses >= config.delete_misses) | (tentative & ((age >= N) | (hits + (N - age) < M)))
+    return history, misses, age, status, delete
+
+
+# -- opaque filter states -------------------------------------------------------------------------
+
+
+def take_items(state: Any, index: np.ndarray, batch: int) -> Any:
+    """The sub-batch ``index`` of a filter state (arrays with leading axis ``batch``, walked through
+    dataclasses and tuples; other values are kept)."""
+    if isinstance(state, np.ndarray):
+        return state[index] if state.ndim and state.shape[0] == batch else state
+    if dataclasses.is_dataclass(state) and not isinstance(state, type):
+        return dataclasses.replace(state, **{f.name: take_items(getattr(state, f.name), index, batch)
+                                             for f in dataclasses.fields(state) if f.init})
+    if isinstance(state, tuple):
+        items = [take_items(v, index, batch) for v in state]
+        return type(state)(*items) if hasattr(state, "_fields") else tuple(items)
+    return state
+
+
+def join_items(a: Any, b: Any, batch_a: int, batch_b: int) -> Any:
+    """Concatenate two filter states along the batch axis (non-batched values are taken from ``a``)."""
+    if isinstance(a, np.ndarray):
+        if a.ndim and a.shape[0] == batch_a and isinstance(b, np.ndarray) and b.ndim and b.shape[0] == batch_b:
+            return np.concatenate([a, b], axis=0)
+        return a
+    if dataclasses.is_dataclass(a) and not isinstance(a, type):
+        return dataclasses.replace(a, **{f.name: join_items(getattr(a, f.name), getattr(b, f.name), batch_a, batch_b)
+                                         for f in dataclasses.fields(a) if f.init})
+    if isinstance(a, tuple):
+        items = [join_items(x, y, batch_a, batch_b) for x, y in zip(a, b)]
+        return type(a)(*items) if hasattr(a, "_fields") else tuple(items)
+    return a
+
+
+# -- the tracker ----------------------------------------------------------------------------------
+
+
+def initial_state(n: int = 4) -> TrackerState:
+    """No tracks, no initiation candidates."""
+    e = np.zeros(0, dtype=np.int64)
+    return TrackerState(TrackTable(e, e.astype(np.int8), e, e, e, np.zeros((0, n))), np.zeros((0, 2)))
+
+
+def _predict_tracks(st: TrackerState, filt: FilterSpec, motion: MotionModel, rng) -> Any:
+    """The live tracks' predicted filter state (``None`` without tracks)."""
+    return filt.predict(st.table.state, motion, rng) if st.table.size else None
+
+
+def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, motion: MotionModel,
+                 model: MeasurementModel, config: TrackerConfig, rng: np.random.Generator,
+                 predicted: Any = None) -> tuple[TrackerState, PingTracks]:
+    """Process one ping's Cartesian detections ``positions (M, 2)``; see the module docstring.
+
+    ``predicted`` is the live tracks' filter state already predicted to this ping (by :func:`_predict_tracks`);
+    ``None`` predicts here.
+    """
+    positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+    if not np.all(np.isfinite(positions)):
+        raise InputError(f"tracker: ping {st.ping + 1} holds a non-finite detection position")
+    n = motion.dim
+    if n != 4:
+        raise InputError(f"tracker: the state must be [x, y, vx, vy] (n = 4), got a motion model with n = {n}")
+    k = st.ping + 1
+    table = st.table
+    K, M = table.size, positions.shape[0]
+    zm = measurement_view(model, positions, n) if M else np.zeros((0, model.dim))
+    near = np.zeros(M, dtype=bool)
+    if K:
+        state = predicted if predicted is not None else filt.predict(table.state, motion, rng)
+        pred = filt.estimate(state)
+        rows, cols, d2 = gated_pairs(pred, positions, zm, model, config)
+        near[cols] = True
+        a_rows, a_cols = greedy_assign(rows, cols, d2)
+        hit = np.zeros(K, dtype=bool)
+        hit[a_rows] = True
+        z = np.zeros((K, 1, model.dim))
+        z[a_rows, 0] = zm[a_cols]
+        state = filt.update(state, Scan(z, hit[:, None]), model, rng)
+        mean = filt.estimate(state).mean
+        history, misses, age, status, delete = mofn_step(table.history, table.misses, table.age, table.status, hit,
+                                                         config)
+        keep = np.flatnonzero(~delete)
+        table = TrackTable(table.ids[keep], status[keep], history[keep], misses[keep], age[keep], mean[keep],
+                           take_items(state, keep, K) if keep.size else None)
+        hits_out = hit[keep]
+    else:
+        hits_out = np.zeros(0, dtype=bool)
+    # initiation from the unclaimed detections of this ping and the last
+    init_pos = positions[~near]
+    pi, ci, dist = rectangular_pairs(st.candidates, init_pos, config.v_max * motion.dt, config.dense_limit)
+    a_p, a_c = greedy_assign(pi, ci, dist)
+    next_id = st.next_id
+    if a_c.size:
+        order = np.argsort(a_c)  # new tracks in detection order
+        a_p, a_c = a_p[order], a_c[order]
+        p_prev, p_cur = st.candidates[a_p], init_pos[a_c]
+        pos_cov = position_covariance(model, p_cur, n)
+        prior = two_point_prior(p_prev, p_cur, motion.dt, pos_cov, config.sigma_v, config.sigma_c)
+        new_state = filt.init(prior, rng)
+        new_mean = filt.estimate(new_state).mean
+        Kn = a_c.size
+        ids = np.arange(next_id, next_id + Kn, dtype=np.int64)
+        next_id += Kn
+        status0 = np.where(2 >= config.confirm_hits, CONFIRMED, TENTATIVE).astype(np.int8)
+        joined = new_state if table.size == 0 else join_items(table.state, new_state, table.size, Kn)
+        table = TrackTable(np.concatenate([table.ids, ids]), np.concatenate([table.status, np.full(Kn, status0)]),
+                           np.concatenate([table.history, np.full(Kn, 0b11, dtype=np.int64)]),
+                           np.concatenate([table.misses, np.zeros(Kn, dtype=np.int64)]),
+                           np.concatenate([table.age, np.full(Kn, 2, dtype=np.int64)]),
+                           np.concatenate([table.mean, new_mean]), joined)
+        hits_out = np.concatenate([hits_out, np.ones(Kn, dtype=bool)])
+    used = np.zeros(init_pos.shape[0], dtype=bool)
+    used[a_c] = True
+    out = PingTracks(k, table.ids.copy(), table.status.copy(), hits_out, table.mean.copy())
+    return TrackerState(table, init_pos[~used], next_id, k), out
+
+
+@dataclass
+class _MofNCarry:
+    ctx: Context
+    states: list  # per run: its TrackerState
+    predicted: list  # per run: its live tracks' filter state predicted to the coming ping, or None
+    rngs: list
+    rows: dict
+    motion: MotionModel
+
+
+class MofN:
+    """The multi-target role of :func:`workbench.tracking.run`: every run's live tracks are the filter's batch.
+
+    Per run ``b`` the random stream is ``generator(seed, *key, b)``, so a run's tracks do not depend on the other
+    runs.  Detections must be Cartesian ``(x, y)``; the filter sees them through its model
+    (:func:`measurement_view`).  :meth:`finish` returns a :class:`TrackLog` (rows ordered by run, then ping).
+    """
+
+    def __init__(self, config: TrackerConfig = TrackerConfig(), seed: int = 0, key: tuple = ()):
+        self.config, self.seed, self.key = config, seed, tuple(key)
+
+    def start(self, ctx: Context, prior: Gaussian | None, first: Scan) -> _MofNCarry:
+        if first.z.shape[-1] != 2:
+            raise InputError(f"tracker: detections must be Cartesian (x, y), got dimension {first.z.shape[-1]}")
+        rows: dict[str, list] = {"run": [], "ping": [], "track_id": [], "status": [], "hit": [], "mean": []}
+        return _MofNCarry(ctx, [initial_state(ctx.motion.dim) for _ in range(ctx.batch)], [None] * ctx.batch,
+                          [generator(self.seed, *self.key, b) for b in range(ctx.batch)], rows, ctx.motion)
+
+    def predict(self, carry: _MofNCarry, motion: MotionModel, k: int) -> _MofNCarry:
+        carry.motion = motion
+        carry.predicted = [_predict_tracks(st, carry.ctx.filter, motion, carry.rngs[b])
+                           for b, st in enumerate(carry.states)]
+        return carry
+
+    def update(self, carry: _MofNCarry, scan: Scan, k: int) -> _MofNCarry:
+        ctx = carry.ctx
+        for b in range(ctx.batch):
+            st, out = tracker_step(carry.states[b], scan.z[b][scan.valid[b]], ctx.filter, carry.motion, ctx.model,
+                                   self.config, carry.rngs[b], predicted=carry.predicted[b])
+            carry.states[b], carry.predicted[b] = st, None
+            K = out.ids.shape[0]
+            carry.rows["run"].append(np.full(K, b))
+            carry.rows["ping"].append(np.full(K, k))
+            carry.rows["track_id"].append(out.ids)
+            carry.rows["status"].append(out.status)
+            carry.rows["hit"].append(out.hit)
+            carry.rows["mean"].append(out.mean)
+        return carry
+
+    def finish(self, carry: _MofNCarry) -> TrackLog:
+        n = carry.motion.dim
+        cat = {key: (np.concatenate(v) if v else np.zeros(0)) for key, v in carry.rows.items() if key != "mean"}
+        order = np.lexsort((cat["ping"], cat["run"]))  # stable: within a (run, ping) the tracks keep their order
+        cat = {key: v[order] for key, v in cat.items()}
+        mean = np.concatenate(carry.rows["mean"]).reshape(-1, n)[order] if carry.rows["mean"] else np.zeros((0, n))
+        return TrackLog(cat["run"].astype(np.int64), cat["ping"].astype(np.int64), cat["track_id"].astype(np.int64),
+                        cat["status"].astype(np.int8), cat["hit"].astype(bool), mean, carry.ctx.batch, carry.ctx.steps)
+
+
+def run_tracker(scans: Scans, filt: FilterSpec, motion: MotionModel, model: MeasurementModel,
+                config: TrackerConfig = TrackerConfig(), seed: int = 0, key: tuple = ()) -> TrackLog:
+    """Track every run of ``scans`` (Cartesian detections, ``z (B, T, M, 2)``) with :class:`MofN` through
+    :func:`workbench.tracking.run`; one generator per run, ``generator(seed, *key, run)``.  ``origin`` is never
+    read."""
+    from .loop import run
+
+    if scans.z.shape[-1] != 2:
+        raise InputError(f"tracker: detections must be Cartesian (x, y), got dimension {scans.z.shape[-1]}")
+    return run(filt, scans, motion, model, association=MofN(config, seed, key))
