@@ -22,8 +22,9 @@ def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host):
     paper = report.papers[0]
     assert not paper.errors
     index = (tmp_path / "index.html").read_text()
-    for section in ("Paper demo", "Reproduced if", "table1", "fig1", "Provenance", "seed", "package numpy",
-                    "published", "workbench report"):
+    for section in ("Paper demo", "Scoreboard: reproduced if", "table1", "fig1", "Provenance", "seed",
+                    "package numpy", "Published values and claims", "workbench report",
+                    "What differs from the paper and why", "A fixture."):
         assert section in index
     assert "data:image/png;base64," in index
     for ext in ("png", "svg", "npz", "csv"):
@@ -33,8 +34,156 @@ def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host):
     # KF and EKF are the same filter on a linear model: identical curves behind the figure.
     np.testing.assert_allclose(data["mse"][0], data["mse"][1], rtol=1e-9)
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["papers"][0]["criteria"][0]["met"] is True
     assert summary["papers"][0]["tables"][0]["columns"][2].startswith("published")
+
+
+def _criteria_by_id(summary, paper="demo"):
+    entry = next(p for p in summary["papers"] if p["paper"] == paper)
+    return {c["id"]: c for c in entry["criteria"]}
+
+
+def test_quick_report_declares_nothing_met_and_shows_n_interval_and_verdict(tmp_path, demo_host):
+    run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
+    crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
+    keys = {"id", "statement", "ours", "published", "n", "interval", "threshold", "verdict", "indicative", "met",
+            "detail", "replication"}
+    assert all(keys <= set(c) for c in crit.values())
+    assert all(c["indicative"] and c["met"] is False and c["verdict"] != "met" for c in crit.values())
+    # criterion 1 is an old-style bool criterion: no n, no interval; its quick numbers pass (worst MSE < 100)
+    assert crit["1"]["n"] is None and crit["1"]["interval"] is None and crit["1"]["verdict"] == "inconclusive"
+    assert crit["1"]["extra"]["quick_verdict"] == "met" and crit["1"]["detail"].startswith("worst ")
+    # criterion 2: the KF's per-run mean squared error, 20 quick runs, bootstrap interval around ours
+    two = crit["2"]
+    lo, hi = two["interval"]
+    assert two["n"] == 20 and lo < two["ours"] < hi and two["threshold"] == "<= 10" and two["published"] == 4.0
+    assert hi <= 10 and two["verdict"] == "inconclusive" and two["extra"]["quick_verdict"] == "met"
+    # criterion 3: a paired ratio, exactly 1 on a linear model; replicated in 4 disjoint 5-run batches
+    assert crit["3"]["ours"] == pytest.approx(1.0) and crit["3"]["interval"] == pytest.approx([1.0, 1.0])
+    assert crit["3"]["replication"] == [4, 4] and crit["3"]["published"] == {"KF": 4.0, "EKF": 4.0}
+
+    index = (tmp_path / "index.html").read_text()
+    board = index[index.index("id='paperdemo-scoreboard'"):index.index("id='paperdemo-differs'")]
+    assert board.count("indicative (quick run)") == 3 and board.count("quick-run numbers pass") == 3
+    assert ">met</span>" not in board and board.count(">inconclusive</span>") == 3
+    assert f"[{lo:.4g}, {hi:.4g}]" in board and "holds in 4 of 4" in board
+    assert "<span class='kv'>KF 4</span> · <span class='kv'>EKF 4</span>" in board
+    assert "{'KF'" not in index and "{&#x27;KF&#x27;" not in index  # never a Python dict repr
+    published = index[index.index("id='paperdemo-published'"):]
+    assert "<td>kf, ekf</td>" in published  # a tuple, joined readably
+
+
+def test_full_report_gives_firm_verdicts(tmp_path, demo_host):
+    run_report(demo_host, tmp_path, papers=["demo"], size="full", seed=3, progress=False)
+    crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
+    assert {k: (c["verdict"], c["met"], c["indicative"]) for k, c in crit.items()} == {
+        "1": ("met", True, False), "2": ("met", True, False), "3": ("met", True, False)}
+    assert crit["2"]["n"] == 100
+    index = (tmp_path / "index.html").read_text()
+    assert "indicative (quick run)" not in index and index.count(">met</span>") >= 3
+
+
+def test_paper_into_an_existing_folder_keeps_the_other_papers(tmp_path, capsys):
+    from dataclasses import replace
+
+    from fixtures import demo_plugin
+    from workbench import hookimpl
+    from workbench.plugins import load_host
+
+    other = replace(demo_plugin.RECIPE, paper="other", title="Another paper", notes="Other notes.")
+
+    class OtherPaper:
+        @hookimpl
+        def workbench_report_recipes(self):
+            return [other]
+
+    demo_host = load_host(extra_plugins=[("demo", demo_plugin), ("other", OtherPaper())])
+    run_report(demo_host, tmp_path, papers=["other"], seed=5, progress=False, command="workbench report --paper other")
+    (tmp_path / "paperbroken").mkdir()
+    (tmp_path / "paperbroken" / "outcome.json").write_text("{not json")
+    report = run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
+    # a damaged saved outcome is skipped with one warning line; the report goes on
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if "paperbroken" in ln]
+    assert len(lines) == 1 and "JSONDecodeError" in lines[0] and report.warnings == [lines[0].split("warning: ", 1)[1]]
+    assert [p.paper for p in report.papers] == ["demo"] and [p.paper for p in report.saved] == ["other"]
+
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    papers = {p["paper"]: p for p in summary["papers"]}
+    assert set(papers) == {"demo", "other"}
+    assert (papers["demo"]["from_saved"], papers["other"]["from_saved"]) == (False, True)
+    assert (papers["demo"]["seed"], papers["other"]["seed"]) == (3, 5)
+    assert papers["other"]["figures"] == ["fig1"] and papers["other"]["tables"][0]["rows"][0][0] == "ekf"
+    assert _criteria_by_id(summary, "other")["2"]["n"] == 20
+    index = (tmp_path / "index.html").read_text()
+    for anchor in ("paperdemo", "paperother", "paperother-scoreboard", "paperother-fig-fig1",
+                   "paperother-table-table1"):
+        assert f"id='{anchor}'" in index and f"href='#{anchor}'" in index
+    section = index[index.index("<section id='paperother'>"):]
+    section = section[:section.index("</section>")]
+    assert "Another paper" in section and "Other notes." in section and "workbench report --paper other" in section
+    assert section.count("data:image/png;base64,") == 1
+    assert "paperbroken" in index and "skipped the saved outcome" in index
+    assert "Paper broken" not in index
+
+    # and re-running the other paper now keeps demo (its fresh outcome was saved in turn)
+    again = run_report(demo_host, tmp_path, papers=["other"], seed=5, progress=False)
+    assert [p.paper for p in again.saved] == ["demo"] and again.saved[0].seed == 3
+    assert {p["paper"] for p in json.loads((tmp_path / "summary.json").read_text())["papers"]} == {"demo", "other"}
+
+
+def test_saved_outcome_round_trips(tmp_path, demo_host):
+    from workbench.report.engine import load_outcome
+
+    report = run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
+    fresh = report.papers[0]
+    back = load_outcome(tmp_path / "paperdemo" / "outcome.json", tmp_path)
+    assert back.saved and not fresh.saved
+    assert back.criteria == fresh.criteria
+    assert [(t["id"], t["columns"], t["rows"]) for t in back.tables] == \
+        [(t["id"], list(t["columns"]), [list(r) for r in t["rows"]]) for t in fresh.tables]
+    assert [f["png"] for f in back.figures] == [f["png"] for f in fresh.figures]
+    assert back.published == {"mean MSE": 4.0, "per filter": {"KF": 4.0, "EKF": 4.0}, "filters": ["kf", "ekf"]}
+    assert (back.seed, back.size, back.filters, back.notes) == (3, "quick", ("kf", "ekf"), "A fixture.")
+    assert [t["key"] for t in back.tasks] == ["mse-kf", "mse-ekf"]
+
+
+def test_index_and_summary_are_written_atomically(tmp_path, demo_host, monkeypatch):
+    import workbench.report.cache as cache
+
+    run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
+    before = (tmp_path / "index.html").read_text()
+
+    def fail(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(cache.os, "replace", fail)
+    with pytest.raises(OSError, match="disk full"):
+        run_report(demo_host, tmp_path, papers=["demo"], seed=4, progress=False)
+    assert (tmp_path / "index.html").read_text() == before  # the old page, whole
+    assert json.loads((tmp_path / "paperdemo" / "outcome.json").read_text())["seed"] == 3
+    assert not [p for p in tmp_path.rglob("*.tmp")]  # no temporary file left behind
+
+
+def test_published_values_and_alignment_are_readable():
+    import re
+
+    from workbench.report.html import _table, format_value, human_value, is_numeric_like
+
+    text = lambda h: re.sub(r"<[^>]+>", "", h)  # noqa: E731
+    assert text(human_value({"A": 332.0, "B": 291.0, "C": 221.0})) == "A 332 · B 291 · C 221"
+    assert text(human_value((0.5, 1, "x"))) == "0.5, 1, x"
+    nested = human_value({"L1": {"ekf": 1.7964, "ukf": 1.78}, "note": "see text"})
+    assert nested.startswith("<table class='nested'>") and "ekf 1.796" in text(nested) and "note" in nested
+    assert [format_value(v) for v in (None, 3, 2.0, 0.000123456, 12345.6, float("nan"), True)] == \
+        ["n/a", "3", "2", "0.0001235", "12346", "nan", "yes"]
+    assert all(map(is_numeric_like, [1, 2.5, "3/20", "61.0 %", "1.2e+04", "nan", "-0.5"]))
+    assert not any(map(is_numeric_like, ["ekf", "(A) ekf-nis", "L1", True, "holds in 4 of 4"]))
+    html = _table(["method", "ours (m)", "lost runs", "note"],
+                  [("ekf", 268.3, "0/2", "fine"), ("ukf", 311.1, "-", "slow 2x")])
+    head = re.findall(r"<th( class='num')?>([^<]*)</th>", html)
+    assert [(name, bool(num)) for num, name in head] == [
+        ("method", False), ("ours (m)", True), ("lost runs", True), ("note", False)]
+    assert "<td>ekf</td><td class='num'>268.3</td><td class='num'>0/2</td><td>fine</td>" in html
 
 
 def test_second_run_reuses_cache_and_a_changed_filter_set_recomputes_only_the_new_task(tmp_path, demo_host):
@@ -103,3 +252,47 @@ def test_interrupted_report_resumes_and_loses_nothing(tmp_path):
     tasks = {t["key"]: t["cached"] for t in json.loads((out / "summary.json").read_text())["papers"][0]["tasks"]}
     assert tasks == {"mse-kf": True, "mse-ekf": False}
     assert (out / "index.html").exists()
+
+
+def test_what_differs_links_the_papers_docs_page_when_the_repository_has_it(tmp_path):
+    from workbench.report.engine import PaperOutcome
+    from workbench.report.html import _differs
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "paper000.md"
+    assert docs.is_file()
+    out = tmp_path / "deep" / "report"
+    block = _differs(PaperOutcome("000", "t", "quick", (), "Gate chosen on tuning seeds.", {}), out)
+    assert "What differs from the paper and why" in block and "Gate chosen on tuning seeds." in block
+    href = block.split("<a href='", 1)[1].split("'", 1)[0]
+    assert not href.startswith("/") and (out / href).resolve() == docs.resolve()
+    none = _differs(PaperOutcome("demo", "t", "quick", (), "", {}), out)
+    assert "<a href" not in none and "records no choices" in none
+
+
+def test_summary_is_strict_json_and_a_one_run_criterion_has_no_interval(tmp_path, demo_host):
+    from dataclasses import replace
+
+    from fixtures import demo_plugin
+    from workbench.criteria import criterion_from_runs
+    from workbench.report.engine import ReportOutcome, run_recipe
+    from workbench.report.html import write_index, write_summary
+
+    def criteria(results):
+        return [criterion_from_runs("x", "from one run", [2.0], np.mean, 1.0, ">=", min_n=1)]
+
+    recipe = replace(demo_plugin.RECIPE, criteria=criteria)
+    paper = run_recipe(recipe, demo_host, tmp_path, size="full", progress=False)
+    report = ReportOutcome(tmp_path, [paper], 0.0, "", 0, "full")
+    write_summary(report, demo_host)
+    write_index(report, demo_host)
+
+    def no_constants(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    summary = json.loads((tmp_path / "summary.json").read_text(), parse_constant=no_constants)
+    (crit,) = summary["papers"][0]["criteria"]
+    assert crit["interval"] == [None, None] and crit["n"] == 1 and crit["ours"] == 2.0
+    assert crit["verdict"] == "inconclusive" and crit["indicative"] is False  # a full run, still undecided
+    index = (tmp_path / "index.html").read_text()
+    board = index.split("id='paperdemo-scoreboard'")[1].split("id='paperdemo-differs'")[0]
+    assert ">inconclusive</span>" in board and "nan" not in board

@@ -108,9 +108,13 @@ def cmd_report(args) -> int:
         if executor is not None:
             executor.close()
     for p in report.papers:
-        met = sum(c.met for c in p.criteria)
+        counts = {}
+        for c in p.criteria:
+            counts[c.verdict] = counts.get(c.verdict, 0) + 1
+        verdicts = ", ".join(f"{n} {v}" for v, n in counts.items()) or "none"
+        marker = " (indicative: quick run)" if any(c.indicative for c in p.criteria) else ""
         print(f"paper {p.paper}: {len(p.figures)} figures, {len(p.tables)} tables, "
-              f"criteria met {met}/{len(p.criteria)}, {p.seconds:.1f} s"
+              f"criteria: {verdicts}{marker}, {p.seconds:.1f} s"
               + (f", {len(p.errors)} problems" if p.errors else ""))
         for err in p.errors:
             print(f"  not done: {err}", file=sys.stderr)

@@ -10,14 +10,33 @@ Every recipe's ``criteria(results)`` returns a list of :class:`Criterion`.  A ve
   near-optimal reference, is in ``detail``).
 
 A quick report never says *met*: the report engine marks every quick-mode verdict ``indicative``.
+
+The functions below build criteria honestly from per-run data:
+
+- :func:`bootstrap_interval`: a percentile bootstrap interval over runs (paired samples resampled together);
+- :func:`binomial_interval`: the exact (Clopper-Pearson) interval of a proportion;
+- :func:`judge`: the three-way verdict of an interval against a threshold;
+- :func:`criterion_from_runs` and :func:`criterion_from_counts`: a :class:`Criterion` with ours, n, the
+  interval and the verdict filled in;
+- :func:`replication_rate`: how often the criterion, computed the paper's way on a few runs, holds in
+  independent, disjoint batches of runs.
+
+Samples are given with the runs on the first axis.  A *tuple* of arrays is a paired sample: every array
+holds the same runs (for example the errors of methods A and C on the same simulated tracks), and a
+resample draws the same run indices from each, so a statistic such as ``mean(A) / mean(C)`` keeps the
+pairing.  A list is always one sample.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from typing import Any
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Callable, Mapping
 
-__all__ = ["VERDICTS", "Criterion"]
+import numpy as np
+
+__all__ = ["VERDICTS", "DIRECTIONS", "Criterion", "bootstrap_interval", "binomial_interval", "judge",
+           "criterion_from_runs", "criterion_from_counts", "replication_rate", "RUNS_DETAIL", "COUNTS_DETAIL"]
 
 #: The verdicts a criterion may carry.
 VERDICTS = ("met", "not met", "inconclusive", "not attainable")
@@ -69,7 +88,7 @@ class Criterion:
 
     def __post_init__(self) -> None:
         verdict = self.verdict
-        if isinstance(verdict, bool) or type(verdict).__name__ == "bool_":
+        if isinstance(verdict, (bool, np.bool_)):
             verdict = "met" if bool(verdict) else "not met"
         if verdict not in VERDICTS:
             raise ValueError(f"criterion {self.id!r}: verdict must be one of {VERDICTS}, got {verdict!r}")
@@ -83,7 +102,414 @@ class Criterion:
         """True only for a firm ``"met"`` outside quick mode."""
         return self.verdict == "met" and not self.indicative
 
+    @property
+    def quick_verdict(self) -> str | None:
+        """For an indicative criterion, the verdict the quick run's own numbers gave before marking."""
+        return self.extra.get("quick_verdict")
+
     def as_indicative(self) -> "Criterion":
-        """The same criterion marked as a quick-mode indication: a ``"met"`` becomes ``"inconclusive"``."""
+        """The same criterion marked as a quick-mode indication.
+
+        A ``"met"`` becomes ``"inconclusive"``; the other verdicts are kept.  The verdict the quick run's
+        numbers gave is kept in ``extra["quick_verdict"]`` (see :attr:`quick_verdict`), so the report can
+        say "the quick run would pass".  Marking an indicative criterion again changes nothing.
+
+        Returns
+        -------
+        Criterion
+            A new record with ``indicative=True``.
+        """
+        if self.indicative:
+            return self
+        extra = dict(self.extra)
+        extra.setdefault("quick_verdict", self.verdict)
         verdict = "inconclusive" if self.verdict == "met" else self.verdict
-        return replace(self, verdict=verdict, indicative=True)
+        return replace(self, verdict=verdict, indicative=True, extra=extra)
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict of every field, plus ``met`` (bool) for older readers.
+
+        Returns
+        -------
+        dict
+            ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication,
+            detail, extra``; numpy scalars become Python numbers, tuples become lists.
+        """
+        out = {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
+        out["met"] = bool(self.met)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Criterion":
+        """Rebuild a criterion written by :meth:`to_dict` (unknown keys are ignored).
+
+        Parameters
+        ----------
+        data : mapping
+            The dict, e.g. read back from JSON.
+
+        Returns
+        -------
+        Criterion
+        """
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in data.items() if k in names}
+        for key in ("interval", "replication"):
+            if kw.get(key) is not None:
+                kw[key] = tuple(kw[key])
+        if kw.get("extra") is None:
+            kw["extra"] = {}
+        return cls(**kw)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays, tuples and mappings turned into JSON-ready Python values."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+#: The directions :func:`judge` understands.  ``"within"`` takes ``threshold=(low, high)``.
+DIRECTIONS = (">=", ">", "<=", "<", "within")
+
+
+def _as_runs(samples: Any) -> tuple[tuple[np.ndarray, ...], bool]:
+    """Split ``samples`` into arrays with the runs on axis 0; True when it is a paired (tuple) sample."""
+    paired = isinstance(samples, tuple) and len(samples) > 0 and all(np.ndim(a) >= 1 for a in samples)
+    arrays = tuple(np.asarray(a) for a in samples) if paired else (np.asarray(samples),)
+    if arrays[0].ndim == 0:
+        raise ValueError("samples must have the runs on a first axis (got a scalar)")
+    lengths = {a.shape[0] for a in arrays}
+    if len(lengths) != 1:
+        raise ValueError(f"paired samples must hold the same number of runs, got lengths {sorted(lengths)}")
+    return arrays, paired
+
+
+def _runs_in(samples: Any) -> int:
+    arrays, _ = _as_runs(samples)
+    return int(arrays[0].shape[0])
+
+
+def _rng(rng: np.random.Generator | None, seed: int | None) -> np.random.Generator:
+    if rng is not None:
+        return rng
+    return np.random.default_rng(seed)
+
+
+# Statistics that can be applied to all resamples at once along an axis (a 1-D sample only).
+_AXIS_STATISTICS = {np.mean, np.median, np.sum, np.std, np.var, np.min, np.max, np.nanmean, np.nanmedian}
+
+
+def bootstrap_interval(samples: Any, statistic: Callable[..., float] = np.mean, *, level: float = 0.95,
+                       resamples: int = 2000, seed: int | None = 0,
+                       rng: np.random.Generator | None = None) -> tuple[float, float]:
+    """Percentile bootstrap confidence interval of a statistic over independent runs.
+
+    Runs are drawn with replacement ``resamples`` times; the interval is the ``(1 - level) / 2`` and
+    ``(1 + level) / 2`` quantiles of the statistic over the resamples.
+
+    Parameters
+    ----------
+    samples : array_like or tuple of array_like
+        One value (or one row) per run, runs on the first axis.  A tuple of arrays is a paired sample:
+        each resample takes the same run indices from every array, and ``statistic`` receives the arrays
+        as separate arguments, e.g. ``lambda a, c: a.mean() / c.mean()``.
+    statistic : callable, default ``np.mean``
+        Maps the (resampled) sample(s) to one number.
+    level : float, default 0.95
+        Confidence level, in (0, 1).
+    resamples : int, default 2000
+        Number of bootstrap resamples.
+    seed : int or None, default 0
+        Seed of the resampling generator (ignored when ``rng`` is given).
+    rng : numpy.random.Generator, optional
+        The generator to draw resamples from.
+
+    Returns
+    -------
+    (float, float)
+        The interval.  ``(nan, nan)`` when there are fewer than 2 runs (a bootstrap of one run says
+        nothing about its spread) or when the statistic is not finite on some resample; :func:`judge`
+        reads such an interval as inconclusive.
+
+    Examples
+    --------
+    >>> lo, hi = bootstrap_interval(np.arange(100.0), seed=1)
+    >>> bool(lo < 49.5 < hi)
+    True
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if resamples < 1:
+        raise ValueError(f"resamples must be >= 1, got {resamples}")
+    arrays, paired = _as_runs(samples)
+    n = arrays[0].shape[0]
+    if n < 2:
+        return (math.nan, math.nan)
+    gen = _rng(rng, seed)
+    idx = gen.integers(0, n, size=(resamples, n))
+    q = [(1.0 - level) / 2.0, (1.0 + level) / 2.0]
+    if not paired and arrays[0].ndim == 1 and statistic in _AXIS_STATISTICS:
+        stats = np.empty(resamples)
+        chunk = max(1, 4_000_000 // n)  # bound the memory of the (chunk, n) block of resampled values
+        for start in range(0, resamples, chunk):
+            stats[start:start + chunk] = statistic(arrays[0][idx[start:start + chunk]], axis=1)
+    else:
+        stats = np.array([float(statistic(*(a[i] for a in arrays))) for i in idx])
+    if not np.all(np.isfinite(stats)):
+        return (math.nan, math.nan)
+    lo, hi = np.quantile(stats, q)
+    return (float(lo), float(hi))
+
+
+def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) confidence interval of a proportion ``k / n``.
+
+    Parameters
+    ----------
+    k : int
+        Number of successes, ``0 <= k <= n``.
+    n : int
+        Number of independent trials (runs).
+    level : float, default 0.95
+        Confidence level, in (0, 1).
+
+    Returns
+    -------
+    (float, float)
+        ``(beta.ppf(a/2, k, n-k+1), beta.ppf(1-a/2, k+1, n-k))`` with ``a = 1 - level``; the lower bound is
+        0 when ``k = 0`` and the upper bound 1 when ``k = n``.  ``(0, 1)`` when ``n = 0``.
+
+    Examples
+    --------
+    >>> round(binomial_interval(0, 10)[1], 4)
+    0.3085
+    """
+    from scipy.stats import beta
+
+    k, n = int(k), int(n)
+    if n < 0 or not 0 <= k <= max(n, 0):
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if n == 0:
+        return (0.0, 1.0)
+    alpha = 1.0 - level
+    lo = 0.0 if k == 0 else float(beta.ppf(alpha / 2.0, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1.0 - alpha / 2.0, k + 1, n - k))
+    return (lo, hi)
+
+
+def _check_direction(threshold: Any, direction: str) -> None:
+    if direction not in DIRECTIONS:
+        raise ValueError(f"direction must be one of {DIRECTIONS}, got {direction!r}")
+    if direction == "within":
+        if np.ndim(threshold) != 1 or len(threshold) != 2 or not threshold[0] <= threshold[1]:
+            raise ValueError(f"direction 'within' needs threshold=(low, high) with low <= high, got {threshold!r}")
+    elif np.ndim(threshold) != 0:
+        raise ValueError(f"direction {direction!r} needs one number as threshold, got {threshold!r}")
+
+
+def judge(interval: tuple[float, float] | None, threshold: float | tuple[float, float], direction: str,
+          n: int | None = None, min_n: int | None = None) -> str:
+    """The three-way verdict of a confidence interval against a threshold.
+
+    Parameters
+    ----------
+    interval : (float, float) or None
+        The confidence interval ``(lo, hi)`` of our value.
+    threshold : float or (float, float)
+        The passing boundary; for ``direction="within"``, the passing range ``(low, high)``.
+    direction : {">=", ">", "<=", "<", "within"}
+        The passing side: ``value >= threshold`` etc., or ``low <= value <= high``.
+    n, min_n : int, optional
+        The number of runs behind the interval and the number the criterion needs.
+
+    Returns
+    -------
+    str
+        ``"met"`` when the whole interval lies on the passing side, ``"not met"`` when the whole interval
+        lies on the failing side, ``"inconclusive"`` when it straddles the boundary, when ``n < min_n``,
+        or when the interval is missing or not a number.
+
+    Examples
+    --------
+    >>> judge((1.4, 1.6), 1.3, ">=")
+    'met'
+    >>> judge((1.2, 1.6), 1.3, ">=")
+    'inconclusive'
+    >>> judge((1.4, 1.6), 1.3, ">=", n=5, min_n=20)
+    'inconclusive'
+    """
+    _check_direction(threshold, direction)
+    if min_n is not None and (n is None or n < min_n):
+        return "inconclusive"
+    if interval is None:
+        return "inconclusive"
+    lo, hi = (float(v) for v in interval)
+    if math.isnan(lo) or math.isnan(hi):
+        return "inconclusive"
+    if lo > hi:
+        raise ValueError(f"interval must be (lo, hi) with lo <= hi, got {interval!r}")
+    if direction == "within":
+        a, b = (float(v) for v in threshold)
+        if a <= lo and hi <= b:
+            return "met"
+        if hi < a or lo > b:
+            return "not met"
+        return "inconclusive"
+    t = float(threshold)
+    passing = {">=": lo >= t, ">": lo > t, "<=": hi <= t, "<": hi < t}[direction]
+    failing = {">=": hi < t, ">": hi <= t, "<=": lo > t, "<": lo >= t}[direction]
+    if passing:
+        return "met"
+    if failing:
+        return "not met"
+    return "inconclusive"
+
+
+def _threshold_text(threshold: Any, direction: str) -> str:
+    if direction == "within":
+        return f"within [{threshold[0]:g}, {threshold[1]:g}]"
+    return f"{direction} {float(threshold):g}"
+
+
+#: The default ``detail_fmt`` of :func:`criterion_from_runs`.
+RUNS_DETAIL = ("ours {ours:.4g}, {pct:g} % interval [{lo:.4g}, {hi:.4g}] (percentile bootstrap over n = {n} "
+               "runs, {resamples} resamples); passes if {threshold}; needs n >= {min_n}")
+
+#: The ``detail`` of :func:`criterion_from_runs` with the default format when no interval could be computed.
+RUNS_DETAIL_NO_INTERVAL = ("ours {ours:.4g} from n = {n} runs; no interval (a bootstrap needs 2 runs or more and a "
+                           "finite statistic on every resample); passes if {threshold}; needs n >= {min_n}")
+
+#: The default ``detail_fmt`` of :func:`criterion_from_counts`.
+COUNTS_DETAIL = ("ours {k}/{n} = {ours:.4g}, {pct:g} % interval [{lo:.4g}, {hi:.4g}] (exact, Clopper-Pearson); "
+                 "passes if {threshold}; needs n >= {min_n}")
+
+
+def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..., float],
+                        threshold: float | tuple[float, float], direction: str, *, min_n: int,
+                        published: Any = None, detail_fmt: str = RUNS_DETAIL, level: float = 0.95,
+                        resamples: int = 2000, seed: int | None = 0, threshold_text: str | None = None,
+                        replication: tuple[int, int] | None = None) -> Criterion:
+    """A :class:`Criterion` judged from per-run data: ours, n, a bootstrap interval and the verdict.
+
+    Parameters
+    ----------
+    id, text : str
+        The criterion's id and statement.
+    samples : array_like or tuple of array_like
+        Per-run values, runs on the first axis (a tuple is a paired sample; see :func:`bootstrap_interval`).
+    statistic : callable
+        The judged statistic, e.g. ``np.mean`` or ``lambda a, c: a.mean() / c.mean()``.
+    threshold, direction
+        The passing condition (see :func:`judge`).
+    min_n : int
+        The fewest runs from which the criterion may be decided; with fewer the verdict is inconclusive.
+    published : optional
+        The paper's value, shown beside ours.
+    detail_fmt : str
+        Format of ``detail``; fields ``ours, lo, hi, n, min_n, pct, resamples, threshold, verdict``.
+    level, resamples, seed
+        Passed to :func:`bootstrap_interval`.
+    threshold_text : str, optional
+        The passing condition in words (default e.g. ``">= 1.3"``).
+    replication : (int, int), optional
+        ``(holds, of)`` from :func:`replication_rate`.
+
+    Returns
+    -------
+    Criterion
+    """
+    _check_direction(threshold, direction)
+    arrays, _ = _as_runs(samples)
+    n = int(arrays[0].shape[0])
+    ours = float(statistic(*arrays)) if n else math.nan
+    interval = bootstrap_interval(samples, statistic, level=level, resamples=resamples, seed=seed)
+    verdict = judge(interval, threshold, direction, n=n, min_n=min_n)
+    thr = threshold_text or _threshold_text(threshold, direction)
+    if detail_fmt is RUNS_DETAIL and math.isnan(interval[0]):
+        detail_fmt = RUNS_DETAIL_NO_INTERVAL
+    detail = detail_fmt.format(ours=ours, lo=interval[0], hi=interval[1], n=n, min_n=min_n, pct=100 * level,
+                               resamples=resamples, threshold=thr, verdict=verdict)
+    return Criterion(id, text, verdict, detail, ours=ours, published=published, n=n, interval=interval,
+                     threshold=thr, replication=replication)
+
+
+def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float | tuple[float, float],
+                          direction: str, *, min_n: int, published: Any = None, detail_fmt: str = COUNTS_DETAIL,
+                          level: float = 0.95, threshold_text: str | None = None,
+                          replication: tuple[int, int] | None = None) -> Criterion:
+    """A :class:`Criterion` on a proportion ``k / n`` of runs, with the exact binomial interval.
+
+    Parameters
+    ----------
+    id, text : str
+        The criterion's id and statement.
+    k, n : int
+        Runs in which the event happened, and runs in all.
+    threshold, direction, min_n, published, level, threshold_text, replication
+        As in :func:`criterion_from_runs` (the threshold is a proportion in [0, 1]).
+    detail_fmt : str
+        Format of ``detail``; fields ``k, n, ours, lo, hi, min_n, pct, threshold, verdict``.
+
+    Returns
+    -------
+    Criterion
+    """
+    _check_direction(threshold, direction)
+    interval = binomial_interval(k, n, level)
+    ours = k / n if n else math.nan
+    verdict = judge(interval, threshold, direction, n=n, min_n=min_n)
+    thr = threshold_text or _threshold_text(threshold, direction)
+    detail = detail_fmt.format(k=k, n=n, ours=ours, lo=interval[0], hi=interval[1], min_n=min_n, pct=100 * level,
+                               threshold=thr, verdict=verdict)
+    return Criterion(id, text, verdict, detail, ours=ours, published=published, n=int(n), interval=interval,
+                     threshold=thr, replication=replication)
+
+
+def replication_rate(samples: Any, protocol_runs: int, holds_fn: Callable[..., bool], replications: int = 50,
+                     seed: int | None = 0) -> tuple[int, int]:
+    """How often a criterion, computed the paper's way on ``protocol_runs`` runs, holds on independent batches.
+
+    The runs are shuffled (seeded) and cut into disjoint batches of ``protocol_runs`` runs; no run serves
+    two batches.  With fewer than ``protocol_runs * replications`` runs, as many whole batches as fit are
+    used (the rest of the runs are left out).
+
+    Parameters
+    ----------
+    samples : array_like or tuple of array_like
+        Per-run values, runs on the first axis; a tuple is paired and its arrays are cut by the same
+        run indices.
+    protocol_runs : int
+        The paper's number of runs per evaluation (e.g. 20).
+    holds_fn : callable
+        ``holds_fn(*batch) -> bool``: the criterion computed the paper's way (no interval) on one batch.
+    replications : int, default 50
+        The number of batches wanted.
+    seed : int or None, default 0
+        Seed of the shuffle.
+
+    Returns
+    -------
+    (int, int)
+        ``(holds, of)``: batches on which the criterion held, batches evaluated.  ``(0, 0)`` when not one
+        batch fits.
+    """
+    if protocol_runs < 1 or replications < 1:
+        raise ValueError(f"protocol_runs and replications must be >= 1, got {protocol_runs}, {replications}")
+    arrays, _ = _as_runs(samples)
+    n = arrays[0].shape[0]
+    batches = min(replications, n // protocol_runs)
+    order = np.random.default_rng(seed).permutation(n)
+    holds = 0
+    for b in range(batches):
+        idx = order[b * protocol_runs:(b + 1) * protocol_runs]
+        holds += bool(holds_fn(*(a[idx] for a in arrays)))
+    return (holds, batches)

@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["task_key", "code_version", "save_arrays", "load_arrays", "TaskCache"]
+__all__ = ["task_key", "code_version", "save_arrays", "load_arrays", "write_text_atomic", "TaskCache"]
 
 
 def _canonical(obj: Any) -> Any:
@@ -85,6 +85,24 @@ def save_arrays(path: Path, arrays: Mapping[str, Any]) -> None:
     os.close(fd)
     try:
         np.savez_compressed(tmp, **clean)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically: a temporary file in the same folder, then ``os.replace``.
+
+    A reader (or a crash) sees the old file or the whole new one, never a part.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.chmod(tmp, 0o644)  # mkstemp makes the file private; a report is for reading
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

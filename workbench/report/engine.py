@@ -7,28 +7,43 @@ Output folder layout::
     OUT/paperNNN/FIG.png|.svg      each figure
     OUT/paperNNN/FIG.npz, FIG.csv  the data behind it
     OUT/paperNNN/TABLE.csv         each table
+    OUT/paperNNN/outcome.json      the paper's rendered outcome (tables, figure paths, criteria, tasks, notes,
+                                   published values, errors, timings), so that ``--paper X`` into this folder
+                                   keeps the other papers' sections
     OUT/cache/...                  finished task results (reused by the next run)
+
+Only the full size gives firm verdicts: the criteria of any other size (the quick report) are marked
+indicative (:meth:`workbench.criteria.Criterion.as_indicative`), so a quick report never says *met*.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import sys
 import time
 import traceback
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from ..plugins import PluginHost, UnknownComponent
-from ..specs import Criterion, RecipeOptions, RecipeSpec, Table, TaskContext
+from ..criteria import Criterion
+from ..specs import RecipeOptions, RecipeSpec, Table, TaskContext
 from ..types import InputError
-from .cache import TaskCache, code_version, save_arrays, task_key
+from .cache import TaskCache, code_version, save_arrays, task_key, write_text_atomic
 
 __all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
-           "InProcess", "DaskExecutor", "dask_executor"]
+           "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
+           "dask_executor"]
+
+#: The file, inside ``OUT/paperNNN``, that keeps a paper's rendered outcome.
+OUTCOME_FILE = "outcome.json"
+#: The size whose verdicts are firm; every other size's criteria are marked indicative.
+FIRM_SIZE = "full"
 
 
 def resolve_filters(default: Sequence[str], request: str | None, host: PluginHost) -> tuple[str, ...]:
@@ -55,6 +70,13 @@ def resolve_filters(default: Sequence[str], request: str | None, host: PluginHos
 
 @dataclass
 class PaperOutcome:
+    """One paper's rendered outcome: what ``index.html`` and ``summary.json`` show of it.
+
+    ``figures`` entries hold ``id, caption, png, svg, data`` (paths), ``tables`` entries ``id, caption,
+    columns, rows, csv``, ``tasks`` entries ``key, seconds, cached, error``.  ``saved`` is True for an
+    outcome read back from an earlier run's ``outcome.json`` (a paper not re-run this time).
+    """
+
     paper: str
     title: str
     size: str
@@ -67,20 +89,140 @@ class PaperOutcome:
     tasks: list[dict] = field(default_factory=list)  # key, seconds, cached, error
     errors: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    seed: int | None = None
+    command: str = ""
+    finished: str = ""  # UTC time stamp
+    saved: bool = False
 
 
 @dataclass
 class ReportOutcome:
+    """A report run: ``papers`` are the papers run now; ``saved`` the other papers found in ``out``."""
+
     out: Path
     papers: list[PaperOutcome]
     seconds: float
     command: str
     seed: int
     size: str
+    saved: list[PaperOutcome] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def failed(self) -> bool:
         return any(p.errors for p in self.papers)
+
+    @property
+    def all_papers(self) -> list[PaperOutcome]:
+        """Every paper the report shows: those run now and the saved ones, ordered by paper id."""
+        return sorted([*self.papers, *self.saved], key=lambda p: p.paper)
+
+
+def _rel(path: Path | str | None, out: Path) -> str | None:
+    if path is None:
+        return None
+    path = Path(path)
+    try:
+        return path.relative_to(out).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _jsonable(value, strict: bool = False):
+    """``value`` as plain JSON data (numpy scalars and arrays, tuples, paths converted; others as str).
+
+    With ``strict``, non-finite floats become ``None`` (standard JSON has no NaN or infinity).
+    """
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v, strict) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v, strict) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist(), strict)
+    if isinstance(value, np.generic):
+        return _jsonable(value.item(), strict)
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, float) and strict and not np.isfinite(value):
+        return None
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
+    return str(value)
+
+
+def outcome_dict(outcome: PaperOutcome, out: Path) -> dict:
+    """``outcome`` as JSON data, with file paths relative to the report folder ``out``."""
+    return {
+        "format": 1,
+        "paper": outcome.paper, "title": outcome.title, "size": outcome.size, "filters": list(outcome.filters),
+        "notes": outcome.notes, "published": _jsonable(outcome.published),
+        "seed": outcome.seed, "command": outcome.command, "finished": outcome.finished,
+        "seconds": outcome.seconds, "errors": list(outcome.errors),
+        "figures": [{"id": f["id"], "caption": f["caption"],
+                     **{k: _rel(f.get(k), out) for k in ("png", "svg", "data")}} for f in outcome.figures],
+        "tables": [{"id": t["id"], "caption": t["caption"], "columns": _jsonable(t["columns"]),
+                    "rows": _jsonable(t["rows"]), "csv": _rel(t.get("csv"), out)} for t in outcome.tables],
+        "criteria": [c.to_dict() for c in outcome.criteria],
+        "tasks": [_jsonable(t) for t in outcome.tasks],
+    }
+
+
+def save_outcome(outcome: PaperOutcome, out: Path) -> Path:
+    """Write ``out/paperNNN/outcome.json`` atomically and return its path."""
+    path = Path(out) / f"paper{outcome.paper}" / OUTCOME_FILE
+    write_text_atomic(path, json.dumps(outcome_dict(outcome, Path(out)), indent=1, allow_nan=True))
+    return path
+
+
+def load_outcome(path: Path, out: Path) -> PaperOutcome:
+    """Read a paper's outcome written by :func:`save_outcome` (paths resolved against ``out``).
+
+    Raises
+    ------
+    ValueError, KeyError, TypeError, OSError
+        When the file is missing, not JSON, or not an outcome.
+    """
+    out = Path(out)
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    if not isinstance(data, dict) or data.get("format") != 1:
+        raise ValueError("not a workbench paper outcome (format 1)")
+    at = lambda rel: None if rel is None else out / rel  # noqa: E731
+    return PaperOutcome(
+        paper=str(data["paper"]), title=str(data["title"]), size=str(data["size"]),
+        filters=tuple(data.get("filters", ())), notes=str(data.get("notes", "")),
+        published=dict(data.get("published") or {}),
+        figures=[{"id": f["id"], "caption": f["caption"], "png": at(f["png"]), "svg": at(f.get("svg")),
+                  "data": at(f.get("data"))} for f in data.get("figures", [])],
+        tables=[{"id": t["id"], "caption": t["caption"], "columns": list(t["columns"]),
+                 "rows": [list(r) for r in t["rows"]], "csv": at(t.get("csv"))} for t in data.get("tables", [])],
+        criteria=[Criterion.from_dict(c) for c in data.get("criteria", [])],
+        tasks=list(data.get("tasks", [])), errors=list(data.get("errors", [])),
+        seconds=float(data.get("seconds", 0.0)), seed=data.get("seed"), command=str(data.get("command", "")),
+        finished=str(data.get("finished", "")), saved=True)
+
+
+def saved_outcomes(out: Path, skip: Iterable[str] = ()) -> tuple[list[PaperOutcome], list[str]]:
+    """The papers saved in ``out`` (``paper*/outcome.json``) other than those in ``skip``.
+
+    Returns
+    -------
+    (list of PaperOutcome, list of str)
+        The outcomes, and one warning line per saved outcome that could not be read (it is skipped).
+    """
+    out, skip = Path(out), set(skip)
+    found, warnings = [], []
+    for path in sorted(out.glob(f"paper*/{OUTCOME_FILE}")):
+        if path.parent.name[len("paper"):] in skip:
+            continue
+        try:
+            outcome = load_outcome(path, out)
+        except Exception as exc:  # noqa: BLE001 - a damaged file must not take the report down
+            warnings.append(f"skipped the saved outcome {path}: {type(exc).__name__}: {exc}")
+            continue
+        if outcome.paper in skip:
+            continue
+        found.append(outcome)
+    return found, warnings
 
 
 def figure_data_csv(data: Mapping[str, np.ndarray], path: Path) -> None:
@@ -106,8 +248,13 @@ def _write_table(table: Table, path: Path) -> None:
 
 def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "quick", seed: int = 0,
                filters: str | None = None, arch: str = "cpu", progress: bool = True,
-               on_task: Callable[[str], None] | None = None, executor: "Executor | None" = None) -> PaperOutcome:
-    """Run one recipe into ``out/paperNNN`` using the cache in ``out/cache``."""
+               on_task: Callable[[str], None] | None = None, executor: "Executor | None" = None,
+               command: str = "") -> PaperOutcome:
+    """Run one recipe into ``out/paperNNN`` using the cache in ``out/cache``.
+
+    The criteria of any size but ``"full"`` are marked indicative (never *met*), and the outcome is saved
+    to ``out/paperNNN/outcome.json``.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -118,7 +265,8 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
         raise InputError(f"recipe {recipe.paper} has no size {size!r} (sizes: {', '.join(recipe.sizes)})")
     chosen = resolve_filters(recipe.default_filters, filters, host) if recipe.default_filters else ()
     options = RecipeOptions(size=size, values=dict(recipe.sizes[size]), seed=seed, filters=chosen, arch=arch)
-    outcome = PaperOutcome(recipe.paper, recipe.title, size, chosen, recipe.notes, dict(recipe.published))
+    outcome = PaperOutcome(recipe.paper, recipe.title, size, chosen, recipe.notes, dict(recipe.published),
+                           seed=seed, command=command)
     paper_dir = out / f"paper{recipe.paper}"
     paper_dir.mkdir(parents=True, exist_ok=True)
     cache = TaskCache(out / "cache")
@@ -184,12 +332,21 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
             outcome.criteria = list(recipe.criteria(results))
         except Exception as exc:  # noqa: BLE001
             outcome.errors.append(f"criteria not evaluated: {type(exc).__name__}: {exc}")
+        if size != FIRM_SIZE:
+            outcome.criteria = [c.as_indicative() for c in outcome.criteria]
     outcome.seconds = time.perf_counter() - start
+    outcome.finished = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    save_outcome(outcome, out)
     return outcome
 
 
 def _call_task(run, params, seed, host, arch) -> dict:
-    return {k: np.asarray(v) for k, v in dict(run(TaskContext(params=params, seed=seed, host=host, arch=arch))).items()}
+    """Run one task with the kernels on ``arch`` (the one backend policy, :mod:`workbench.kernels.backend`)."""
+    from ..kernels.backend import using
+
+    with using(arch):
+        result = run(TaskContext(params=params, seed=seed, host=host, arch=arch))
+    return {k: np.asarray(v) for k, v in dict(result).items()}
 
 
 class InProcess:
@@ -321,7 +478,11 @@ def _progress_bar(total: int, desc: str, enabled: bool):
 def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = None, size: str = "quick",
                seed: int = 0, filters: str | None = None, arch: str = "cpu", progress: bool = True,
                command: str = "", executor: "Executor | None" = None) -> ReportOutcome:
-    """Run the chosen recipes (default: every registered one) and write ``index.html`` and ``summary.json``."""
+    """Run the chosen recipes (default: every registered one) and write ``index.html`` and ``summary.json``.
+
+    The page and the summary show every paper of ``out``: the ones run now, and the others from their
+    saved ``outcome.json`` (an unreadable one is skipped with a warning on stderr).
+    """
     from .html import write_index, write_summary
 
     start = time.perf_counter()
@@ -335,8 +496,11 @@ def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = No
         except UnknownComponent as exc:
             raise InputError(str(exc)) from None
         outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
-                                   progress=progress, executor=executor))
-    report = ReportOutcome(out, outcomes, time.perf_counter() - start, command, seed, size)
+                                   progress=progress, executor=executor, command=command))
+    saved, warnings = saved_outcomes(out, skip=[o.paper for o in outcomes])
+    for line in warnings:
+        print(f"workbench report: warning: {line}", file=sys.stderr)
+    report = ReportOutcome(out, outcomes, time.perf_counter() - start, command, seed, size, saved, warnings)
     write_index(report, host)
     write_summary(report, host)
     return report

@@ -1,0 +1,241 @@
+"""The criterion record and the statistics that build it: verdicts from hand-made run data, exact binomial
+intervals against known values, bootstrap coverage, disjoint replications, and the old bool form."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import binom
+
+from workbench.criteria import (
+    Criterion,
+    binomial_interval,
+    bootstrap_interval,
+    criterion_from_counts,
+    criterion_from_runs,
+    judge,
+    replication_rate,
+)
+
+
+# -- the record: bool compatibility and quick-mode marking -------------------------------------------------
+
+def test_old_bool_criteria_read_as_met_and_not_met_without_n_or_interval():
+    yes = Criterion("1", "mean MSE below 100", True, "worst 3.2")
+    no = Criterion("2", "ordering C < B < A", np.bool_(False), "B < C")
+    assert (yes.verdict, yes.met, yes.detail) == ("met", True, "worst 3.2")
+    assert (no.verdict, no.met) == ("not met", False)
+    assert yes.n is None and yes.interval is None and not yes.indicative
+    assert sum(c.met for c in (yes, no)) == 1
+    with pytest.raises(ValueError, match="verdict must be one of"):
+        Criterion("3", "x", "passed")
+
+
+def test_as_indicative_never_leaves_met_and_remembers_the_quick_verdict():
+    met = Criterion("1", "x", "met", interval=(1.4, 1.6), n=4).as_indicative()
+    assert (met.verdict, met.met, met.indicative, met.quick_verdict) == ("inconclusive", False, True, "met")
+    assert met.interval == (1.4, 1.6) and met.n == 4
+    not_met = Criterion("2", "x", False).as_indicative()
+    assert (not_met.verdict, not_met.quick_verdict, not_met.met) == ("not met", "not met", False)
+    assert met.as_indicative() == met  # marking twice keeps the first quick verdict
+    assert Criterion("3", "x", "not attainable").as_indicative().verdict == "not attainable"
+
+
+def test_to_dict_is_json_ready_and_round_trips():
+    c = Criterion("C2", "ratio", "inconclusive", "d", ours=np.float64(1.31), published={"A": 332.0}, n=np.int64(20),
+                  interval=(np.float64(1.1), 1.5), threshold=">= 1.3", replication=(41, 50)).as_indicative()
+    d = json.loads(json.dumps(c.to_dict()))
+    assert d["verdict"] == "inconclusive" and d["met"] is False and d["indicative"] is True
+    assert d["interval"] == [1.1, 1.5] and d["n"] == 20 and d["published"] == {"A": 332.0}
+    assert d["extra"] == {"quick_verdict": "inconclusive"}
+    back = Criterion.from_dict(d)
+    assert back == c and isinstance(back.interval, tuple) and back.replication == (41, 50)
+
+
+# -- judge ------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("interval, threshold, direction, verdict", [
+    ((1.4, 1.6), 1.3, ">=", "met"),
+    ((1.3, 1.6), 1.3, ">=", "met"),           # the boundary passes ">="
+    ((1.3, 1.6), 1.3, ">", "inconclusive"),   # ... but not ">"
+    ((1.0, 1.2), 1.3, ">=", "not met"),
+    ((1.2, 1.4), 1.3, ">=", "inconclusive"),  # straddles
+    ((0.05, 0.09), 0.1, "<", "met"),
+    ((0.1, 0.2), 0.1, "<", "not met"),
+    ((0.1, 0.2), 0.1, "<=", "inconclusive"),
+    ((0.08, 0.12), 0.1, "<=", "inconclusive"),
+    ((0.70, 0.85), (0.60, 0.95), "within", "met"),
+    ((0.20, 0.50), (0.60, 0.95), "within", "not met"),
+    ((0.96, 0.99), (0.60, 0.95), "within", "not met"),
+    ((0.50, 0.70), (0.60, 0.95), "within", "inconclusive"),
+    ((math.nan, math.nan), 1.0, ">=", "inconclusive"),
+    (None, 1.0, ">=", "inconclusive"),
+])
+def test_judge_reads_the_whole_interval(interval, threshold, direction, verdict):
+    assert judge(interval, threshold, direction) == verdict
+
+
+def test_judge_is_inconclusive_below_min_n_even_for_a_clear_interval():
+    assert judge((5.0, 6.0), 1.0, ">=", n=19, min_n=20) == "inconclusive"
+    assert judge((5.0, 6.0), 1.0, ">=", n=20, min_n=20) == "met"
+    assert judge((5.0, 6.0), 1.0, ">=", n=None, min_n=20) == "inconclusive"
+    with pytest.raises(ValueError, match="direction"):
+        judge((1.0, 2.0), 1.0, "=>")
+    with pytest.raises(ValueError, match="low, high"):
+        judge((1.0, 2.0), 1.0, "within")
+
+
+# -- exact binomial interval ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("k, n, lo, hi", [
+    (0, 10, 0.0, 0.3085),     # upper = 1 - 0.025**(1/10)
+    (10, 10, 0.6915, 1.0),    # lower = 0.025**(1/10)
+    (1, 10, 0.0025, 0.4450),
+    (5, 10, 0.1871, 0.8129),
+])
+def test_binomial_interval_matches_known_clopper_pearson_values(k, n, lo, hi):
+    got = binomial_interval(k, n)
+    assert got == pytest.approx((lo, hi), abs=1e-4)
+
+
+def test_binomial_interval_closed_form_at_zero_and_exact_coverage():
+    for n in (1, 7, 20, 50):
+        assert binomial_interval(0, n, 0.9)[1] == pytest.approx(1 - 0.05 ** (1 / n), rel=1e-10)
+    # Clopper-Pearson is conservative: for every p the exact probability of covering it is >= the level.
+    n = 20
+    bounds = [binomial_interval(k, n) for k in range(n + 1)]
+    for p in np.linspace(0.01, 0.99, 99):
+        cover = sum(binom.pmf(k, n, p) for k, (lo, hi) in enumerate(bounds) if lo <= p <= hi)
+        assert cover >= 0.95 - 1e-12, p
+    assert binomial_interval(0, 0) == (0.0, 1.0)
+    with pytest.raises(ValueError):
+        binomial_interval(11, 10)
+
+
+# -- bootstrap --------------------------------------------------------------------------------------------
+
+def _coverage(level, datasets=200, n=40, mean=5.0, sd=2.0):
+    rng = np.random.default_rng(20240612)
+    hits = 0
+    for i in range(datasets):
+        lo, hi = bootstrap_interval(rng.normal(mean, sd, n), np.mean, level=level, resamples=1000, seed=i)
+        hits += lo <= mean <= hi
+    return hits / datasets
+
+
+@pytest.mark.parametrize("level", [0.95, 0.5])
+def test_bootstrap_interval_covers_a_known_mean_at_about_its_level(level):
+    coverage = _coverage(level)
+    # 3 binomial standard deviations over 200 datasets, plus 0.02 for the percentile method's known
+    # small under-coverage at n = 40.
+    tol = 3 * math.sqrt(level * (1 - level) / 200) + 0.02
+    assert abs(coverage - level) <= tol, coverage
+
+
+def test_bootstrap_interval_of_a_mean_matches_the_normal_interval_for_many_runs():
+    x = np.random.default_rng(7).normal(10.0, 3.0, 2000)
+    lo, hi = bootstrap_interval(x, seed=1)
+    half = 1.959964 * x.std(ddof=1) / math.sqrt(x.size)
+    assert (hi - lo) / 2 == pytest.approx(half, rel=0.1)
+    assert (lo + hi) / 2 == pytest.approx(x.mean(), abs=0.2 * half)
+
+
+def test_bootstrap_resamples_paired_samples_with_the_same_runs():
+    c = np.random.default_rng(3).exponential(100.0, 30)
+    a = 2.0 * c  # A is exactly twice C run by run: every paired resample gives a ratio of exactly 2
+
+    def ratio(a_, c_):
+        assert np.allclose(a_, 2.0 * c_)  # the same run indices were drawn for both
+        return a_.mean() / c_.mean()
+
+    assert bootstrap_interval((a, c), ratio, seed=0) == pytest.approx((2.0, 2.0))
+    # the same data resampled independently would not be so sure: the pairing is what narrows it
+    rng = np.random.default_rng(0)
+    independent = [a[rng.integers(0, 30, 30)].mean() / c[rng.integers(0, 30, 30)].mean() for _ in range(2000)]
+    assert np.quantile(independent, 0.975) - np.quantile(independent, 0.025) > 0.5
+
+
+def test_bootstrap_is_seeded_handles_rows_and_refuses_to_guess_from_one_run():
+    x = np.random.default_rng(1).normal(size=25)
+    assert bootstrap_interval(x, seed=4) == bootstrap_interval(x, seed=4)
+    assert bootstrap_interval(x, seed=4) != bootstrap_interval(x, seed=5)
+    assert bootstrap_interval(x, rng=np.random.default_rng(4)) == bootstrap_interval(x, seed=4)
+    # the fast (vectorised) path and the per-resample path agree
+    assert bootstrap_interval(x, np.median, seed=2) == pytest.approx(
+        bootstrap_interval(x, lambda v: float(np.median(v)), seed=2))
+    rows = np.tile(x[:, None], (1, 3))  # (runs, time): resampled by run
+    assert bootstrap_interval(rows, lambda e: e.mean(), seed=4) == pytest.approx(bootstrap_interval(x, seed=4))
+    assert all(math.isnan(v) for v in bootstrap_interval([1.0], seed=0))
+    assert all(math.isnan(v) for v in bootstrap_interval(x, lambda v: np.nan, seed=0))
+
+
+# -- criteria from hand-made run data ---------------------------------------------------------------------
+
+def test_criterion_from_runs_met_not_met_and_inconclusive():
+    wiggle = np.tile([-0.01, 0.01], 15)  # 30 runs
+    met = criterion_from_runs("2", "A/C >= 1.3", 1.5 + wiggle, np.mean, 1.3, ">=", min_n=20, published=1.9)
+    assert (met.verdict, met.n, met.published, met.threshold) == ("met", 30, 1.9, ">= 1.3")
+    assert met.ours == pytest.approx(1.5) and 1.49 <= met.interval[0] <= met.interval[1] <= 1.51
+    assert "n = 30" in met.detail and "needs n >= 20" in met.detail
+
+    not_met = criterion_from_runs("2", "A/C >= 1.3", 1.0 + wiggle, np.mean, 1.3, ">=", min_n=20)
+    assert not_met.verdict == "not met" and not not_met.met
+
+    straddle = criterion_from_runs("2", "A/C >= 1.3", np.linspace(1.0, 1.6, 30), np.mean, 1.3, ">=", min_n=20)
+    assert straddle.ours == pytest.approx(1.3)
+    assert straddle.interval[0] < 1.3 < straddle.interval[1] and straddle.verdict == "inconclusive"
+
+    too_few = criterion_from_runs("2", "A/C >= 1.3", [2.0, 2.1, 1.9, 2.0, 2.0], np.mean, 1.3, ">=", min_n=20)
+    assert too_few.interval[0] > 1.3 and too_few.n == 5 and too_few.verdict == "inconclusive"
+
+
+def test_criterion_from_runs_on_a_paired_ratio_within_a_range():
+    c = np.random.default_rng(11).exponential(200.0, 40)
+    crit = criterion_from_runs("R", "A/C in 1.3..2.5", (1.8 * c, c), lambda a, c_: a.mean() / c_.mean(),
+                               (1.3, 2.5), "within", min_n=20, detail_fmt="{ours:.2f} [{lo:.2f}, {hi:.2f}] n={n}")
+    assert crit.verdict == "met" and crit.ours == pytest.approx(1.8) and crit.detail == "1.80 [1.80, 1.80] n=40"
+    assert crit.threshold == "within [1.3, 2.5]"
+
+
+def test_criterion_from_counts_uses_the_exact_interval():
+    zero = criterion_from_counts("L", "lost runs <= 50 %", 0, 10, 0.5, "<=", min_n=10)
+    assert zero.verdict == "met" and zero.interval == pytest.approx((0.0, 0.3085), abs=1e-4) and zero.ours == 0.0
+    some = criterion_from_counts("L", "lost runs <= 50 %", 3, 10, 0.5, "<=", min_n=10)
+    assert some.verdict == "inconclusive" and some.detail.startswith("ours 3/10 = 0.3")
+    many = criterion_from_counts("L", "lost runs <= 50 %", 9, 10, 0.5, "<=", min_n=10)
+    assert many.verdict == "not met"
+    assert criterion_from_counts("L", "x", 0, 5, 0.5, "<=", min_n=10).verdict == "inconclusive"
+
+
+# -- replication of the paper's protocol ------------------------------------------------------------------
+
+def test_replication_rate_uses_disjoint_batches_of_the_protocol_size():
+    runs = np.arange(100)
+    seen = []
+
+    def record(batch):
+        seen.append(np.asarray(batch))
+        return True
+
+    assert replication_rate(runs, 20, record, replications=3, seed=1) == (3, 3)
+    assert [len(b) for b in seen] == [20, 20, 20]
+    assert len(np.unique(np.concatenate(seen))) == 60  # no run used twice
+    seen.clear()
+    assert replication_rate(runs, 20, record, replications=50, seed=1) == (5, 5)  # only 5 batches fit
+    assert sorted(np.concatenate(seen).tolist()) == list(range(100))
+    assert replication_rate(runs, 200, record, replications=5) == (0, 0)
+
+
+def test_replication_rate_counts_how_often_the_criterion_holds():
+    runs = np.arange(100)
+    # run 0 is in exactly one of the five disjoint batches, whatever the shuffle
+    for seed in range(5):
+        assert replication_rate(runs, 20, lambda b: 0 in b, replications=5, seed=seed) == (1, 5)
+    # paired arrays are cut by the same run indices
+    assert replication_rate((runs, 2 * runs), 10, lambda a, b: np.array_equal(b, 2 * a), 10, seed=3) == (10, 10)
+    # a criterion that holds on a batch's mean: 20-run batches of N(0.3, 1) beat 0 often but not always
+    x = np.random.default_rng(5).normal(0.3, 1.0, 1000)
+    holds, of = replication_rate(x, 20, lambda b: b.mean() > 0, replications=50, seed=0)
+    assert of == 50 and 30 <= holds <= 50  # P(mean of 20 > 0) = Phi(0.3 * sqrt(20)) = 0.91
+    assert replication_rate(x, 20, lambda b: b.mean() > 0, replications=50, seed=0) == (holds, of)
