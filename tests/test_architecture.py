@@ -88,3 +88,29 @@ def test_every_builtin_sensor_and_clutter_generator_declares_a_known_frame():
     for kind in ("workbench_sensors", "workbench_clutter_generators"):
         for name, spec in host.components[kind].items():
             assert spec.detection_frame() in FRAMES, (name, spec.detection_frame())
+
+
+def test_the_kernel_modules_import_each_other_without_cycles():
+    # every import between kernel modules, at module level or inside a function, follows one direction:
+    # dispatchers -> backends (numba, taichi) -> the NumPy twins and constants
+    folder = ROOT / "workbench" / "kernels"
+    graph = {}
+    for path in folder.glob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        graph[path.stem] = {node.module.split(".")[0] for node in ast.walk(tree)
+                            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module}
+    state: dict[str, int] = {}
+
+    def visit(node, trail):
+        if state.get(node) == 1:
+            raise AssertionError("import cycle among the kernels: " + " -> ".join(trail + [node]))
+        if state.get(node) == 2:
+            return
+        state[node] = 1
+        for nxt in graph.get(node, ()):
+            visit(nxt, trail + [node])
+        state[node] = 2
+
+    for module in graph:
+        visit(module, [])
+    assert {"tbd_weights_numba", "crpf_numba", "counter_normals_numba"} <= set(graph)

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 from scipy.stats import kstest
 
-from workbench.kernels.counter_normals import (_splitmix, _unit, counter_normals, counter_normals_numpy, draw_key,
+from workbench.kernels.counter_normals import counter_normals
+from workbench.kernels.counter_normals_numpy import (_splitmix, _unit, counter_normals_numpy, draw_key,
                                                log_poly, sincos_poly)
-from workbench.kernels.tbd_weights import numba_available
+from workbench.kernels.backend import numba_available
 from workbench.rng import generator
 
 

@@ -132,3 +132,22 @@ def test_taichi_runtime_is_lazy_and_checks_its_arch():
         with pytest.raises(TaichiUnavailable):
             ensure_taichi("cuda")
         assert ensure_taichi("auto") == "cpu"  # the failed request did not tear down the running runtime
+
+
+def test_the_one_backend_policy():
+    from workbench.kernels import backend
+
+    assert backend.resolve("auto", "cpu") == ("numba" if backend.numba_available() else "taichi")
+    assert backend.resolve("auto", "cuda") == "taichi" and backend.resolve("auto", "vulkan") == "taichi"
+    assert backend.resolve("numpy", "cuda") == "numpy" and backend.resolve("taichi", "cpu") == "taichi"
+    with pytest.raises(ValueError, match="CPU only"):
+        backend.resolve("numba", "cuda")
+    with pytest.raises(ValueError, match="unknown kernel backend"):
+        backend.resolve("fortran")
+    assert backend.current_arch() == "cpu"
+    with backend.using("cuda"):
+        assert backend.current_arch() == "cuda" and backend.resolve("auto") == "taichi"
+    assert backend.current_arch() == "cpu"  # restored, also after an exception
+    with pytest.raises(RuntimeError), backend.using("vulkan"):
+        raise RuntimeError("boom")
+    assert backend.current_arch() == "cpu"

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from workbench.filtering import run_filter
-from workbench.kernels.tbd_weights import numba_available
+from workbench.kernels.backend import numba_available
 from workbench.models import linear_measurement, random_walk_velocity, range_bearing
 from workbench.rng import generator
 from workbench.trajectory import sample_motion

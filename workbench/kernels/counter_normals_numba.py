@@ -13,7 +13,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from .counter_normals import COS_SERIES, GAMMA, LN2_HI, LN2_LO, LOG_SERIES, MIX1, MIX2, SIN_SERIES, SQRT2
+from .counter_normals_numpy import COS_SERIES, GAMMA, LN2_HI, LN2_LO, LOG_SERIES, MIX1, MIX2, SIN_SERIES, SQRT2
 
 
 @intrinsic

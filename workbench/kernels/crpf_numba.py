@@ -12,7 +12,7 @@ import numba
 import numpy as np
 
 from .counter_normals_numba import row_normals
-from .crpf_step import ATAN_P, ATAN_Q, TAN_PI_8, TWO_PI
+from .crpf_step_numpy import ATAN_P, ATAN_Q, TAN_PI_8, TWO_PI
 
 p0, p1, p2, p3, p4 = ATAN_P
 q0, q1, q2, q3, q4 = ATAN_Q

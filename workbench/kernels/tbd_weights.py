@@ -27,13 +27,13 @@ started on first use only.  (No ``from __future__ import annotations`` here: Tai
 annotations as objects.)
 """
 
-import functools
-
 import numpy as np
 
 from .backend import BACKENDS, current_arch, numba_available, resolve
 from .reference import tbd_log_weight_sums_reference
 from .runtime import ensure_taichi
+from .tbd_weights_numpy import (EXP_COEFFS, EXP_FLOOR, INV_LN2, LN2_HI, LN2_LO, SERIAL_PAIRS, TILE,  # noqa: F401
+                                pack_measurements, pack_points, poly_exp)
 
 __all__ = [
     "BACKENDS",
@@ -46,78 +46,10 @@ __all__ = [
     "tbd_log_weight_sums",
 ]
 
-#: Particles per tile of the Numba kernel (its per-tile accumulators stay in L1).
-TILE = 128
-
-#: Below this many particle-measurement pairs the Numba kernel runs on one thread.
-SERIAL_PAIRS = 2_000_000
-
-# exp(x) = 2^n exp(r), n = round(x / ln 2), r = x - n ln2 with ln2 split in a high and a low part
-# (Cody-Waite), so that n * LN2_HI is exact for |n| < 2^20.
-INV_LN2 = 1.4426950408889634
-LN2_HI = 0.6931471803691238
-LN2_LO = 1.9082149292705877e-10
-#: Taylor coefficients 1/k!, k = 11 ... 0 (Horner order).
-EXP_COEFFS = tuple(1.0 / float(np.prod(np.arange(1, k + 1))) for k in range(11, -1, -1))
-#: Arguments below this are clamped: exp(-708) is the smallest normal double's order of magnitude.
-EXP_FLOOR = -708.0
-
-
-def poly_exp(x: np.ndarray) -> np.ndarray:
-    """The kernels' ``exp`` for ``x <= 0`` in NumPy (same steps), for tests and documentation.
-
-    Shapes: any -> same.
-    """
-    x = np.maximum(np.asarray(x, dtype=float), EXP_FLOOR)
-    n = np.round(x * INV_LN2)
-    r = x - n * LN2_HI - n * LN2_LO
-    p = np.full_like(r, EXP_COEFFS[0])
-    for c in EXP_COEFFS[1:]:
-        p = p * r + c
-    # 2^n: the biased exponent n + 1023 in bits 52..62 of an IEEE double
-    return p * ((n.astype(np.int64) + 1023) << 52).view(np.float64)
-
 
 def resolve_backend(backend: str = "auto", arch: str | None = None) -> str:
     """The backend ``"auto"`` stands for (:func:`workbench.kernels.backend.resolve`)."""
     return resolve(backend, arch)
-
-
-def pack_points(points: np.ndarray) -> np.ndarray:
-    """Particles ``[x, y, z, vr]`` as contiguous structure-of-arrays rows.
-
-    Shapes: ``points (B, N, 4)`` -> ``(B, 4, N)``.
-    """
-    return np.ascontiguousarray(np.swapaxes(np.asarray(points, dtype=np.float64), 1, 2))
-
-
-def pack_measurements(z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray, sigma_p: np.ndarray,
-                      sigma_vr: float) -> tuple[np.ndarray, np.ndarray]:
-    """Valid measurements moved to the front, as rows ``[x, y, z, vr, c_m, a_m]``, plus their counts.
-
-    Shapes
-    ------
-    z : (B, M, 4); valid, log_pd, sigma_p : (B, M)
-    returns : ``meas (B, 6, M')`` with ``M' = max count`` and ``counts (B,)`` int32
-    """
-    valid = np.asarray(valid, dtype=bool)
-    B, M = valid.shape
-    counts = valid.sum(axis=1).astype(np.int32)
-    width = int(counts.max()) if B and M else 0
-    order = np.argsort(~valid, axis=1, kind="stable")[:, :width]  # valid rows first, in their order
-    take = lambda a: np.take_along_axis(np.asarray(a, dtype=np.float64), order, axis=1)  # noqa: E731
-    zz = np.take_along_axis(np.asarray(z, dtype=np.float64), order[..., None], axis=1)
-    var_p = take(sigma_p) ** 2
-    meas = np.empty((B, 6, width))
-    meas[:, :4] = np.swapaxes(zz, 1, 2)
-    # c_m = log P_D - 3/2 log(2 pi sigma_p^2) - 1/2 log(2 pi sigma_vr^2)
-    meas[:, 4] = take(log_pd) - 1.5 * np.log(2.0 * np.pi * var_p) - 0.5 * np.log(2.0 * np.pi * sigma_vr**2)
-    # a_m = 1 / (2 sigma_p^2)
-    meas[:, 5] = 0.5 / var_p
-    live = np.arange(width)[None, :] < counts[:, None]
-    meas[:, 4] = np.where(live, meas[:, 4], 0.0)  # padding: harmless finite values, never read
-    meas[:, 5] = np.where(live, meas[:, 5], 0.0)
-    return np.ascontiguousarray(meas), counts
 
 
 def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray,
@@ -156,57 +88,10 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
     return out
 
 
-# -- Taichi ---------------------------------------------------------------------------------------
-
-
-@functools.cache
 def _taichi_kernel():
-    import taichi as ti
+    from .tbd_weights_taichi import _taichi_kernel as build
 
-    # Every constant goes through ti.f64(...) in Taichi scope: a bare literal would take default_fp (f32).
-    @ti.func
-    def fexp(x):
-        x = ti.max(x, ti.f64(EXP_FLOOR))
-        n = ti.round(x * ti.f64(INV_LN2))
-        r = x - n * ti.f64(LN2_HI) - n * ti.f64(LN2_LO)
-        p = ti.f64(EXP_COEFFS[0])
-        for k in ti.static(range(1, len(EXP_COEFFS))):
-            p = p * r + ti.f64(EXP_COEFFS[k])
-        return p * ti.bit_cast((ti.cast(n, ti.i64) + 1023) << 52, ti.f64)
-
-    @ti.func
-    def log_w(meas: ti.template(), b, m, px, py, pz, pv, beta):
-        dx = meas[b, 0, m] - px
-        dy = meas[b, 1, m] - py
-        dz = meas[b, 2, m] - pz
-        dv = meas[b, 3, m] - pv
-        # log w = c_m - a_m |p_m - p_i|^2 - beta (vr_m - vr_i)^2
-        return meas[b, 4, m] - meas[b, 5, m] * (dx * dx + dy * dy + dz * dz) - beta * dv * dv
-
-    @ti.kernel
-    def kernel(pts: ti.types.ndarray(dtype=ti.f64, ndim=3), meas: ti.types.ndarray(dtype=ti.f64, ndim=3),
-               counts: ti.types.ndarray(dtype=ti.i32, ndim=1), beta: ti.f64,
-               out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-        for b, i in ti.ndrange(pts.shape[0], pts.shape[2]):
-            px, py, pz, pv = pts[b, 0, i], pts[b, 1, i], pts[b, 2, i], pts[b, 3, i]
-            M = counts[b]
-            # pass 1: an upper bound within 2 of max_m log w, as an integer max (vectorises, unlike an
-            # f64 max reduction under Taichi's fast-math flags)
-            top = ti.i64(-(1 << 62))
-            for m in range(M):
-                top = ti.max(top, ti.cast(ti.max(log_w(meas, b, m, px, py, pz, pv, beta), ti.f64(-1e18)), ti.i64))
-            shift = ti.cast(top, ti.f64) + ti.f64(1.0)
-            # pass 2: sum_m exp(log w - shift), every term <= 1 and the largest >= e^-2
-            s = ti.f64(0.0)
-            for m in range(M):
-                s += fexp(log_w(meas, b, m, px, py, pz, pv, beta) - shift)
-            if M > 0:
-                out[b, i] = shift + ti.log(s)
-
-    return kernel
-
-
-# -- Numba (the CPU default) ---------------------------------------------------------------------
+    return build()
 
 
 def _numba_kernel():

@@ -12,7 +12,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from .tbd_weights import EXP_COEFFS, EXP_FLOOR, INV_LN2, LN2_HI, LN2_LO, TILE
+from .tbd_weights_numpy import EXP_COEFFS, EXP_FLOOR, INV_LN2, LN2_HI, LN2_LO, TILE
 
 
 @intrinsic
