@@ -13,6 +13,7 @@ import pytest
 from workbench.report.cache import load_arrays
 from workbench.report.engine import resolve_filters, run_report
 from workbench.plugins import UnknownComponent
+from workbench.types import InputError
 
 TESTS = Path(__file__).parent
 
@@ -203,6 +204,16 @@ def test_resolve_filters(demo_host):
     assert resolve_filters(("kf", "ekf"), "sir", demo_host) == ("sir",)
     with pytest.raises(UnknownComponent, match="no filter named 'nope'"):
         resolve_filters(("kf",), "+nope", demo_host)
+    # configured filters: the commas inside the parentheses do not split, and the label names the values
+    got = resolve_filters(("kf", "ekf"), "+sir(particles=300, threshold=0.25),~ekf", demo_host)
+    assert got == ("kf", "sir(particles=300, threshold=0.25)")
+    assert demo_host.filter(got[1]).params == {"particles": 300, "threshold": 0.25}
+    with pytest.raises(InputError, match="leaves no filter"):
+        resolve_filters(("kf",), "-kf", demo_host)  # removing the last filter is an error, not undone
+    with pytest.raises(InputError, match="cannot remove 'ukf'"):
+        resolve_filters(("kf", "ekf"), "-ukf", demo_host)
+    with pytest.raises(InputError, match="particles: must be >= 1"):
+        resolve_filters(("kf",), "+sir(particles=0)", demo_host)
 
 
 def test_failed_task_is_reported_and_the_rest_kept(tmp_path, demo_host):

@@ -48,7 +48,7 @@ def _write(tmp_path, text):
 
 def test_good_scenario_runs_and_writes_results(tmp_path, demo_host):
     sc = load_scenario(_write(tmp_path, GOOD), demo_host)
-    assert sc.dt == 1.0 and sc.motion.dim == 4 and sc.filters == ("kf", "ekf")
+    assert sc.dt == 1.0 and sc.motion.dim == 4 and sc.filter_names == ("kf", "ekf")
     result = run_scenario(sc, demo_host, tmp_path / "out")
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     # KF and EKF coincide on a linear model; the RMSE is of the order of the measurement noise.
@@ -61,11 +61,19 @@ def test_good_scenario_runs_and_writes_results(tmp_path, demo_host):
 @pytest.mark.parametrize("old, new, message", [
     ('dt = "1 s"', 'dt = "1 m"', r"\[scenario\] dt: '1 m' is a length, but this key expects a time"),
     ('dt = "1 s"', 'dt = "1 fortnight"', r"\[scenario\] dt: unknown unit 'fortnight'"),
-    ('sigma = 2.0', 'sigma = 2.0\nsigmaa = 1', r"\[sensor\] unknown parameter 'sigmaa' for sensor 'demo-position'"),
+    ('sigma = 2.0', 'sigma = 2.0\nsigmaa = 1', r"\[sensor\] sensor 'demo-position': unknown parameter 'sigmaa'"),
+    ('sigma = 2.0', 'sigma = "2 s"', r"\[sensor\] sensor 'demo-position': sigma: '2 s' is a time, but this key expects a length"),
+    ('sigma = 2.0', 'sigma = nan', r"\[sensor\] sensor 'demo-position': sigma: expected a finite number"),
+    ('sigma = 2.0', 'sigma = [1, 2]', r"\[sensor\] sensor 'demo-position': sigma: expected a number"),
     ('plugin = "demo-position"', 'plugin = "sonar-9000"', r"\[sensor\] plugin: no sensor named 'sonar-9000'"),
     ('std = [2.0, 2.0, 0.2, 0.2]', 'std = [2.0, -1.0, 0.2, 0.2]', r"\[prior\] std: standard deviations must be >= 0"),
     ('std = [2.0, 2.0, 0.2, 0.2]', 'std = [1.0, 1.0]', r"\[prior\] std: expected 4 values"),
-    ('names = ["kf", "ekf"]', 'names = ["kf", "ufk"]', r"\[filters\] names: no filter named 'ufk'"),
+    ('names = ["kf", "ekf"]', 'names = ["kf", "ufk"]', r"\[filters\] names\[1\]: no filter named 'ufk'"),
+    ('names = ["kf", "ekf"]', 'names = ["kf", {name = "sir", particles = 0}]',
+     r"\[filters\] names\[1\]: filter 'sir': particles: must be >= 1"),
+    ('names = ["kf", "ekf"]', 'names = ["kf", "sir(partcles=3)"]', r"names\[1\]: filter 'sir': unknown parameter 'partcles'"),
+    ('names = ["kf", "ekf"]', 'names = ["kf", "kf"]', r"the same filter is listed twice"),
+    ('runs = 30', 'runs = 1000000000000', r"runs = 1000000000000 x steps = 20 needs about .* GiB"),
     ('model = "constant_velocity"', 'model = "warp"', r"\[motion\] model: expected one of"),
     ('runs = 30', 'runs = 30\nrunz = 4', r"\[scenario\] unknown key\(s\) \['runz'\]"),
     ('[prior]', '[priors]', r"unknown table\(s\) \['priors'\]"),
@@ -122,3 +130,83 @@ def test_recorded_detections_need_an_associating_tracker(tmp_path, demo_host):
     path.write_text(text.replace("../data/", str(EXAMPLES.parent / "data") + "/"))
     with pytest.raises(InputError, match="need a tracker that associates"):
         load_scenario(path, demo_host)
+
+
+def test_filters_take_their_own_parameters_and_the_results_name_them(tmp_path, demo_host):
+    text = GOOD.replace('names = ["kf", "ekf"]', 'names = ["kf", {name = "sir", particles = 300}, "sir(particles=800)"]')
+    sc = load_scenario(_write(tmp_path, text), demo_host)
+    assert sc.filter_names == ("kf", "sir(particles=300)", "sir(particles=800)")
+    assert sc.filters[1].params == {"particles": 300}
+    result = run_scenario(sc, demo_host, tmp_path / "out")
+    data = np.load(tmp_path / "out" / "results.npz")
+    assert "mean_sir(particles=300)" in data.files and "mean_sir(particles=800)" in data.files
+    assert set(result.rmse) == {"kf", "sir(particles=300)", "sir(particles=800)"}
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["filters"]["sir(particles=300)"] == {"plugin": "sir", "params": {"particles": 300}}
+
+
+def test_a_failing_filter_is_named_and_the_others_are_written(tmp_path, demo_host):
+    from dataclasses import replace
+
+    from workbench.plugins import load_host
+    from fixtures import demo_plugin
+    from workbench import hookimpl
+    from types import SimpleNamespace
+
+    kf = demo_host.filter("kf")
+
+    def nan_update(state, scan, model, rng=None):
+        out = kf.update(state, scan, model, rng)
+        return type(out)(np.full_like(out.mean, np.nan), out.cov) if False else out.__class__(
+            np.where(np.arange(out.mean.shape[1]) == 0, np.nan, out.mean), out.cov) if scan.time > 5 else out
+
+    def raising_update(state, scan, model, rng=None):
+        raise RuntimeError("the solver exploded")
+
+    broken = SimpleNamespace(workbench_filters=hookimpl(lambda: [
+        replace(kf, name="kf-boom", update=raising_update), replace(kf, name="kf-nan", update=nan_update)]))
+    host = load_host(extra_plugins=[("demo", demo_plugin), ("broken-filters", broken)])
+    text = GOOD.replace('names = ["kf", "ekf"]', 'names = ["kf-boom", "kf", "kf-nan", "ekf"]')
+    sc = load_scenario(_write(tmp_path, text), host)
+    result = run_scenario(sc, host, tmp_path / "out")
+    assert set(result.failed) == {"kf-boom", "kf-nan"}
+    assert "the solver exploded" in result.failed["kf-boom"] and "NaN" in result.failed["kf-nan"]
+    data = np.load(tmp_path / "out" / "results.npz")
+    assert {"mean_kf", "mean_ekf"} <= set(data.files) and "mean_kf-boom" not in data.files
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert set(summary["failed"]) == {"kf-boom", "kf-nan"} and set(summary["position_rmse"]) == {"kf", "ekf"}
+    assert "FAILED" in result.summary_text()
+
+
+def test_a_frame_mismatch_is_refused_naming_both(tmp_path):
+    from workbench.plugins import load_host
+
+    text = (EXAMPLES / "range_bearing.toml").read_text() + \
+        '\n[[clutter]]\nplugin = "sonar-poisson"\n'
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(InputError, match="sensor 'range-bearing' makes range-bearing detections but clutter "
+                                         "generator 'sonar-poisson' makes cartesian-2d detections"):
+        load_scenario(path, load_host())
+
+
+def test_run_plots_in_the_sensor_frame_converted_to_positions(tmp_path):
+    from workbench.plugins import load_host
+
+    host = load_host()
+    text = (EXAMPLES / "range_bearing.toml").read_text().replace("runs = 200", "runs = 5").replace(
+        "steps = 100", "steps = 30")
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    result = run_scenario(load_scenario(path, host), host, tmp_path / "out")
+    plot = result.plot
+    assert [str(v) for v in plot["left_labels"][:2]] == ["x (m)", "y (m)"]
+    assert [str(v) for v in plot["right_labels"][:2]] == ["time (s)", "position RMSE (m)"]
+    # the range-bearing detections are drawn as positions: near the true path, not at (range, bearing)
+    truth = plot["truth_xy"]
+    d = plot["detections_xy"]
+    nearest = np.min(np.linalg.norm(d[:, None, :] - truth[None, :, :], axis=-1), axis=1)
+    assert np.median(nearest) < 30.0 and np.all(np.abs(d[:, 1]) > 5.0)  # bearings would be |y| < pi
+    assert plot["track_ekf"].shape == (30, 2) and plot["rmse_ekf"].shape == (30,)
+    saved = np.load(tmp_path / "out" / "tracks.npz")
+    np.testing.assert_array_equal(saved["detections_xy"], d)

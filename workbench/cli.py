@@ -1,16 +1,58 @@
-"""The ``workbench`` command line."""
+"""The ``workbench`` command line.
+
+Error policy: every expected failure ends the command with one line on stderr naming what went wrong (the
+file, key, line, column or plugin, and what was expected) and an exit status per class; ``--debug`` shows
+the traceback instead.
+
+====  =================================================================================================
+exit  meaning
+====  =================================================================================================
+0     done
+1     done, but some work failed (a task, a figure, a filter): the rest is written and the failures named
+2     bad input: a scenario, data file, option, parameter or component name
+3     an operating-system error: a file or folder that cannot be read or written, a full disk
+4     a plugin failed to load or raised where it should not have
+5     the network: a Dask scheduler that cannot be reached
+70    an internal error (a bug: please report it with the ``--debug`` traceback)
+130   interrupted (Ctrl-C)
+====  =================================================================================================
+"""
 
 from __future__ import annotations
 
 import argparse
+import difflib
+import errno
 import shlex
 import sys
+import traceback
 from pathlib import Path
 
 from .plugins import BLOCK_ENV, PluginHost, UnknownComponent, load_host
 from .types import InputError
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "EXIT", "NetworkError", "PluginFailure"]
+
+#: Exit status per class of failure (see the module docstring).
+EXIT = {"ok": 0, "partial": 1, "input": 2, "os": 3, "plugin": 4, "network": 5, "internal": 70, "interrupted": 130}
+
+
+class NetworkError(RuntimeError):
+    """A service the command needs (a Dask scheduler) cannot be reached."""
+
+
+class PluginFailure(RuntimeError):
+    """A plugin failed to load, or raised where it should not have; the message names it."""
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {value}")
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,9 +61,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate, compare and accelerate target-tracking algorithms in clutter and at low SNR.")
     parser.add_argument("--block", action="append", default=[], metavar="PLUGIN",
                         help=f"do not load this plugin (repeatable; also the {BLOCK_ENV} environment variable)")
+    parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    sub.add_parser("plugins", help="list installed plugins: kind, name, distribution, version, status")
+    plg = sub.add_parser("plugins", help="list installed plugins; with a NAME, that component's parameters")
+    plg.add_argument("name", nargs="?", default=None,
+                     help="a component name: print its kind, summary, capabilities and declared parameters")
 
     rep = sub.add_parser("report", help="regenerate the papers' figures and tables")
     rep.add_argument("--paper", action="append", default=[], help="only this paper (repeatable), e.g. 003")
@@ -31,15 +76,16 @@ def build_parser() -> argparse.ArgumentParser:
     rep.set_defaults(size="quick")
     rep.add_argument("--out", default="workbench-report", help="output folder (default: ./workbench-report)")
     rep.add_argument("--filters", default=None,
-                     help="comma-separated filter names: '+name' adds to each recipe's defaults, '-name' "
-                          "removes one, a plain list replaces them")
+                     help="comma-separated filters, each 'name' or 'name(key=value, ...)': '+name' adds to each "
+                          "recipe's defaults, '-name' or '~name' removes one, a plain list replaces them "
+                          "(e.g. --filters '+sir(particles=2000),~ekf')")
     rep.add_argument("--seed", type=int, default=0, help="base seed of every random stream (default 0)")
     rep.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "auto"],
                      help="Taichi backend for kernels (default cpu; auto falls back to cpu)")
     rep.add_argument("--no-progress", action="store_true", help="no progress bars")
     rep.add_argument("--scheduler", default=None, metavar="ADDRESS",
                      help="send the tasks to this Dask distributed scheduler (pip install -e '.[dask]')")
-    rep.add_argument("--workers", type=int, default=None, metavar="N",
+    rep.add_argument("--workers", type=_positive_int, default=None, metavar="N",
                      help="start a local Dask cluster of N worker processes for the tasks")
 
     run = sub.add_parser("run", help="run one scenario file: a results file and its plots")
@@ -62,11 +108,55 @@ def _host(args) -> PluginHost:
     for p in host.broken:
         print(f"workbench: warning: plugin {p.name} ({p.distribution} {p.version}) is broken: {p.error}",
               file=sys.stderr)
+    for warning in host.warnings:
+        print(f"workbench: warning: {warning}", file=sys.stderr)
+    known = {p.name for p in host.plugins}
+    for name in args.block:
+        if name not in known:
+            close = difflib.get_close_matches(name, sorted(known), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else f" (plugins: {', '.join(sorted(known))})"
+            print(f"workbench: warning: --block {name!r} matches no installed plugin{hint}", file=sys.stderr)
     return host
+
+
+def _describe_component(host: PluginHost, name: str) -> int:
+    from .params import describe
+
+    found = host.find(name)
+    if not found:
+        everything = sorted({n for table in host.components.values() for n in table})
+        close = difflib.get_close_matches(name, everything, n=3)
+        raise UnknownComponent(f"no component named {name!r} is installed"
+                               + (f"; did you mean {', '.join(close)}?" if close else ""))
+    for kind, spec in found:
+        label = getattr(spec, "name", None) or getattr(spec, "paper", None) or getattr(spec, "group", name)
+        print(f"{kind} {label}: {getattr(spec, 'summary', '') or getattr(spec, 'title', '')}")
+        caps = sorted(getattr(spec, "capabilities", ()) or ())
+        if caps:
+            print(f"  capabilities: {', '.join(caps)}")
+        frame = spec.detection_frame() if hasattr(spec, "detection_frame") else ""
+        if frame:
+            print(f"  frame of its detections: {frame}")
+        if hasattr(spec, "declared"):
+            rows = describe(spec.declared, spec.params)
+            if rows:
+                head = ("parameter", "type", "unit", "value", "meaning")
+                widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(4)]
+                print("  " + "  ".join(str(v).ljust(widths[i]) for i, v in enumerate(head[:4])) + "  " + head[4])
+                for r in rows:
+                    print("  " + "  ".join(str(v).ljust(widths[i]) for i, v in enumerate(r[:4])) + "  " + r[4])
+            else:
+                print("  no parameters")
+        owner = next((p for p in host.plugins if (kind, label) in p.provides), None)
+        if owner is not None:
+            print(f"  from plugin {owner.name} ({owner.distribution} {owner.version})")
+    return 0
 
 
 def cmd_plugins(args) -> int:
     host = _host(args)
+    if args.name:
+        return _describe_component(host, args.name)
     rows = []
     for p in host.plugins:
         if p.provides:
@@ -99,7 +189,13 @@ def cmd_report(args) -> int:
     if args.scheduler or args.workers:
         from .report.engine import dask_executor
 
-        executor = dask_executor(host, args.scheduler, args.workers, block=args.block)
+        try:
+            executor = dask_executor(host, args.scheduler, args.workers, block=args.block)
+        except InputError:
+            raise
+        except (OSError, TimeoutError) as exc:
+            raise NetworkError(f"cannot reach the Dask scheduler {args.scheduler or '(local cluster)'}: "
+                               f"{exc}") from None
     try:
         report = run_report(host, Path(args.out), papers=args.paper or None, size=args.size, seed=args.seed,
                             filters=args.filters, arch=args.arch, progress=not args.no_progress, command=command,
@@ -132,6 +228,10 @@ def cmd_run(args) -> int:
     out = Path(args.out) if args.out else Path(args.scenario).with_name(f"{scenario.name}-results")
     result = run_scenario(scenario, host, out, seed=args.seed)
     print(result.summary_text())
+    if result.failed:
+        print(f"workbench: {len(result.failed)} of {len(scenario.filters)} filters failed "
+              f"({', '.join(result.failed)}); the others' results are written", file=sys.stderr)
+        return EXIT["partial"]
     return 0
 
 
@@ -161,16 +261,65 @@ COMMANDS = {"plugins": cmd_plugins, "report": cmd_report, "run": cmd_run, "check
             "bench": cmd_bench}
 
 
+def _normalise_argv(argv: list[str]) -> list[str]:
+    """``--filters -ekf`` as ``--filters=-ekf``: a value that starts with '-' would otherwise read as an option."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--filters" and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1] != "--":
+            out.append(f"--filters={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
+
+
+def _os_message(exc: OSError) -> str:
+    what = exc.strerror or str(exc)
+    if exc.errno == errno.ENOSPC:
+        what = "no space left on the device"
+    where = f" {exc.filename}" if exc.filename else ""
+    return f"cannot use{where}: {what}"
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = _normalise_argv(list(sys.argv[1:] if argv is None else argv))
     args = build_parser().parse_args(argv)
+    debug = getattr(args, "debug", False)
+
+    def fail(kind: str, message: str) -> int:
+        if debug:
+            traceback.print_exc()
+        print(f"workbench: error: {message}", file=sys.stderr)
+        return EXIT[kind]
+
     try:
         return COMMANDS[args.command](args)
-    except (InputError, UnknownComponent, FileNotFoundError) as exc:
-        print(f"workbench: error: {exc}", file=sys.stderr)
-        return 2
+    except (InputError, UnknownComponent) as exc:
+        return fail("input", str(exc))
+    except UnicodeDecodeError as exc:
+        return fail("input", f"a file is not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8")
+    except NetworkError as exc:
+        return fail("network", str(exc))
+    except PluginFailure as exc:
+        return fail("plugin", str(exc))
+    except OSError as exc:
+        return fail("os", _os_message(exc))
+    except MemoryError:
+        return fail("input", "the request needs more memory than this machine has; ask for fewer runs, steps or "
+                             "particles")
     except KeyboardInterrupt:
-        print("workbench: interrupted; finished work is cached and will be reused", file=sys.stderr)
-        return 130
+        if debug:
+            traceback.print_exc()
+        what = {"report": "finished tasks are cached in the output folder and will be reused",
+                "run": "nothing of this run was written", "bench": "no benchmark table was written"}
+        print(f"workbench: interrupted; {what.get(args.command, 'nothing was written')}", file=sys.stderr)
+        return EXIT["interrupted"]
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback with --debug
+        frames = traceback.extract_tb(exc.__traceback__)
+        at = f" at {Path(frames[-1].filename).name}:{frames[-1].lineno}" if frames else ""
+        return fail("internal", f"internal error {type(exc).__name__}: {exc}{at} (run with --debug for the "
+                                "traceback, and please report it)")
 
 
 if __name__ == "__main__":  # pragma: no cover

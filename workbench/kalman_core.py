@@ -39,7 +39,7 @@ def linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
     """One step of the linear motion model for every item of the batch."""
     mean = state.mean @ motion.F.T  # x- = F x
     cov = symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q)  # P- = F P F^T + Q
-    return Gaussian(mean, cov)
+    return Gaussian.trusted(mean, cov)
 
 
 def linear_update(state: Gaussian, z: np.ndarray, present: np.ndarray, H: np.ndarray, R: np.ndarray) -> Gaussian:
@@ -73,7 +73,7 @@ def linear_update(state: Gaussian, z: np.ndarray, present: np.ndarray, H: np.nda
     nu = z_safe - state.mean @ H.T  # nu = z - H x-
     mean = state.mean + np.einsum("bij,bj->bi", K, nu)
     cov = joseph_update(P, K, H, R_safe)
-    return Gaussian(keep_where(present, mean, state.mean), keep_where(present, cov, P))
+    return Gaussian.trusted(keep_where(present, mean, state.mean), keep_where(present, cov, P))
 
 
 def measurement_covariance(scan: Scan, model: MeasurementModel, present: np.ndarray) -> np.ndarray:
@@ -108,7 +108,7 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
     nu = model.residual(z, model.h(state.mean))  # wrap(z - h(x-))
     mean = state.mean + np.einsum("bij,bj->bi", K, nu)
     cov = joseph_update(P, K, H, R)
-    return Gaussian(keep_where(present, mean, state.mean), keep_where(present, cov, P))
+    return Gaussian.trusted(keep_where(present, mean, state.mean), keep_where(present, cov, P))
 
 
 def kf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:

@@ -17,7 +17,8 @@ from typing import Any, Iterable, Mapping
 from .types import InputError
 from .units import UNITS, parse_quantity
 
-__all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults"]
+__all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults",
+           "parse_reference"]
 
 #: The value types a parameter may declare.
 TYPES = ("float", "int", "bool", "str", "vector", "float?", "vector?")
@@ -204,3 +205,66 @@ def describe(params: Iterable[Param], values: Mapping[str, Any] | None = None) -
             bounds = f" [{' | '.join(map(str, p.choices))}]"
         rows.append((p.name, p.type + bounds, p.unit_label or "-", format_value(value), p.doc))
     return rows
+
+
+def parse_reference(text: str, where: str = "component") -> tuple[str, dict[str, Any]]:
+    """Split a component reference ``"name"`` or ``"name(key=value, ...)"`` into the name and its raw values.
+
+    Values are read as TOML values where they are one (``2000``, ``0.5``, ``true``, ``"iso"``, ``[1, 2]``) and kept
+    as plain strings otherwise (``arc-length``, ``15 m/s``), for the component's declarations to check.  Commas
+    inside brackets or quotes do not split.
+
+    >>> parse_reference("sir(particles=2000, threshold=0.5)")
+    ('sir', {'particles': 2000, 'threshold': 0.5})
+    """
+    text = text.strip()
+    if "(" not in text:
+        if not text or any(c in text for c in ")=,"):
+            raise InputError(f"{where}: cannot read {text!r} as a component name")
+        return text, {}
+    if not text.endswith(")"):
+        raise InputError(f"{where}: {text!r} must end with ')': write name(key=value, ...)")
+    name, inner = text[: text.index("(")].strip(), text[text.index("(") + 1: -1]
+    if not name:
+        raise InputError(f"{where}: {text!r} has no component name before '('")
+    parts, depth, quote, current = [], 0, "", ""
+    for ch in inner:
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[(":
+            depth += 1
+        elif ch in "])":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append(current)
+            current = ""
+            continue
+        current += ch
+    if current.strip():
+        parts.append(current)
+    values: dict[str, Any] = {}
+    for part in parts:
+        if "=" not in part:
+            raise InputError(f"{where}: {part.strip()!r} in {text!r} is not key=value")
+        key, raw = (s.strip() for s in part.split("=", 1))
+        if not key.isidentifier():
+            raise InputError(f"{where}: {key!r} in {text!r} is not a parameter name")
+        if key in values:
+            raise InputError(f"{where}: {key!r} is given twice in {text!r}")
+        values[key] = _read_value(raw)
+    return name, values
+
+
+def _read_value(raw: str) -> Any:
+    import sys
+
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except Exception:  # noqa: BLE001 - not a TOML value: a bare string (a choice, or a quantity with a unit)
+        return raw

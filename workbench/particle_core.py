@@ -98,7 +98,7 @@ def init(prior: Gaussian, rng: np.random.Generator, particles: int) -> ParticleS
     x = component_major(prior.batch, particles, prior.dim)
     # x_i = mean + chol e_i
     x[...] = prior.mean[:, None, :] + np.einsum("bij,bnj->bni", chol, e)
-    return ParticleState(Particles(x, np.full((prior.batch, particles), -np.log(particles))))
+    return ParticleState(Particles.trusted(x, np.full((prior.batch, particles), -np.log(particles))))
 
 
 def _noise_columns(motion: MotionModel) -> np.ndarray:
@@ -115,7 +115,7 @@ def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator)
     if g.shape[1]:
         sources.append(rng.standard_normal((B, N, g.shape[1])))
     moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), *sources)
-    return ParticleState(Particles(moved, state.cloud.log_weights), state.resamples, state.underflows)
+    return ParticleState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows)
 
 
 def _inverse_cholesky(R: np.ndarray) -> np.ndarray:

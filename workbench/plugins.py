@@ -81,6 +81,14 @@ class PluginHost:
         return table[name]
 
     def filter(self, name: str) -> FilterSpec:
+        """The installed filter ``name``, or a configured one: ``"sir(particles=2000)"`` is the ``sir`` filter
+        configured with 2,000 particles (checked against its declared parameters) and named by that label."""
+        if "(" in name:
+            from .params import parse_reference
+
+            base, values = parse_reference(name, "filter")
+            spec = self._get("workbench_filters", base)
+            return spec.configure(name=name, **values) if values else spec
         return self._get("workbench_filters", name)
 
     def sensor(self, name: str) -> SensorSpec:

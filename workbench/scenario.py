@@ -1,14 +1,16 @@
 """Scenario files (TOML): validated once on load, then run by ``workbench run``.
 
 A scenario names a motion model, a truth (start state or manoeuvre legs), a sensor plugin, optional
-clutter generators and removers, a prior and the filters to compare.  Every key is checked on load:
-an unknown key, a wrong unit, a negative standard deviation or a plugin that is not installed gives an
-error naming the file, the key and what was expected.  See ``docs/scenarios.md``.
+clutter generators and removers, a prior and the filters to compare (each with its own parameters).  Every key
+is checked on load: an unknown key, a wrong type or unit, a NaN, a value out of its declared range, a plugin
+that is not installed, components whose measurement frames do not match, or a request that would not fit in
+memory gives an error naming the file, the key and what was expected.  See ``docs/scenarios.md``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,8 +19,10 @@ from typing import Any, Mapping
 import numpy as np
 
 from .filtering import run_filter
+from .frames import FRAMES, check_same_frame
 from .metrics import position_sq_error
 from .models import MotionModel, constant_velocity, random_walk_velocity, range_rate_model
+from .params import parse_reference
 from .plugins import PluginHost, UnknownComponent
 from .rng import generator
 from .trajectory import Leg, piecewise_trajectory, sample_motion
@@ -35,14 +39,27 @@ __all__ = ["Component", "Scenario", "load_scenario", "run_scenario", "ScenarioRe
 MOTION_MODELS = ("constant_velocity", "random_walk_velocity", "range_rate")
 TRACKERS = ("direct", "nearest-neighbour", "multi-target")
 DETECTION_FORMATS = ("sonar", "pcl")
+#: The measurement frame of each recorded-detection format.
+FORMAT_FRAMES = {"sonar": "cartesian-2d", "pcl": "bistatic-range-rate"}
+#: A scenario may ask for at most this share of the machine's memory (truth, detections and estimates).
+MEMORY_SHARE = 0.5
 
 
 @dataclass(frozen=True)
 class Component:
-    """A plugin reference with its parameters (already converted to SI)."""
+    """A plugin reference with its parameters (checked against its declarations, converted to SI).
+
+    ``label`` is how reports and results name it: the plugin name, or ``name(key=value, ...)`` when parameters
+    are set (filters).
+    """
 
     plugin: str
     params: Mapping[str, Any] = field(default_factory=dict)
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.label:
+            object.__setattr__(self, "label", self.plugin)
 
 
 @dataclass(frozen=True)
@@ -62,11 +79,17 @@ class Scenario:
     removers: tuple[Component, ...]
     prior_mean: np.ndarray
     prior_std: np.ndarray
-    filters: tuple[str, ...]
+    filters: tuple[Component, ...]
     tracker: str
     gate: float | None = None
     detections: Path | None = None
     detections_format: str = ""
+    frame: str = ""
+
+    @property
+    def filter_names(self) -> tuple[str, ...]:
+        """The filters' labels, in order."""
+        return tuple(f.label for f in self.filters)
 
 
 class _Reader:
@@ -120,32 +143,84 @@ class _Reader:
 
 
 def _component(path: Path, table: Mapping, name: str, registry: Mapping[str, Any], kind: str) -> Component:
+    """``plugin = "..."`` and that component's parameters, checked against its declarations (type, unit, range)."""
     reader = _Reader(path, table, name)
     plugin = reader.get("plugin")
+    if not isinstance(plugin, str):
+        raise InputError(f"{reader.where('plugin')}: expected a {kind} name, got {plugin!r}")
     if plugin not in registry:
         raise InputError(f"{path}: [{name}] plugin: no {kind} named {plugin!r} is installed "
                          f"(installed: {', '.join(sorted(registry)) or 'none'})")
-    defaults = dict(registry[plugin].params)
-    params = {}
-    for key in table:
-        if key == "plugin":
-            continue
-        if defaults and key not in defaults:
-            raise InputError(f"{path}: [{name}] unknown parameter {key!r} for {kind} {plugin!r} "
-                             f"(parameters: {', '.join(sorted(defaults))})")
-        value = table[key]
-        params[key] = parse_quantity(value, None, reader.where(key)) if isinstance(value, str) and \
-            not isinstance(defaults.get(key), str) else value
+    spec = registry[plugin]
+    values = {key: value for key, value in table.items() if key != "plugin"}
+    try:
+        params = spec.check(**values)
+    except InputError as exc:
+        raise InputError(f"{path}: [{name}] {exc}") from None
     return Component(plugin, params)
+
+
+def _filters(path: Path, table: Mapping, host: PluginHost) -> tuple[Component, ...]:
+    """``names = ["kf", {name = "sir", particles = 2000}, "ukf(alpha=0.5)"]``: each checked against its filter's
+    declared parameters."""
+    fl = _Reader(path, table, "filters")
+    names = fl.get("names")
+    fl.done()
+    if not isinstance(names, list) or not names:
+        raise InputError(f"{fl.where('names')}: expected a non-empty list of filters (names, or tables "
+                         f"{{name = \"sir\", particles = 2000}})")
+    out = []
+    for i, entry in enumerate(names):
+        where = f"{fl.where('names')}[{i}]"
+        if isinstance(entry, str):
+            base, values = parse_reference(entry, where)
+        elif isinstance(entry, Mapping) and isinstance(entry.get("name"), str):
+            base, values = entry["name"], {k: v for k, v in entry.items() if k != "name"}
+        else:
+            raise InputError(f"{where}: expected a filter name or a table with a 'name', got {entry!r}")
+        try:
+            spec = host.filter(base).configure(**values) if values else host.filter(base)
+        except (UnknownComponent, InputError) as exc:
+            raise InputError(f"{where}: {exc}") from None
+        changed = {k: spec.params[k] for k in values}
+        label = spec.name if values else base
+        out.append(Component(base, changed, label))
+    labels = [c.label for c in out]
+    if len(set(labels)) != len(labels):
+        raise InputError(f"{fl.where('names')}: the same filter is listed twice: "
+                         f"{sorted({x for x in labels if labels.count(x) > 1})}")
+    return tuple(out)
+
+
+def _memory_limit() -> float:
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+        return 8.0 * 2 ** 30
+
+
+def check_request_size(path: Path, runs: int, steps: int, n: int, filters: int, detections: int = 1) -> None:
+    """Refuse a scenario whose arrays would not fit: truth, detections and every filter's means and covariances,
+    ``8 x runs x steps x (n + 4 detections + filters (n + n^2))`` bytes, against half the machine's memory."""
+    need = 8.0 * runs * steps * (n + 5 * detections + filters * (n + n * n))
+    limit = MEMORY_SHARE * _memory_limit()
+    if need > limit:
+        raise InputError(f"{path}: [scenario] runs = {runs} x steps = {steps} needs about {need / 2**30:.3g} GiB for the "
+                         f"truth, detections and estimates; this machine allows {limit / 2**30:.3g} GiB (half its "
+                         f"memory): ask for fewer runs or steps")
 
 
 def load_scenario(path: Path, host: PluginHost) -> Scenario:
     """Read and validate a scenario file; every problem is reported with the file and key."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give the scenario's .toml file")
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        raw = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise InputError(f"{path}: no such scenario file") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
     known = {"scenario", "motion", "truth", "sensor", "clutter", "remover", "prior", "filters", "detections"}
@@ -179,6 +254,8 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
             raise InputError(f"{de.where('format')}: expected one of {DETECTION_FORMATS}, got {det_format!r}")
         if not detections.exists():
             raise InputError(f"{de.where('file')}: no such file {detections}")
+        if detections.is_dir():
+            raise InputError(f"{de.where('file')}: {detections} is a folder, not a detection file")
         de.done()
         if tracker == "direct":
             raise InputError(f"{sc.where('tracker')}: recorded detections need a tracker that associates "
@@ -228,44 +305,84 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     if tracker == "nearest-neighbour" and np.isnan(prior_std).any():
         raise InputError(f"{pr.where('std')}: the nearest-neighbour tracker needs the prior's standard deviations")
 
-    fl = _Reader(path, raw["filters"], "filters")
-    names = fl.get("names")
-    if not isinstance(names, list) or not names or not all(isinstance(x, str) for x in names):
-        raise InputError(f"{fl.where('names')}: expected a non-empty list of filter names")
-    for fname in names:
-        try:
-            host.filter(fname)
-        except UnknownComponent as exc:
-            raise InputError(f"{fl.where('names')}: {exc}") from None
-    fl.done()
+    filters = _filters(path, raw["filters"], host)
+    frame = _check_frames(path, host, sensor, clutter, removers, tracker, det_format)
+    if not recorded:
+        check_request_size(path, runs, steps, n, len(filters), 1 + len(clutter))
     return Scenario(path, name, seed, runs, steps, dt, motion, x0, x0_std, tuple(legs), sensor, clutter,
-                    removers, prior_mean, prior_std, tuple(names), tracker, gate, detections, det_format)
+                    removers, prior_mean, prior_std, filters, tracker, gate, detections, det_format, frame)
+
+
+def _check_frames(path: Path, host: PluginHost, sensor: Component, clutter, removers, tracker: str,
+                  det_format: str) -> str:
+    """The frame of the scenario's detections; components of other frames are refused, naming both."""
+    spec = host.sensor(sensor.plugin)
+    frame = FORMAT_FRAMES[det_format] if det_format else spec.detection_frame(**sensor.params)
+    who = f"the recorded {det_format} file" if det_format else f"sensor {sensor.plugin!r}"
+    for i, comp in enumerate(clutter):
+        other = host.clutter_generator(comp.plugin).detection_frame(**comp.params)
+        try:
+            check_same_frame(frame, who, other, f"clutter generator {comp.plugin!r}")
+        except InputError as exc:
+            raise InputError(f"{path}: [clutter[{i}]] {exc}") from None
+    for i, comp in enumerate(removers):
+        frames = host.clutter_remover(comp.plugin).frames
+        if frame and frames and frame not in frames:
+            raise InputError(f"{path}: [remover[{i}]] clutter remover {comp.plugin!r} works on {', '.join(frames)} "
+                             f"detections, but {who} makes {frame} detections")
+    model = spec.measurement_model(**sensor.params)
+    if tracker == "multi-target" and frame and frame != "cartesian-2d":
+        raise InputError(f"{path}: [scenario] tracker: the multi-target tracker takes Cartesian (x, y) detections, "
+                         f"but {who} makes {frame} detections")
+    if tracker != "multi-target" and frame and model.frame and model.frame != frame:
+        raise InputError(f"{path}: [sensor] {who} makes {frame} detections but its measurement model "
+                         f"{model.name!r} describes {model.frame} measurements: the filters would read one as the "
+                         f"other (choose the sensor's model of its own detections, or the multi-target tracker)")
+    return frame
 
 
 @dataclass(frozen=True)
 class ScenarioResult:
+    """What ``workbench run`` wrote: the folder, each filter's time-averaged position RMSE (m) where there is a
+    truth, its diagnostics, the filters that failed (name -> why) and notes."""
+
     out: Path
     name: str
     rmse: Mapping[str, float]
     diagnostics: Mapping[str, Mapping[str, float]]
     lines: tuple[str, ...] = ()
+    failed: Mapping[str, str] = field(default_factory=dict)
+    plot: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def summary_text(self) -> str:
         lines = [f"scenario {self.name}: results in {self.out}"]
         for fname, value in self.rmse.items():
-            lines.append(f"  {fname:12s} position RMSE (time-averaged) {value:.4g}")
+            lines.append(f"  {fname:12s} position RMSE (time-averaged) {value:.4g} m")
         lines.extend(f"  {line}" for line in self.lines)
+        for fname, why in self.failed.items():
+            lines.append(f"  {fname:12s} FAILED: {why}")
         return "\n".join(lines)
+
+
+def _load_recorded(scenario: Scenario) -> Scans:
+    from .recorded import load_pcl_candidates, load_sonar_csv
+
+    loader = load_sonar_csv if scenario.detections_format == "sonar" else load_pcl_candidates
+    try:
+        scans = loader(scenario.detections)
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{scenario.detections}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as "
+                         f"UTF-8") from None
+    if not scans.valid.any():
+        raise InputError(f"{scenario.detections}: holds no detection (a header without rows?); nothing to track")
+    return scans
 
 
 def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | None, Scans]:
     """Truth and detections (sensor, then clutter, then removers) for all runs; recorded detections
     (no truth) when the scenario names a file."""
     if scenario.detections is not None:
-        from .recorded import load_pcl_candidates, load_sonar_csv
-
-        loader = load_sonar_csv if scenario.detections_format == "sonar" else load_pcl_candidates
-        scans = loader(scenario.detections)
+        scans = _load_recorded(scenario)
         for comp in scenario.removers:
             scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
         return None, scans
@@ -286,10 +403,6 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | N
     for comp in scenario.removers:
         scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
     return truth, scans
-
-
-def _position_dims(motion: MotionModel) -> int:
-    return motion.dim // 2
 
 
 def _track_single(scenario, spec, model, scans, seed):
@@ -317,75 +430,155 @@ def _track_single(scenario, spec, model, scans, seed):
         track.seconds)
 
 
+def _non_finite(est) -> str:
+    """Why a filter's estimates cannot be used (NaN or inf somewhere), or ``""``."""
+    for name in ("mean", "cov"):
+        values = getattr(est, name)
+        if not np.all(np.isfinite(values)):
+            b, k = (int(i) for i in np.argwhere(~np.isfinite(values))[0][:2])
+            return f"its {name} holds NaN or inf (run {b}, scan {k})"
+    return ""
+
+
+def _plot_data(scenario: Scenario, model, scans: Scans, truth: Truth | None, estimates: dict, logs: dict
+               ) -> dict[str, np.ndarray]:
+    """The data behind ``tracks.png`` (saved as ``tracks.npz``): run 0 in the sensor's frame converted to positions
+    where the frame has them, the filters' position components (from the motion model's layout), and the RMSE or
+    track counts per scan, with the axis labels and units."""
+    frame = FRAMES.get(scenario.frame)
+    dims = scenario.motion.position_dims
+    shown = scans.valid[0]
+    planar = frame is not None and frame.position is not None and dims >= 2
+    data: dict[str, np.ndarray] = {"times": scans.times}
+    if planar:
+        pos = frame.to_position(scans.z[0][shown], model.sensor_position if model.frame == frame.name else None)
+        data["detections_xy"] = pos[:, :2]
+        data["left_labels"] = np.array(["x (m)", "y (m)", "run 0 in the plane"])
+    else:
+        label = frame.labels()[0] if frame is not None else "measurement component 0"
+        k = np.nonzero(shown)[0]
+        data["detections_xy"] = np.column_stack([scans.times[k], scans.z[0][shown][:, 0]])
+        data["left_labels"] = np.array(["time (s)", label, "run 0: the first measured component over time"])
+    if truth is not None:
+        data["truth_xy"] = truth.states[0, :, :2] if planar else np.column_stack([truth.times, truth.states[0, :, 0]])
+    for name, est in estimates.items():
+        data[f"track_{name}"] = est.mean[0, :, :2] if planar else np.column_stack([scans.times, est.mean[0, :, 0]])
+    for name, log in logs.items():
+        from .tracking import CONFIRMED
+
+        conf = (log.status == CONFIRMED) & (log.run == 0)
+        data[f"confirmed_{name}"] = log.mean[conf, :2]
+        data[f"count_{name}"] = log.confirmed_counts().mean(axis=0)
+    if logs:
+        data["right_labels"] = np.array(["scan", "confirmed tracks (mean over runs)", "confirmed tracks per scan"])
+    elif truth is not None:
+        for name, est in estimates.items():
+            err = position_sq_error(truth.states, est.mean, dims)
+            data[f"rmse_{name}"] = np.sqrt(err.mean(axis=0))
+        data["right_labels"] = np.array(["time (s)", "position RMSE (m)", f"position RMSE over {scans.batch} runs"])
+    else:
+        data["count_detections"] = scans.valid.sum(axis=2).mean(axis=0)
+        data["right_labels"] = np.array(["time (s)", "detections per scan (mean over runs)",
+                                         "detections (no truth: recorded data)"])
+    return data
+
+
+def _draw(data: Mapping[str, np.ndarray], fig) -> None:
+    ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    d = data["detections_xy"]
+    ax1.plot(d[:, 0], d[:, 1], ".", color="0.7", ms=3, label="detections")
+    if "truth_xy" in data:
+        ax1.plot(data["truth_xy"][:, 0], data["truth_xy"][:, 1], "k-", label="truth")
+    for key, value in data.items():
+        if key.startswith("track_"):
+            ax1.plot(value[:, 0], value[:, 1], label=key[len("track_"):])
+        elif key.startswith("confirmed_"):
+            ax1.plot(value[:, 0], value[:, 1], "o", mfc="none", ms=5, label=f"{key[len('confirmed_'):]} confirmed")
+    x, y, title = (str(v) for v in data["left_labels"])
+    ax1.set(xlabel=x, ylabel=y, title=title)
+    for key, value in data.items():
+        if key.startswith("rmse_"):
+            ax2.semilogy(data["times"], value, label=key[len("rmse_"):])
+        elif key.startswith("count_"):
+            ax2.step(data["times"] if key == "count_detections" else np.arange(value.size), value, where="mid",
+                     label=key[len("count_"):])
+    x, y, title = (str(v) for v in data["right_labels"])
+    ax2.set(xlabel=x, ylabel=y, title=title)
+    ax1.legend(fontsize=7)
+    ax2.legend(fontsize=7)
+
+
 def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | None = None) -> ScenarioResult:
-    """Run every filter of the scenario on the same truth and detections; write NPZ, JSON and plots."""
+    """Run every filter of the scenario on the same truth and detections; write NPZ, JSON and plots.
+
+    Each filter runs on its own: one that raises, or returns NaN or inf, is named in the result (and in
+    ``summary.json``) and the other filters' results are still written.
+    """
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
     from tqdm.auto import tqdm
 
+    from .report.cache import save_arrays
+
     seed = scenario.seed if seed is None else seed
     truth, scans = simulate(scenario, host, seed)
     sensor = host.sensor(scenario.sensor.plugin)
     model = sensor.measurement_model(**scenario.sensor.params)
-    dims = _position_dims(scenario.motion)
+    dims = scenario.motion.position_dims
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder; choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, np.ndarray] = {"times": scans.times, "z": scans.z, "valid": scans.valid}
     if truth is not None:
         arrays["truth"] = truth.states
-    rmse, diag, lines = {}, {}, []
-    fig = Figure(figsize=(10, 4.5), layout="constrained")
-    ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    shown = scans.valid[0]
-    ax1.plot(scans.z[0][shown][:, 0], scans.z[0][shown][:, 1 if scans.z.shape[-1] > 1 else 0], ".",
-             color="0.7", ms=3, label="detections")
-    if truth is not None:
-        ax1.plot(truth.states[0, :, 0], truth.states[0, :, 1 if dims > 1 else 0], "k-", label="truth")
-    for fname in tqdm(scenario.filters, desc=f"scenario {scenario.name}", unit="filter", leave=False,
-                      disable=None):
-        spec = host.filter(fname)
+    rmse, diag, lines, failed = {}, {}, [], {}
+    estimates, logs = {}, {}
+    for comp in tqdm(scenario.filters, desc=f"scenario {scenario.name}", unit="filter", leave=False, disable=None):
+        fname = comp.label
         try:
+            spec = host.filter(fname)
             if scenario.tracker == "multi-target":
-                from .tracking import CONFIRMED, TrackerConfig, run_tracker
+                from .tracking import TrackerConfig, run_tracker
 
                 config = TrackerConfig(gate=scenario.gate) if scenario.gate else TrackerConfig()
                 log = run_tracker(scans, spec, scenario.motion, model, config, seed=seed, key=("tracker", fname))
+                if not np.all(np.isfinite(log.mean)):
+                    raise FloatingPointError("its track estimates hold NaN or inf")
+                logs[fname] = log
                 arrays.update(log.to_arrays(prefix=f"{fname}_"))
                 counts = log.confirmed_counts()
                 lines.append(f"{fname:12s} confirmed tracks per scan (run 0): {counts[0].tolist()}")
-                conf = (log.status == CONFIRMED) & (log.run == 0)
-                ax1.plot(log.mean[conf, 0], log.mean[conf, 1], "o", mfc="none", ms=5, label=f"{fname} confirmed")
-                ax2.step(np.arange(scans.steps), counts.mean(axis=0), where="mid", label=fname)
                 continue
             est = _track_single(scenario, spec, model, scans, seed)
-        except InputError as exc:
-            raise InputError(f"{scenario.path}: filter {fname!r}: {exc}") from None
+            why = _non_finite(est)
+            if why:
+                raise FloatingPointError(why)
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:  # noqa: BLE001 - one filter failing must not lose the others' results
+            failed[fname] = f"{type(exc).__name__}: {exc}"
+            continue
+        estimates[fname] = est
         arrays[f"mean_{fname}"] = est.mean
         arrays[f"cov_{fname}"] = est.cov
         diag[fname] = {k: float(v) for k, v in est.diagnostics.items()}
-        ax1.plot(est.mean[0, :, 0], est.mean[0, :, 1 if dims > 1 else 0], label=fname)
         if truth is not None:
             err = position_sq_error(truth.states, est.mean, dims)
             arrays[f"sq_error_{fname}"] = err
             rmse[fname] = float(np.sqrt(err.mean(axis=0)).mean())
-            ax2.semilogy(truth.times, np.sqrt(err.mean(axis=0)), label=fname)
-        else:
-            ax2.plot(scans.times, est.mean[0, :, 0], label=fname)
-    np.savez_compressed(out / "results.npz", **arrays)
+    save_arrays(out / "results.npz", arrays)
     (out / "summary.json").write_text(json.dumps({
         "scenario": scenario.name, "seed": seed, "runs": scans.batch, "steps": scans.steps,
-        "tracker": scenario.tracker, "detections": str(scenario.detections or "simulated"),
-        "position_rmse": rmse, "diagnostics": diag, "notes": lines}, indent=2))
-    ax1.set(title="run 0", xlabel="z[0]", ylabel="z[1]")
-    if scenario.tracker == "multi-target":
-        ax2.set(title="confirmed tracks per scan (mean over runs)", xlabel="scan", ylabel="tracks")
-    elif truth is not None:
-        ax2.set(title=f"position RMSE over {scans.batch} runs", xlabel="time (s)", ylabel="RMSE")
-    else:
-        ax2.set(title="estimated state[0] (no truth: recorded data)", xlabel="time (s)", ylabel="state[0]")
-    ax1.legend(fontsize=7)
-    ax2.legend(fontsize=7)
+        "tracker": scenario.tracker, "detections": str(scenario.detections or "simulated"), "frame": scenario.frame,
+        "filters": {c.label: {"plugin": c.plugin, "params": dict(c.params)} for c in scenario.filters},
+        "position_rmse": rmse, "position_rmse_unit": "m", "diagnostics": diag, "failed": failed, "notes": lines}, indent=2, default=str),
+        encoding="utf-8")
+    plot = _plot_data(scenario, model, scans, truth, estimates, logs)
+    save_arrays(out / "tracks.npz", plot)
+    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    _draw(plot, fig)
     fig.savefig(out / "tracks.png", dpi=110)
-    return ScenarioResult(out, scenario.name, rmse, diag, tuple(lines))
+    return ScenarioResult(out, scenario.name, rmse, diag, tuple(lines), failed, plot)

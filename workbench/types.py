@@ -27,6 +27,7 @@ __all__ = [
     "Scans",
     "Truth",
     "InputError",
+    "check_covariance",
 ]
 
 #: Origin label of a detection that came from clutter (metrics only; filters never see it).
@@ -50,9 +51,42 @@ def _require_finite(name: str, arr: np.ndarray) -> None:
         raise InputError(f"{name} holds a non-finite value (NaN or inf) at index {tuple(int(i) for i in bad)}")
 
 
+#: Relative tolerance of the covariance checks: ``|P - P^T| <= SYMMETRY_TOL * scale`` and every eigenvalue
+#: ``>= -PSD_TOL * scale``, ``scale`` the largest diagonal entry of ``P`` (at least 1e-300).
+SYMMETRY_TOL = 1e-8
+PSD_TOL = 1e-8
+#: Log-weights are normalised when ``|logsumexp(log_weights)| <= WEIGHT_TOL`` per item.
+WEIGHT_TOL = 1e-6
+
+
+def check_covariance(name: str, cov: np.ndarray) -> None:
+    """Symmetric and positive semi-definite to :data:`SYMMETRY_TOL` / :data:`PSD_TOL` (relative to the largest
+    diagonal entry of each matrix); :class:`InputError` naming the first bad item otherwise.  ``cov (..., n, n)``."""
+    if cov.size == 0:
+        return
+    scale = np.maximum(np.abs(np.diagonal(cov, axis1=-2, axis2=-1)).max(axis=-1), 1e-300)
+    asym = np.abs(cov - np.swapaxes(cov, -1, -2)).max(axis=(-2, -1))
+    bad = asym > SYMMETRY_TOL * scale
+    if np.any(bad):
+        item = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"{name} is not symmetric at item {item} (|P - P^T| = {asym[item]:.3g})")
+    low = np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, -1, -2)))[..., 0]
+    bad = low < -PSD_TOL * scale
+    if np.any(bad):
+        item = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"{name} is not positive semi-definite at item {item} (smallest eigenvalue "
+                         f"{low[item]:.3g})")
+
+
 @dataclass(frozen=True)
 class Gaussian:
     """A batch of Gaussian beliefs ``N(mean[b], cov[b])``.
+
+    Built with ``Gaussian(mean, cov)`` the record checks its shapes, that every number is finite and that every
+    covariance is symmetric and positive semi-definite (:func:`check_covariance`).  Filter code whose algebra
+    guarantees symmetry and semi-definiteness (a Joseph-form update, a moment of weighted particles) may build its
+    results with :meth:`trusted`, which checks shapes and finiteness only; the filter test kit checks every
+    filter's covariances.
 
     Shapes
     ------
@@ -64,15 +98,28 @@ class Gaussian:
     cov: np.ndarray
 
     def __post_init__(self) -> None:
-        mean = _array("Gaussian.mean", self.mean, 2)
-        cov = _array("Gaussian.cov", self.cov, 3)
+        mean, cov = self._checked(self.mean, self.cov)
+        check_covariance("Gaussian.cov", cov)
+        object.__setattr__(self, "mean", mean)
+        object.__setattr__(self, "cov", cov)
+
+    @staticmethod
+    def _checked(mean, cov) -> tuple[np.ndarray, np.ndarray]:
+        mean = _array("Gaussian.mean", mean, 2)
+        cov = _array("Gaussian.cov", cov, 3)
         if cov.shape != (mean.shape[0], mean.shape[1], mean.shape[1]):
             raise InputError(f"Gaussian.cov must have shape {(mean.shape[0], mean.shape[1], mean.shape[1])} "
                              f"to match mean {mean.shape}, got {cov.shape}")
         _require_finite("Gaussian.mean", mean)
         _require_finite("Gaussian.cov", cov)
-        object.__setattr__(self, "mean", mean)
-        object.__setattr__(self, "cov", cov)
+        return mean, cov
+
+    @classmethod
+    def trusted(cls, mean, cov) -> "Gaussian":
+        """A Gaussian whose covariances the caller's algebra keeps symmetric and positive semi-definite: shapes and
+        finiteness are checked, the (costlier) eigenvalue test is not."""
+        mean, cov = cls._checked(mean, cov)
+        return _validated(cls, mean=mean, cov=cov)
 
     @property
     def batch(self) -> int:
@@ -85,7 +132,7 @@ class Gaussian:
     def take(self, index) -> "Gaussian":
         """The sub-batch ``index`` (an int keeps a batch axis of one)."""
         index = np.atleast_1d(index) if np.isscalar(index) else index
-        return Gaussian(self.mean[index], self.cov[index])
+        return Gaussian.trusted(self.mean[index], self.cov[index])
 
     @classmethod
     def broadcast(cls, mean, cov, batch: int) -> "Gaussian":
@@ -114,12 +161,37 @@ class Particles:
     log_weights: np.ndarray
 
     def __post_init__(self) -> None:
-        x = _array("Particles.particles", self.particles, 3)
-        lw = _array("Particles.log_weights", self.log_weights, 2)
-        if lw.shape != x.shape[:2]:
-            raise InputError(f"Particles.log_weights must have shape {x.shape[:2]}, got {lw.shape}")
+        x, lw = self._checked(self.particles, self.log_weights)
+        _require_finite("Particles.particles", x)
+        if lw.size:
+            from scipy.special import logsumexp
+
+            with np.errstate(invalid="ignore"):
+                total = logsumexp(lw, axis=1)
+            bad = ~(np.abs(total) <= WEIGHT_TOL) | np.isnan(lw).any(axis=1)
+            if np.any(bad):
+                item = int(np.argmax(bad))
+                raise InputError(f"Particles.log_weights of item {item} are not normalised (logsumexp = "
+                                 f"{total[item]:.3g}; expected 0) or hold NaN")
         object.__setattr__(self, "particles", x)
         object.__setattr__(self, "log_weights", lw)
+
+    @staticmethod
+    def _checked(particles, log_weights) -> tuple[np.ndarray, np.ndarray]:
+        x = _array("Particles.particles", particles, 3)
+        lw = _array("Particles.log_weights", log_weights, 2)
+        if lw.shape != x.shape[:2]:
+            raise InputError(f"Particles.log_weights must have shape {x.shape[:2]}, got {lw.shape}")
+        if x.shape[1] < 1:
+            raise InputError("Particles needs at least one particle per item, got N = 0")
+        return x, lw
+
+    @classmethod
+    def trusted(cls, particles, log_weights) -> "Particles":
+        """Particles from filter code that keeps them finite and normalised: shapes (and N >= 1) are checked, the
+        per-particle scans are not."""
+        x, lw = cls._checked(particles, log_weights)
+        return _validated(cls, particles=x, log_weights=lw)
 
     @property
     def weights(self) -> np.ndarray:
@@ -139,7 +211,7 @@ class Particles:
             mean = np.matmul(w[:, None, :], x)[:, 0, :]  # sum_i w_i x_i
             d = x - mean[:, None, :]
             cov = np.matmul(np.swapaxes(d * w[..., None], 1, 2), d)  # sum_i w_i d_i d_i^T (one BLAS call)
-            return Gaussian(mean, 0.5 * (cov + np.swapaxes(cov, 1, 2)))
+            return Gaussian.trusted(mean, 0.5 * (cov + np.swapaxes(cov, 1, 2)))
         mean = np.empty((B, n))
         for j in range(n):
             mean[:, j] = np.einsum("bn,bn->b", w, x[..., j])  # sum_i w_i x_ij
@@ -149,7 +221,7 @@ class Particles:
             wd = w * d[i]
             for j in range(i, n):
                 cov[:, i, j] = cov[:, j, i] = np.einsum("bn,bn->b", wd, d[j])  # sum_k w_k d_ki d_kj
-        return Gaussian(mean, cov)
+        return Gaussian.trusted(mean, cov)
 
 
 def _scan_cov(cls_name: str, cov, z: np.ndarray, valid: np.ndarray):

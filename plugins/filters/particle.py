@@ -54,7 +54,7 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
     # N_eff <= N, so a threshold above one resamples every item with a measurement
     resample = present if threshold > 1.0 else present & (effective_sample_size(log_w) < threshold * n)
     x, log_w = resample_where(resample, cloud.particles, log_w, rng)
-    return ParticleState(Particles(x, log_w), state.resamples + int(resample.sum()),
+    return ParticleState(Particles.trusted(x, log_w), state.resamples + int(resample.sum()),
                          state.underflows + int((dead & present).sum()))
 
 

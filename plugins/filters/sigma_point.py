@@ -268,7 +268,7 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
 
 
 def _estimate_full(state: SigmaPointState) -> Gaussian:
-    return Gaussian(state.mean, state.cov)
+    return Gaussian.trusted(state.mean, state.cov)
 
 
 def _diagnostics_full(state: SigmaPointState) -> dict:
@@ -364,7 +364,7 @@ def _update_sqrt(state: SquareRootState, scan: Scan, model: MeasurementModel, rn
 
 
 def _estimate_sqrt(state: SquareRootState) -> Gaussian:
-    return Gaussian(state.mean, state.chol @ np.swapaxes(state.chol, 1, 2))
+    return Gaussian.trusted(state.mean, state.chol @ np.swapaxes(state.chol, 1, 2))
 
 
 def _diagnostics_sqrt(state: SquareRootState) -> dict:

@@ -46,25 +46,47 @@ OUTCOME_FILE = "outcome.json"
 FIRM_SIZE = "full"
 
 
+def split_references(text: str) -> list[str]:
+    """Split a comma-separated list of component references, keeping ``name(a=1, b=2)`` whole."""
+    parts, depth, current = [], 0, ""
+    for ch in text:
+        if ch in "([":
+            depth += 1
+        elif ch in ")]":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append(current.strip())
+            current = ""
+            continue
+        current += ch
+    parts.append(current.strip())
+    return [p for p in parts if p]
+
+
 def resolve_filters(default: Sequence[str], request: str | None, host: PluginHost) -> tuple[str, ...]:
     """Apply ``--filters`` to a recipe's default list.
 
-    ``request`` is a comma-separated list; entries starting with ``+`` are added to the defaults, and
-    ``-name`` removes one; if any entry has no sign, the list replaces the defaults.  Every name must be
-    an installed filter.
+    ``request`` is a comma-separated list of filter references (``name`` or ``name(key=value, ...)``, a configured
+    filter); entries starting with ``+`` are added to the defaults, and ``-name`` (or ``~name``, which a shell
+    cannot mistake for an option) removes one; if any entry has no sign, the list replaces the defaults.  Every
+    name must be an installed filter, every removed one must be in the list, and the result must not be empty.
     """
     if not request:
         return tuple(default)
-    parts = [p.strip() for p in request.split(",") if p.strip()]
-    plain = [p for p in parts if p[0] not in "+-"]
+    parts = split_references(request)
+    plain = [p for p in parts if p[0] not in "+-~"]
     chosen = list(plain) if plain else list(default)
     for p in parts:
         if p.startswith("+") and p[1:] not in chosen:
             chosen.append(p[1:])
-        elif p.startswith("-") and p[1:] in chosen:
+        elif p[0] in "-~":
+            if p[1:] not in chosen:
+                raise InputError(f"--filters: cannot remove {p[1:]!r}: it is not among {', '.join(chosen) or 'none'}")
             chosen.remove(p[1:])
+    if not chosen:
+        raise InputError(f"--filters {request!r} leaves no filter to compare")
     for name in chosen:
-        host.filter(name)  # raises UnknownComponent naming what is installed
+        host.filter(name)  # raises UnknownComponent naming what is installed, or InputError for bad parameters
     return tuple(chosen)
 
 
