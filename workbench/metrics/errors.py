@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 
 from ..linalg import psd_solve
 
@@ -31,6 +30,8 @@ def chi2_band(dof: int, runs: int, confidence: float = 0.95) -> tuple[float, flo
     ``chi2.ppf([a/2, 1 - a/2], runs * dof) / runs``.
     """
     alpha = 1.0 - confidence
+    from scipy import stats  # imported on use: scipy.stats takes a second to import
+
     lo, hi = stats.chi2.ppf([alpha / 2, 1 - alpha / 2], runs * dof)
     return float(lo / runs), float(hi / runs)
 
