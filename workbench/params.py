@@ -18,7 +18,7 @@ from .types import InputError
 from .units import UNITS, parse_quantity
 
 __all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults",
-           "parse_reference"]
+           "parse_reference", "check_footprint", "memory_limit"]
 
 #: The value types a parameter may declare.
 TYPES = ("float", "int", "bool", "str", "vector", "float?", "vector?")
@@ -63,6 +63,7 @@ class Param:
     choices: tuple | None = None
     length: int | None = None
     above: float | None = None
+    footprint: float | None = None
 
     def __post_init__(self) -> None:
         if self.type not in TYPES:
@@ -268,3 +269,27 @@ def _read_value(raw: str) -> Any:
         return tomllib.loads(f"v = {raw}")["v"]
     except Exception:  # noqa: BLE001 - not a TOML value: a bare string (a choice, or a quantity with a unit)
         return raw
+
+
+def memory_limit() -> float:
+    """Bytes of physical memory of this machine (8 GiB where the system does not say)."""
+    import os
+
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+        return 8.0 * 2 ** 30
+
+
+def check_footprint(params: Iterable[Param], values: Mapping[str, Any], batch: int, dim: int, who: str,
+                    share: float = 0.5) -> None:
+    """Refuse a configuration whose declared working memory (:attr:`Param.footprint`) would exceed ``share`` of the
+    machine's memory for ``batch`` items of state dimension ``dim``, naming the parameter and the GiB."""
+    limit = share * memory_limit()
+    for p in params:
+        if p.footprint is None or values.get(p.name) is None:
+            continue
+        need = float(batch) * dim * float(values[p.name]) * p.footprint
+        if need > limit:
+            raise InputError(f"{who}: {p.name} = {values[p.name]:g} for {batch} runs needs about {need / 2**30:.3g} GiB; "
+                             f"this machine allows {limit / 2**30:.3g} GiB (half its memory): ask for fewer")

@@ -286,12 +286,21 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
     return PluginHost(tuple(infos), components, owner, pm)
 
 
-def _declaration_problem(spec) -> str:
-    """What is wrong with a component's parameter declarations, or ``""``.
+#: The functions each kind of component must provide (checked at load: a spec missing one is broken).
+REQUIRED_FUNCTIONS = {FilterSpec: ("init", "predict", "update", "estimate"), SensorSpec: ("measurement_model", "simulate"),
+                      ClutterGeneratorSpec: ("generate",), ClutterRemoverSpec: ("remove",),
+                      RecipeSpec: ("tasks",), BenchmarkSpec: ("run",)}
 
-    Every declared parameter needs a current value that passes its own check, and (when the component
-    declares any) every value needs a declaration.
+
+def _declaration_problem(spec) -> str:
+    """What is wrong with a component's functions or parameter declarations, or ``""``.
+
+    Every required function must be callable; every declared parameter needs a current value that passes its own
+    check, and (when the component declares any) every value needs a declaration.
     """
+    for name in REQUIRED_FUNCTIONS.get(type(spec), ()):
+        if not callable(getattr(spec, name, None)):
+            return f"its {name!r} is not a function (got {type(getattr(spec, name, None)).__name__})"
     parameters = getattr(spec, "parameters", None)
     if not parameters:
         return ""

@@ -10,7 +10,6 @@ memory gives an error naming the file, the key and what was expected.  See ``doc
 from __future__ import annotations
 
 import json
-import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +21,7 @@ from .filtering import run_filter
 from .frames import FRAMES, check_same_frame
 from .metrics import position_sq_error
 from .models import MotionModel, constant_velocity, random_walk_velocity, range_rate_model
-from .params import parse_reference
+from .params import memory_limit, parse_reference
 from .plugins import PluginHost, UnknownComponent
 from .rng import generator
 from .trajectory import Leg, piecewise_trajectory, sample_motion
@@ -192,18 +191,11 @@ def _filters(path: Path, table: Mapping, host: PluginHost) -> tuple[Component, .
     return tuple(out)
 
 
-def _memory_limit() -> float:
-    try:
-        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
-        return 8.0 * 2 ** 30
-
-
 def check_request_size(path: Path, runs: int, steps: int, n: int, filters: int, detections: int = 1) -> None:
     """Refuse a scenario whose arrays would not fit: truth, detections and every filter's means and covariances,
     ``8 x runs x steps x (n + 4 detections + filters (n + n^2))`` bytes, against half the machine's memory."""
     need = 8.0 * runs * steps * (n + 5 * detections + filters * (n + n * n))
-    limit = MEMORY_SHARE * _memory_limit()
+    limit = MEMORY_SHARE * memory_limit()
     if need > limit:
         raise InputError(f"{path}: [scenario] runs = {runs} x steps = {steps} needs about {need / 2**30:.3g} GiB for the "
                          f"truth, detections and estimates; this machine allows {limit / 2**30:.3g} GiB (half its "

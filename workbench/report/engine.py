@@ -454,6 +454,10 @@ class DaskExecutor:
 Executor = InProcess | DaskExecutor
 
 
+#: Seconds to wait for a Dask scheduler before the report gives up with a network error.
+CONNECT_TIMEOUT = "10s"
+
+
 def dask_executor(host: PluginHost, scheduler: str | None = None, workers: int | None = None,
                   block: Sequence[str] = ()):
     """A :class:`DaskExecutor` on ``scheduler`` (an address), or on a new local cluster of ``workers``."""
@@ -463,7 +467,10 @@ def dask_executor(host: PluginHost, scheduler: str | None = None, workers: int |
     except ImportError:
         raise InputError("running on Dask needs the 'distributed' package: pip install -e \".[dask]\"") from None
     if scheduler:
-        return DaskExecutor(Client(scheduler), block)
+        if "://" not in scheduler and ":" not in scheduler:
+            raise InputError(f"--scheduler {scheduler!r}: expected an address such as tcp://host:8786")
+        # a scheduler that cannot be reached fails within CONNECT_TIMEOUT, not after Dask's default 30 s
+        return DaskExecutor(Client(scheduler, timeout=CONNECT_TIMEOUT), block)
     # One thread per worker process, kernels included: the workers already share the cores between
     # them, and threaded kernels (Numba, BLAS) in every worker would oversubscribe them.
     env = {name: "1" for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}

@@ -117,6 +117,9 @@ def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementM
     if scans.cov is not None and "detection_covariance" not in filt.capabilities:
         raise InputError(f"the scans carry each detection's own covariance (cov), which filter {filt.name!r} would "
                          f"ignore (it lacks the detection_covariance capability)")
+    from ..params import check_footprint
+
+    check_footprint(filt.declared, filt.params, scans.batch, motion.dim, f"filter {filt.name!r}")
     T = scans.steps
     ctx = Context(filt, model, motion, scans.batch, T, scans.times, rng)
     carry = association.start(ctx, prior, scans.scan(0).for_filter() if T else Scan.empty(scans.batch,
