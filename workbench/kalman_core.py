@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .filtering import keep_where, single_measurement
+from .kernels.backend import resolve
 from .linalg import joseph_update, psd_solve, symmetrise
 from .models import MeasurementModel, MotionModel
 from .types import Gaussian, InputError, Scan
@@ -35,8 +36,32 @@ from .types import Gaussian, InputError, Scan
 __all__ = ["linear_predict", "linear_update", "kalman_update", "kf_update", "ekf_update", "measurement_covariance"]
 
 
+#: Batches smaller than this take the compiled item-by-item loops (:mod:`workbench.kernels.kalman_numba`) where
+#: the backend policy has Numba; larger ones the batched NumPy code below (their reference).
+SMALL_BATCH = 64
+
+
+_LOOPS: list = []
+
+
+def _compiled():
+    """The compiled small-batch loops, or ``None`` (no Numba on this arch)."""
+    if resolve("auto") != "numba":
+        return None
+    if not _LOOPS:
+        from .kernels import kalman_numba
+
+        _LOOPS.append(kalman_numba)
+    return _LOOPS[0]
+
+
 def linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
     """One step of the linear motion model for every item of the batch."""
+    if state.batch < SMALL_BATCH and (fast := _compiled()) is not None:
+        mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
+        fast.predict_items(state.mean, state.cov, np.ascontiguousarray(motion.F, dtype=float),
+                           np.ascontiguousarray(motion.Q, dtype=float), mean, cov)
+        return Gaussian.trusted(mean, cov)
     mean = state.mean @ motion.F.T  # x- = F x
     cov = symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q)  # P- = F P F^T + Q
     return Gaussian.trusted(mean, cov)
@@ -101,6 +126,14 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
     if not present.any():
         return state
     R = measurement_covariance(scan, model, present)
+    if state.batch < SMALL_BATCH and (fast := _compiled()) is not None:
+        nu = model.residual(z, model.h(state.mean))  # wrap(z - h(x-))
+        mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
+        Rb = R if R.ndim == 3 else (R[None] if state.batch == 1 else np.broadcast_to(R, (state.batch,) + R.shape))
+        if fast.update_items(state.mean, state.cov, np.ascontiguousarray(nu, dtype=float),
+                             np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(Rb, dtype=float), present,
+                             mean, cov):
+            return Gaussian.trusted(mean, cov)
     P = state.cov
     S = symmetrise(H @ P @ np.swapaxes(H, -1, -2) + R)  # S = H P- H^T + R
     PHt = P @ np.swapaxes(H, -1, -2)

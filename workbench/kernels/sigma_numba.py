@@ -11,15 +11,39 @@ per step.  The motion's ``f`` and the sensor's ``h`` stay NumPy calls of the mod
 
 A matrix that is not numerically positive definite makes the call return ``False``; the caller then
 takes the NumPy path, which adds and counts jitter.
+
+Each loop is compiled twice, threaded and serial (``prange`` is ``range`` there), and called serial below
+:data:`PARALLEL_MIN` items: for one track, waking the thread pool costs more than the work (milliseconds on a
+loaded machine).  Both give the same numbers (each item is computed alone).
 """
 
 import math
+import types as pytypes
 
 import numba
 import numpy as np
 
 TWO_PI = 2.0 * math.pi
-pjit = numba.njit(parallel=True, error_model="numpy", cache=True)
+#: Batches of at least this many items run threaded.
+PARALLEL_MIN = 64
+
+
+def _compiled(fn, name: str, parallel: bool):
+    """``fn`` compiled under its own name (Numba's cache tells functions apart by name, not by compile flags)."""
+    renamed = pytypes.FunctionType(fn.__code__.replace(co_name=name, co_qualname=name), fn.__globals__, name)
+    return numba.njit(parallel=parallel, error_model="numpy", cache=True)(renamed)
+
+
+def _dispatch(fn, name: str):
+    threaded, serial = _compiled(fn, name, True), _compiled(fn, f"{name}_serial", False)
+
+    def call(*args):
+        return (threaded if args[0].shape[0] >= PARALLEL_MIN else serial)(*args)
+
+    call.__name__ = call.__qualname__ = name
+    call.__doc__ = fn.__doc__
+    call.threaded, call.serial = threaded, serial
+    return call
 
 
 @numba.njit(inline="always", error_model="numpy")
@@ -49,8 +73,7 @@ def cholesky_into(A, L):
     return True
 
 
-@pjit
-def chol_sigma(mean, P, spread, X, S):
+def _chol_sigma(mean, P, spread, X, S):
     """``S[b] = chol(P[b])``; ``X[b] = [x, x + c S_j, x - c S_j]``.  Returns whether every ``P[b]`` was PD."""
     B, n = mean.shape
     ok = np.ones(B, dtype=np.bool_)
@@ -68,8 +91,7 @@ def chol_sigma(mean, P, spread, X, S):
     return ok.all()
 
 
-@pjit
-def predicted_moments(Xf, wm, wc, Q, mean, cov):
+def _predicted_moments(Xf, wm, wc, Q, mean, cov):
     """``mean[b] = sum_s wm_s Xf[b, s]``, ``cov[b] = sym(sum_s wc_s d d^T + Q)``, ``d = Xf[b, s] - mean[b]``."""
     B, S, n = Xf.shape
     for b in numba.prange(B):
@@ -89,8 +111,7 @@ def predicted_moments(Xf, wm, wc, Q, mean, cov):
                 cov[b, c, r] = v
 
 
-@pjit
-def unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
+def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
     """The UKF update of every present item (an absent one keeps ``x``, ``P``); ``False`` if some ``Pyy``
     was not positive definite (then nothing is to be used)."""
     B, S, n = X.shape
@@ -181,3 +202,8 @@ def unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
                 cov[b, r, c] = w
                 cov[b, c, r] = w
     return ok.all()
+
+
+chol_sigma = _dispatch(_chol_sigma, "chol_sigma")
+predicted_moments = _dispatch(_predicted_moments, "predicted_moments")
+unscented_update = _dispatch(_unscented_update, "unscented_update")

@@ -1,0 +1,64 @@
+"""The compiled small-batch Kalman loops (workbench.kernels.kalman_numba) against their NumPy twin, the batched
+code of workbench.kalman_core (taken when the backend policy has no Numba, as on a GPU arch)."""
+
+import numpy as np
+import pytest
+
+from workbench import kalman_core
+from workbench.kernels import backend
+from workbench.models import constant_velocity, linear_measurement, range_bearing
+from workbench.types import Gaussian, Scan
+
+pytestmark = pytest.mark.skipif(not backend.numba_available(), reason="Numba is not installed")
+
+
+def _random_gaussian(rng, B, n):
+    a = rng.normal(size=(B, n, n))
+    return Gaussian(rng.normal(size=(B, n)) * 50 + 100, a @ np.swapaxes(a, 1, 2) + np.eye(n))
+
+
+def _both(fn):
+    compiled = fn()
+    with backend.using("vulkan"):  # no Numba there: the NumPy twin
+        reference = fn()
+    return compiled, reference
+
+
+@pytest.mark.parametrize("B", [1, 5, kalman_core.SMALL_BATCH - 1])
+def test_predict_matches_the_numpy_twin(B):
+    rng = np.random.default_rng(B)
+    g = _random_gaussian(rng, B, 4)
+    motion = constant_velocity(2, 0.7, 1.3)
+    compiled, reference = _both(lambda: kalman_core.linear_predict(g, motion))
+    np.testing.assert_allclose(compiled.mean, reference.mean, rtol=1e-13, atol=1e-11)
+    np.testing.assert_allclose(compiled.cov, reference.cov, rtol=1e-12, atol=1e-10)
+    np.testing.assert_array_equal(compiled.cov, np.swapaxes(compiled.cov, 1, 2))  # exactly symmetric
+
+
+@pytest.mark.parametrize("B", [1, 7])
+def test_ekf_update_matches_the_numpy_twin_with_wrapping_missing_items_and_own_covariances(B):
+    rng = np.random.default_rng(10 + B)
+    g = _random_gaussian(rng, B, 4)
+    model = range_bearing(2.0, 0.05)
+    z = model.h(g.mean) + rng.normal(size=(B, 2)) * [2.0, 0.05]
+    z[:, 1] = np.where(np.arange(B) % 2 == 0, np.pi - 0.01, z[:, 1])  # bearings near +-pi: the residual wraps
+    present = np.arange(B) % 3 != 2 if B > 1 else np.ones(1, bool)
+    cov = np.broadcast_to(np.diag([4.0, 0.01]), (B, 1, 2, 2)) * rng.uniform(0.5, 2.0, (B, 1, 1, 1))
+    for scan in (Scan(z[:, None], present[:, None]), Scan(z[:, None], present[:, None], cov=cov)):
+        H = model.jacobian(g.mean)
+        compiled, reference = _both(lambda: kalman_core.kalman_update(g, scan, model, H, "ekf"))
+        np.testing.assert_allclose(compiled.mean, reference.mean, rtol=1e-11, atol=1e-9)
+        np.testing.assert_allclose(compiled.cov, reference.cov, rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(compiled.mean[~present], g.mean[~present])  # no measurement: unchanged
+
+
+def test_a_non_positive_definite_innovation_falls_back_to_the_numpy_path():
+    # an indefinite prior (only reachable through the unchecked constructor) gives S = diag(2, -2)
+    g = Gaussian.trusted(np.zeros((1, 2)), np.diag([1.0, -3.0])[None])
+    model = linear_measurement(np.eye(2), np.eye(2))
+    fast = kalman_core._compiled()
+    out_x, out_p = np.empty((1, 2)), np.empty((1, 2, 2))
+    assert not fast.update_items(g.mean, g.cov, np.ones((1, 2)), np.eye(2)[None], np.eye(2)[None],
+                                 np.ones(1, bool), out_x, out_p)
+    result = kalman_core.kalman_update(g, Scan.single(np.ones((1, 2))), model, np.eye(2)[None], "kf")
+    assert np.all(np.isfinite(result.mean))  # the NumPy path's general solve takes over
