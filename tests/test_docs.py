@@ -5,7 +5,7 @@ from pathlib import Path
 
 from workbench import hookspecs
 from workbench.specs import CAPABILITIES
-from workbench.testing import CHECKS
+from workbench.testing import CHECKS, GENERATOR_CHECKS, REMOVER_CHECKS, SENSOR_CHECKS
 
 ROOT = Path(__file__).parents[1]
 GUIDE = (ROOT / "docs" / "writing-a-plugin.md").read_text()
@@ -28,6 +28,19 @@ def test_every_capability_and_check_is_documented():
     for check in CHECKS:
         assert f"`{check.name}`" in GUIDE, check.name
         assert check.description and check.description.strip()
+
+
+def test_every_sensor_and_clutter_check_is_documented():
+    section = GUIDE[GUIDE.index("## 3. The tests"):]
+    for kit, heading in ((SENSOR_CHECKS, "**Sensors**"), (GENERATOR_CHECKS, "**Clutter generators**"),
+                         (REMOVER_CHECKS, "**Clutter removers**")):
+        assert kit and heading in section, heading
+        for check in kit:
+            assert f"`{check.name}`" in section, (heading, check.name)
+            assert check.description and check.description.strip(), check.name
+    # what a component must declare for the kits
+    for field in ("truth_to_state", "noise_cov", "expected_count", "region", "amplitude_cdf", "frames"):
+        assert f"`{field}" in section, field
 
 
 def test_readme_opens_with_the_two_commands():

@@ -79,3 +79,31 @@ def test_check_plugin_command(capsys):
     assert main(["check-plugin", "kf"]) == 0
     out = capsys.readouterr().out
     assert "PASSED   kf-check_matches_kalman" in out and " 0 failed" in out
+
+
+def test_the_kit_drives_filters_through_the_one_time_loop(monkeypatch):
+    from workbench.testing import kit
+    from workbench.tracking import Direct
+
+    calls = []
+    real = kit.run
+
+    def spy(filt, scans, motion, model, **kw):
+        calls.append(type(kw.get("association")))
+        return real(filt, scans, motion, model, **kw)
+
+    monkeypatch.setattr(kit, "run", spy)
+    kit.check_matches_kalman(KF)
+    assert calls == [Direct]
+
+
+def test_check_plugin_command_fits_the_kit_to_the_kind(capsys):
+    from workbench.cli import main
+
+    assert main(["check-plugin", "sonar-poisson"]) == 0
+    assert main(["check-plugin", "hough"]) == 0
+    out = capsys.readouterr().out
+    assert "PASSED   sonar-poisson-check_count_poisson: " in out and "PASSED   hough-check_causal: " in out
+    assert main(["check-plugin", "no-such-thing"]) == 2
+    assert "no filter, sensor, clutter generator or clutter remover named 'no-such-thing'" in capsys.readouterr().err
+    assert main(["check-plugin", "kf", "--kind", "sensor"]) == 2

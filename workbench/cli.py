@@ -93,8 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default=None, help="output folder (default: next to the scenario, <name>-results)")
     run.add_argument("--seed", type=int, default=None, help="override the scenario's seed")
 
-    chk = sub.add_parser("check-plugin", help="run the plugin test kit on an installed filter")
-    chk.add_argument("name", help="filter name (as listed by 'workbench plugins')")
+    chk = sub.add_parser("check-plugin", help="run the test kit that fits an installed filter, sensor, clutter "
+                                              "generator or clutter remover")
+    chk.add_argument("name", help="component name (as listed by 'workbench plugins')")
+    chk.add_argument("--kind", choices=sorted(KIT_KINDS), default=None,
+                     help="which kind of component NAME is, where two kinds share the name (default: every kind "
+                          "that has one)")
 
     bench = sub.add_parser("bench", help="run the benchmark suite and print a table")
     bench.add_argument("--quick", action="store_true", help="small sizes (seconds, for CI)")
@@ -235,19 +239,48 @@ def cmd_run(args) -> int:
     return 0
 
 
-def cmd_check_plugin(args) -> int:
-    from .testing.kit import run_checks
+#: ``--kind`` value -> the kind label of :data:`workbench.plugins.KINDS` of the components that have a test kit.
+KIT_KINDS = {"filter": "filter", "sensor": "sensor", "clutter-generator": "clutter generator",
+             "clutter-remover": "clutter remover"}
 
-    host = _host(args)
-    spec = host.filter(args.name)
-    outcomes = run_checks(spec)
-    failed = 0
-    for o in outcomes:
-        print(f"{o.status.upper():8s} {spec.name}-{o.check}" + (f": {o.message}" if o.message else ""))
-        failed += o.status == "failed"
-    passed = sum(o.status == "passed" for o in outcomes)
-    print(f"{passed} passed, {failed} failed")
-    return 1 if failed else 0
+#: outcome status -> the word printed for it
+_STATUS = {"passed": "PASSED", "failed": "FAILED", "xfailed": "XFAIL", "xpassed": "XPASS", "skipped": "SKIPPED"}
+
+
+def check_plugin(host: PluginHost, name: str, kind: str | None = None, out=print) -> int:
+    """Run the kit that fits component ``name`` (every kind that has one, or only ``kind``): one line per check,
+    then a count; 1 when a check failed, else 0."""
+    from .testing import run_checks
+
+    labels = set(KIT_KINDS.values()) if kind is None else {KIT_KINDS[kind]}
+    found = [(label, spec) for label, spec in host.find(name) if label in labels]
+    if not found:
+        what = "filter, sensor, clutter generator or clutter remover" if kind is None else KIT_KINDS[kind]
+        known = sorted({n for label in labels for n in _names(host, label)})
+        raise UnknownComponent(f"no {what} named {name!r} is installed (installed: {', '.join(known) or 'none'})")
+    if len(found) > 1:
+        out(f"{name!r} is a {' and a '.join(label for label, _ in found)}: running each kit (choose one with "
+            f"--kind)")
+    counts = {status: 0 for status in _STATUS}
+    for label, spec in found:
+        if len(found) > 1:
+            out(f"-- {label} {name}")
+        for o in run_checks(spec):
+            out(f"{_STATUS[o.status]:8s} {spec.name}-{o.check}" + (f": {o.message}" if o.message else ""))
+            counts[o.status] += 1
+    extra = "".join(f", {counts[s]} {s}" for s in ("xfailed", "xpassed", "skipped") if counts[s])
+    out(f"{counts['passed']} passed, {counts['failed']} failed{extra}")
+    return 1 if counts["failed"] else 0
+
+
+def _names(host: PluginHost, label: str) -> list[str]:
+    from .plugins import KINDS
+
+    return [n for hook, (lab, _, _) in KINDS.items() if lab == label for n in host.components.get(hook, {})]
+
+
+def cmd_check_plugin(args) -> int:
+    return check_plugin(_host(args), args.name, args.kind)
 
 
 def cmd_bench(args) -> int:

@@ -88,6 +88,13 @@ def _number(param: Param, value: Any, where: str, integer: bool = False) -> floa
             raise InputError(f"{where}: expected an integer, got {value!r}")
         number: float | int = int(value)
     else:
+        if param.unit is None and isinstance(value, str):
+            from .units import _PATTERN
+
+            match = _PATTERN.match(value)
+            if match and match.group(2):
+                raise InputError(f"{where}: expected a pure number, got the quantity {value!r} (this parameter has "
+                                 f"no unit)")
         number = parse_quantity(value, param.unit, where)
     if not math.isfinite(number):
         raise InputError(f"{where}: expected a finite number, got {value!r}")

@@ -179,6 +179,16 @@ class SensorSpec(_Configurable):
     frame : str or callable
         The measurement frame of the detections it simulates (a name of :data:`workbench.frames.FRAMES`), or
         ``frame(params) -> str`` when a parameter chooses it.
+    truth_to_state : callable or None
+        ``truth_to_state(states (..., n), **params) -> (..., n')``: the state the measurement model's ``h`` takes,
+        for a sensor whose model describes a quantity derived from the truth (a bistatic range and its rate);
+        ``None``: ``h`` takes the truth state itself.  The sensor kit centres the detections on
+        ``h(truth_to_state(truth))``.
+    noise_cov : callable or None
+        ``noise_cov(truth: Truth, scans: Scans, **params) -> (B, T, M, m, m)`` (or anything that broadcasts to it):
+        the covariance of the simulated noise of each target detection, for a sensor whose simulation noise is
+        not its model's ``R`` (accuracy that follows each detection's SNR, or a filters' ``R`` tuned apart from
+        the simulation); ``None``: the simulation noise is ``R``.  The sensor kit's chi-square test uses it.
     """
 
     name: str
@@ -188,6 +198,8 @@ class SensorSpec(_Configurable):
     params: Mapping[str, Any] = field(default_factory=dict)
     parameters: tuple[Param, ...] = ()
     frame: str | Callable[[Mapping[str, Any]], str] = ""
+    truth_to_state: Callable[..., np.ndarray] | None = None
+    noise_cov: Callable[..., np.ndarray] | None = None
 
     kind = "sensor"
 
@@ -209,8 +221,9 @@ class ClutterGeneratorSpec(_Configurable):
     points it makes (or is ``frame(params) -> str``); the clutter's declared mean count per scan and its
     region and amplitude law, where it has them, are what the clutter test kit checks.
 
-    ``expected_count(truth, **params) -> (B, T)``, ``region(truth, **params) -> (low (T, m), high (T, m))`` and
-    ``amplitude_cdf(snr_db, **params) -> probability`` are optional declarations for the test kit.
+    ``expected_count(truth, **params) -> (B, T)``, ``region(truth, **params) -> (low, high)`` (each ``(B, T, m)``,
+    ``(T, m)`` or ``(m,)``: inclusive bounds of every component) and ``amplitude_cdf(snr_db, **params) ->
+    P(Scans.snr <= snr_db)`` are optional declarations for the clutter kit (:mod:`workbench.testing.clutter`).
     """
 
     name: str

@@ -83,6 +83,19 @@ def simulate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
                  origin=np.zeros((B, T, 1), dtype=int))
 
 
+def truth_to_state(states: np.ndarray, **params) -> np.ndarray:
+    """The model's state ``[R, Rdot]`` of truth states ``[p, v]`` (2-D or 3-D), ``(..., 2)``."""
+    p = _params(params)
+    return range_and_rate(states, p["tx"], p["rx"])
+
+
+def noise_cov(truth: Truth, scans: Scans, **params) -> np.ndarray:
+    """The simulated candidate noise ``diag(sigma_range^2, sigma_range_rate^2)``, ``(2, 2)``; the filters' ``R`` uses
+    ``model_sigma_range`` and ``model_sigma_range_rate`` instead (about half a range and a Doppler bin)."""
+    p = _params(params)
+    return np.diag([p["sigma_range"] ** 2, p["sigma_range_rate"] ** 2])
+
+
 PARAMETERS = (
     Param("tx", DEFAULTS["tx"], "transmitter position (x, y, z)", "vector", unit="length", length=3),
     Param("rx", DEFAULTS["rx"], "receiver position (x, y, z)", "vector", unit="length", length=3),
@@ -108,6 +121,8 @@ DTV_PBR = SensorSpec(
     params=DEFAULTS,
     parameters=PARAMETERS,
     frame="bistatic-range-rate",
+    truth_to_state=truth_to_state,
+    noise_cov=noise_cov,
 )
 
 

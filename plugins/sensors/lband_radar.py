@@ -99,6 +99,36 @@ def simulate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
                  doppler=vr[:, :, None], origin=np.zeros((B, T, 1), dtype=int))
 
 
+def _spherical_jacobian(sph: np.ndarray) -> np.ndarray:
+    """``d[x, y, z] / d[range, azimuth, elevation]`` at ``sph (..., 3)``, ``(..., 3, 3)``."""
+    r, az, el = sph[..., 0], sph[..., 1], sph[..., 2]
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    J = np.zeros(sph.shape[:-1] + (3, 3))
+    # x = r cos(el) cos(az), y = r cos(el) sin(az), z = r sin(el)
+    J[..., 0, 0], J[..., 0, 1], J[..., 0, 2] = ce * ca, -r * ce * sa, -r * se * ca
+    J[..., 1, 0], J[..., 1, 1], J[..., 1, 2] = ce * sa, r * ce * ca, -r * se * sa
+    J[..., 2, 0], J[..., 2, 2] = se, r * ce
+    return J
+
+
+def noise_cov(truth: Truth, scans: Scans, **params) -> np.ndarray:
+    """The simulation noise of each detection, ``(B, T, M, 4, 4)``: the spherical accuracies at the detection's own
+    SNR (``scans.snr``, the SNR its noise was drawn with), ``S = diag(sigma_R^2, sigma_ang^2, sigma_ang^2)``, carried
+    to Cartesian by the Jacobian ``J`` of the spherical-to-Cartesian map at the true position (first order), and
+    ``sigma_vr^2`` for the radial velocity.  The published ``R`` is the filters' pseudo-measurement noise instead."""
+    p = _checked(params)
+    radar = _radar(p)
+    snr = from_db(scans.snr)
+    sigma = np.stack([range_accuracy(snr, radar.pulse_width), angle_accuracy(snr, radar.beamwidth),
+                      angle_accuracy(snr, radar.beamwidth)], axis=-1)
+    J = _spherical_jacobian(cartesian_to_spherical(truth.states[:, :, None, :3]))
+    cov = np.zeros(scans.z.shape + (4,))
+    # C_pos = J S J^T
+    cov[..., :3, :3] = (J * sigma[..., None, :] ** 2) @ np.swapaxes(J, -1, -2)
+    cov[..., 3, 3] = p["sigma_vr"] ** 2
+    return cov
+
+
 def measurement_model(**params) -> MeasurementModel:
     """``h(s) = [x, y, z, (p . v)/|p|]``, its Jacobian and the pseudo-measurement noise ``R``."""
     p = _checked(params)
@@ -123,6 +153,7 @@ LBAND_RADAR = SensorSpec(
     params=PARAMS,
     parameters=PARAMETERS,
     frame="position-doppler-3d",
+    noise_cov=noise_cov,
 )
 
 

@@ -1,4 +1,5 @@
-"""The plugin test kit.
+"""The plugin test kits: filters (:mod:`.kit`), sensors (:mod:`.sensors`), clutter generators and removers
+(:mod:`.clutter`).
 
 From pytest::
 
@@ -9,25 +10,70 @@ From pytest::
     def test_conformance(spec, check):
         check(spec)
 
-Test ids read ``alpha-beta-check_batch_consistency``; checks listed in the spec's
-``expected_failures`` are marked ``xfail`` with the declared reason.  Without pytest:
-``workbench check-plugin NAME`` or :func:`run_checks`.
+The kit that fits each spec is chosen by its kind (a filter, sensor, clutter generator or remover spec) and its
+checks by its declared capabilities and fields, never by its name.  Test ids read
+``alpha-beta-check_batch_consistency`` or ``lband-radar-check_centred_on_h``; checks listed in a filter's
+``expected_failures`` are marked ``xfail`` with the declared reason.  Without pytest: ``workbench check-plugin
+NAME`` or :func:`run_checks`.
 """
 
-from .kit import CHECKS, Check, Outcome, checks_for, reference_kalman, run_checks
+from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, SensorSpec
+from . import kit
+from ._common import Check, Outcome
+from .clutter import GENERATOR_CHECKS, REMOVER_CHECKS, generator_checks_for, remover_checks_for
+from .kit import CHECKS, reference_kalman
+from .sensors import SENSOR_CHECKS, sensor_checks_for
 
-__all__ = ["CHECKS", "Check", "Outcome", "checks_for", "run_checks", "reference_kalman", "parametrize_with_checks"]
+__all__ = ["CHECKS", "SENSOR_CHECKS", "GENERATOR_CHECKS", "REMOVER_CHECKS", "Check", "Outcome", "checks_for",
+           "kit_checks", "run_checks", "reference_kalman", "parametrize_with_checks"]
+
+#: spec type -> (every check of its kit, the applicable ones)
+_KITS = {
+    FilterSpec: (CHECKS, kit.checks_for),
+    SensorSpec: (SENSOR_CHECKS, sensor_checks_for),
+    ClutterGeneratorSpec: (GENERATOR_CHECKS, generator_checks_for),
+    ClutterRemoverSpec: (REMOVER_CHECKS, remover_checks_for),
+}
+
+
+def _kit(spec):
+    for kind, entry in _KITS.items():
+        if isinstance(spec, kind):
+            return entry
+    raise TypeError(f"no test kit for {type(spec).__name__}; the kits check FilterSpec, SensorSpec, "
+                    f"ClutterGeneratorSpec and ClutterRemoverSpec")
+
+
+def kit_checks(spec) -> tuple[Check, ...]:
+    """Every check of the kit that fits ``spec`` (applicable or not)."""
+    return _kit(spec)[0]
+
+
+def checks_for(spec) -> list[Check]:
+    """The checks of the fitting kit that apply to ``spec`` given its declarations."""
+    return _kit(spec)[1](spec)
+
+
+def run_checks(spec) -> list[Outcome]:
+    """Every check of the fitting kit on ``spec`` without pytest (``passed``, ``failed``, ``skipped`` with the
+    reason, ``xfailed`` / ``xpassed`` for a filter's declared expected failures)."""
+    from ._common import run_kit
+
+    if isinstance(spec, FilterSpec):
+        return kit.run_checks(spec)
+    return run_kit(spec, kit_checks(spec))
 
 
 def parametrize_with_checks(specs):
-    """A ``pytest.mark.parametrize`` over every applicable (filter, check) pair."""
+    """A ``pytest.mark.parametrize`` over every applicable (component, check) pair, for components of any kind."""
     import pytest
 
     params = []
     for spec in specs:
+        expected = getattr(spec, "expected_failures", {}) or {}
         for check in checks_for(spec):
             marks = ()
-            if check.name in spec.expected_failures:
-                marks = (pytest.mark.xfail(reason=spec.expected_failures[check.name], strict=True),)
+            if check.name in expected:
+                marks = (pytest.mark.xfail(reason=expected[check.name], strict=True),)
             params.append(pytest.param(spec, check, id=f"{spec.name}-{check.name}", marks=marks))
     return pytest.mark.parametrize("spec, check", params)

@@ -12,40 +12,21 @@ the same target seen in range and bearing.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Callable
-
 import numpy as np
 
 from ..metrics import chi2_band, nees
 from ..models import MeasurementModel, constant_velocity, linear_measurement, range_bearing
 from ..rng import generator
 from ..specs import FilterSpec
+from ..tracking import Direct, run
 from ..trajectory import sample_motion
 from ..types import Gaussian, Scan, Scans
+from ._common import Check, Outcome, run_kit
 
 __all__ = ["Check", "CHECKS", "checks_for", "run_checks", "Outcome", "reference_kalman"]
 
 _DT = 1.0
 _STEPS = 25
-
-
-@dataclass(frozen=True)
-class Check:
-    name: str
-    description: str
-    applies: Callable[[FilterSpec], bool]
-    run: Callable[[FilterSpec], None]
-
-    def __call__(self, spec: FilterSpec) -> None:
-        self.run(spec)
-
-
-@dataclass(frozen=True)
-class Outcome:
-    check: str
-    status: str  # passed, failed, skipped, xfailed, xpassed
-    message: str = ""
 
 
 # -- reference problems -------------------------------------------------------------------------------
@@ -125,17 +106,10 @@ def _problem(spec: FilterSpec, batch: int, seed: int, steps: int = _STEPS, nonli
 
 
 def _run(spec: FilterSpec, prior, scans, motion, model, seed: int = 0):
-    rng = generator(seed, "kit-filter")
-    state = spec.init(prior, rng)
-    means, covs = [], []
-    for k in range(scans.steps):
-        if k > 0:
-            state = spec.predict(state, motion, rng)
-        state = spec.update(state, scans.scan(k).for_filter(), model, rng)
-        est = spec.estimate(state)
-        means.append(est.mean)
-        covs.append(est.cov)
-    return np.stack(means, axis=1), np.stack(covs, axis=1)
+    """The filter over the scans through the one time loop (:func:`workbench.tracking.run`, ``Direct``
+    association): the estimates ``mean (B, T, n)`` and ``cov (B, T, n, n)``."""
+    track = run(spec, scans, motion, model, association=Direct(), prior=prior, rng=generator(seed, "kit-filter"))
+    return track.mean, track.cov
 
 
 def reference_kalman(prior: Gaussian, scans: Scans, F, Q, H, R):
@@ -339,19 +313,5 @@ def checks_for(spec: FilterSpec) -> list[Check]:
 
 def run_checks(spec: FilterSpec) -> list[Outcome]:
     """Run every applicable check without pytest; expected failures are honoured."""
-    outcomes = []
-    applicable = {c.name for c in checks_for(spec)}
-    for check in CHECKS:
-        if check.name not in applicable:
-            outcomes.append(Outcome(check.name, "skipped", "does not apply to the declared capabilities"))
-            continue
-        expected = spec.expected_failures.get(check.name)
-        try:
-            check.run(spec)
-        except Exception as exc:  # noqa: BLE001 - a check's failure is its outcome
-            msg = f"{type(exc).__name__}: {exc}" if not isinstance(exc, AssertionError) else str(exc)
-            outcomes.append(Outcome(check.name, "xfailed" if expected else "failed", msg))
-            continue
-        outcomes.append(Outcome(check.name, "xpassed" if expected else "passed",
-                                f"expected to fail ({expected}) but passed" if expected else ""))
-    return outcomes
+    checks_for(spec)  # refuses expected failures of unknown checks
+    return run_kit(spec, CHECKS)
