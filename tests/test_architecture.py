@@ -16,7 +16,7 @@ from workbench.plugins import load_host
 
 ROOT = Path(__file__).parents[1]
 PLUGIN_PACKAGES = {"workbench_filters": "filters", "workbench_sensors": "sensors", "workbench_clutter": "clutter",
-                   "workbench_papers": "papers"}
+                   "workbench_papers": "papers", "workbench_interop": "interop"}
 PAPER_NAME = re.compile(r"paper[ _-]?00\d|method[ -]?[ABC]\b", re.IGNORECASE)
 
 

@@ -172,9 +172,13 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
     entry_points : the entry points to load (default: the installed group ``workbench``).
     extra_plugins : ``(name, module_or_object)`` pairs registered directly (tests use this).
 
+    Notes
+    -----
     A plugin that fails to import, implements an unknown hook, raises from a hook, returns something
-    other than a list of the right specs, or reuses a component name already taken is marked
-    ``broken`` with a message naming it and its distribution; everything else keeps working.
+    other than a list of the right specs, or declares parameters its own values fail is marked ``broken`` with a
+    message naming it and its distribution; a component whose name another plugin already holds is not
+    registered, with a warning naming both distributions (built-in names are reserved); everything else keeps
+    working.
     """
     blocked = set(block) | blocked_from_env()
     if entry_points is None:

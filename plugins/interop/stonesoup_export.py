@@ -1,0 +1,157 @@
+"""Truths, detections and tracks as Stone Soup objects, for Stone Soup's metrics, plotters and trackers.
+
+- :func:`ground_truth_paths`: one ``GroundTruthPath`` of ``GroundTruthState`` per run of a
+  :class:`~workbench.types.Truth`;
+- :func:`detections`: per scan of one run, ``(time stamp, {Detection | Clutter})``, as a Stone Soup detector
+  yields them; ``Clutter`` for rows whose origin is :data:`~workbench.types.CLUTTER`, ``Detection`` otherwise
+  (with ``origin``, ``snr``, ``doppler`` in the metadata where known);
+- :func:`track_log_tracks`: the tracks of one run of a :class:`~workbench.tracking.TrackLog`, one ``Track`` of
+  ``State`` (or ``GaussianState`` where covariances are given) per track id;
+- :func:`filter_tracks`: a single-target filter's :class:`~workbench.tracking.Track`, one ``Track`` of
+  ``GaussianState`` per run.
+
+Times: Stone Soup stamps states with ``datetime``; a workbench time ``t`` seconds becomes ``start + t`` (default
+start :data:`EPOCH`), rounded to the microsecond, datetime's resolution (:func:`seconds` turns stamps back).
+State and measurement values are copied exactly; angular measurement components become Stone Soup
+``Bearing`` values when the measurement model is given (Stone Soup then wraps their differences).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timedelta
+from typing import Sequence
+
+import numpy as np
+
+from workbench.models import MeasurementModel
+from workbench.tracking import CONFIRMED, Track as WorkbenchTrack, TrackLog
+from workbench.types import CLUTTER, InputError, Scans, Truth
+
+from .stonesoup_filters import AVAILABLE, REASON
+
+__all__ = ["EPOCH", "timestamps", "seconds", "ground_truth_paths", "detections", "track_log_tracks",
+           "filter_tracks"]
+
+#: The default time of ``t = 0``.
+EPOCH = datetime(2000, 1, 1)
+
+
+def _require() -> None:
+    if not AVAILABLE:
+        raise ImportError(REASON)
+
+
+def timestamps(times, start: datetime = EPOCH) -> list[datetime]:
+    """``start + t`` for every time ``t`` (seconds), to the microsecond."""
+    times = np.asarray(times, dtype=float)
+    if times.ndim != 1 or not np.all(np.isfinite(times)):
+        raise InputError(f"times must be a finite vector of seconds, got shape {times.shape}")
+    return [start + timedelta(microseconds=round(float(t) * 1e6)) for t in times]
+
+
+def seconds(stamps: Sequence[datetime], start: datetime = EPOCH) -> np.ndarray:
+    """The seconds since ``start`` of Stone Soup time stamps (the inverse of :func:`timestamps`)."""
+    return np.array([(s - start) / timedelta(seconds=1) for s in stamps], dtype=float)
+
+
+def _column(values) -> np.ndarray:
+    return np.asarray(values, dtype=float).reshape(-1, 1).copy()
+
+
+def ground_truth_paths(truth: Truth, *, start: datetime = EPOCH) -> list:
+    """One Stone Soup ``GroundTruthPath`` per run (``id`` ``"run <b>"``), its ``GroundTruthState`` s holding the full
+    true state ``(n, 1)`` at every time."""
+    _require()
+    from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
+
+    stamps = timestamps(truth.times, start)
+    return [GroundTruthPath([GroundTruthState(_column(truth.states[b, k]), timestamp=stamps[k])
+                             for k in range(truth.steps)], id=f"run {b}") for b in range(truth.batch)]
+
+
+def detections(scans: Scans, *, run: int = 0, model: MeasurementModel | None = None, ndim_state: int | None = None,
+               start: datetime = EPOCH) -> list[tuple[datetime, set]]:
+    """The valid detections of run ``run``, scan by scan: ``[(time stamp, {Detection | Clutter, ...}), ...]``.
+
+    With ``model`` (and the state dimension ``ndim_state``) each detection carries it as a Stone Soup measurement
+    model (:func:`workbench_interop.stonesoup_models.measurement_model`; a detection's own ``Scans.cov`` as its
+    noise covariance), and angular components are ``Bearing`` values.  ``origin``, ``snr`` and ``doppler`` go into
+    each detection's metadata where the scans carry them.
+    """
+    _require()
+    from stonesoup.types.detection import Clutter, Detection
+
+    from .stonesoup_models import measurement_model, typed_vector
+
+    if not 0 <= run < scans.batch:
+        raise InputError(f"run {run} is not in the scans' {scans.batch} runs")
+    if model is not None and ndim_state is None:
+        raise InputError("detections with a measurement model need the state dimension (ndim_state)")
+    angular = model.angular if model is not None else (False,) * scans.z.shape[-1]
+    shared = measurement_model(model, ndim_state) if model is not None else None
+    out = []
+    for k, stamp in enumerate(timestamps(scans.times, start)):
+        found = set()
+        for j in np.flatnonzero(scans.valid[run, k]):
+            meta = {}
+            origin = None if scans.origin is None else int(scans.origin[run, k, j])
+            if origin is not None:
+                meta["origin"] = origin
+            for key in ("snr", "doppler"):
+                values = getattr(scans, key)
+                if values is not None and np.isfinite(values[run, k, j]):
+                    meta[key] = float(values[run, k, j])
+            mm = shared
+            if model is not None and scans.cov is not None:
+                mm = measurement_model(model, ndim_state, scans.cov[run, k, j])
+            cls = Clutter if origin == CLUTTER else Detection
+            found.add(cls(typed_vector(scans.z[run, k, j], angular), timestamp=stamp, measurement_model=mm,
+                          metadata=meta))
+        out.append((stamp, found))
+    return out
+
+
+def track_log_tracks(log: TrackLog, times, *, run: int = 0, cov=None, confirmed_only: bool = True,
+                     start: datetime = EPOCH) -> list:
+    """The tracks of run ``run`` of a tracker's log as Stone Soup ``Track`` s (``id`` ``"<run>-<track id>"``).
+
+    Each holds a ``State`` per ping at which the track is live (confirmed, with ``confirmed_only``), with the full
+    state ``(n, 1)``; with ``cov (R, n, n)`` (one per log row) a ``GaussianState``.  ``times (T,)``: each ping's time
+    in seconds.
+    """
+    _require()
+    from stonesoup.types.state import GaussianState, State
+    from stonesoup.types.track import Track
+
+    stamps = timestamps(times, start)
+    if len(stamps) != log.pings:
+        raise InputError(f"times must have one entry per ping ({log.pings}), got {len(stamps)}")
+    if cov is not None and np.shape(cov) != (log.run.size, log.mean.shape[1], log.mean.shape[1]):
+        raise InputError(f"cov must have shape ({log.run.size}, n, n), one per log row, got {np.shape(cov)}")
+    sel = log.run == run
+    if confirmed_only:
+        sel &= log.status == CONFIRMED
+    tracks = []
+    for tid in np.unique(log.track_id[sel]):
+        rows = np.flatnonzero(sel & (log.track_id == tid))
+        rows = rows[np.argsort(log.ping[rows], kind="stable")]
+        states = [State(_column(log.mean[r]), timestamp=stamps[log.ping[r]]) if cov is None else
+                  GaussianState(_column(log.mean[r]), np.array(cov[r], dtype=float), timestamp=stamps[log.ping[r]])
+                  for r in rows]
+        tracks.append(Track(states, id=f"{run}-{int(tid)}"))
+    return tracks
+
+
+def filter_tracks(track: WorkbenchTrack, times, *, start: datetime = EPOCH) -> list:
+    """A single-target filter's output as one Stone Soup ``Track`` of ``GaussianState`` per run (``id`` ``"run
+    <b>"``): the mean ``(n, 1)`` and covariance ``(n, n)`` at every step; ``times (T,)`` in seconds."""
+    _require()
+    from stonesoup.types.state import GaussianState
+    from stonesoup.types.track import Track
+
+    B, T, _ = track.mean.shape
+    stamps = timestamps(times, start)
+    if len(stamps) != T:
+        raise InputError(f"times must have one entry per step ({T}), got {len(stamps)}")
+    return [Track([GaussianState(_column(track.mean[b, k]), np.array(track.cov[b, k], dtype=float),
+                                 timestamp=stamps[k]) for k in range(T)], id=f"run {b}") for b in range(B)]
