@@ -210,3 +210,17 @@ def test_run_plots_in_the_sensor_frame_converted_to_positions(tmp_path):
     assert plot["track_ekf"].shape == (30, 2) and plot["rmse_ekf"].shape == (30,)
     saved = np.load(tmp_path / "out" / "tracks.npz")
     np.testing.assert_array_equal(saved["detections_xy"], d)
+
+
+def test_run_writes_a_track_file_per_filter_that_reads_back(tmp_path, demo_host):
+    from workbench.tracks_io import read_tracks
+
+    sc = load_scenario(_write(tmp_path, GOOD), demo_host)
+    run_scenario(sc, demo_host, tmp_path / "out")
+    data = np.load(tmp_path / "out" / "results.npz")
+    for name in ("kf", "ekf"):
+        tracks = read_tracks(tmp_path / "out" / f"tracks-{name}.csv")
+        mean, cov = tracks.single_target()
+        np.testing.assert_array_equal(mean, data[f"mean_{name}"])  # repr-exact floats
+        np.testing.assert_array_equal(cov, data[f"cov_{name}"])
+        assert tracks.names[:2] == ("x", "y") and tracks.units[:4] == ("m", "m", "m/s", "m/s")

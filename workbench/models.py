@@ -38,7 +38,8 @@ __all__ = [
 class MotionModel:
     """Linear motion ``x_k = F x_{k-1} + w_k`` with ``w_k ~ N(0, Q)``.
 
-    Shapes: ``F (n, n)``, ``Q (n, n)``, ``Q_sqrt (n, n)`` with ``Q = Q_sqrt Q_sqrt^T``.
+    Shapes: ``F (n, n)``, ``Q (n, n)``, ``Q_sqrt (n, n)`` with ``Q = Q_sqrt Q_sqrt^T``.  ``state_names`` and
+    ``state_units`` declare the state's layout (e.g. ``x, y, vx, vy`` in m and m/s), for track files and plots.
     """
 
     name: str
@@ -47,6 +48,8 @@ class MotionModel:
     Q_sqrt: np.ndarray
     dt: float
     rebuild: Callable[[float], "MotionModel"] | None = field(default=None, compare=False, repr=False)
+    state_names: tuple[str, ...] = ()
+    state_units: tuple[str, ...] = ()
 
     @property
     def dim(self) -> int:
@@ -80,6 +83,11 @@ class MotionModel:
         return (x.reshape(-1, x.shape[-1]) @ self.F.T).reshape(x.shape)
 
 
+def _cartesian_layout(dims: int) -> dict:
+    axes = ("x", "y", "z")[:dims] if dims <= 3 else tuple(f"p{i}" for i in range(dims))
+    return {"state_names": axes + tuple(f"v{a}" for a in axes), "state_units": ("m",) * dims + ("m/s",) * dims}
+
+
 def _dwna_axis(dt: float) -> np.ndarray:
     # Discrete white-noise acceleration, one axis: G = [T^2/2, T]^T, Q = G G^T sigma_a^2.
     return np.array([dt * dt / 2.0, dt])
@@ -107,7 +115,7 @@ def constant_velocity(dims: int, dt: float, sigma_a: float | Sequence[float]) ->
     G[:dims] = g[0] * np.diag(sig)
     G[dims:] = g[1] * np.diag(sig)
     return MotionModel(f"cv{dims}d", F, G @ G.T, _lower_factor(G), float(dt),
-                       rebuild=lambda step: constant_velocity(dims, step, sigma_a))
+                       rebuild=lambda step: constant_velocity(dims, step, sigma_a), **_cartesian_layout(dims))
 
 
 def random_walk_velocity(dims: int, dt: float, sigma_a: float) -> MotionModel:
@@ -124,14 +132,15 @@ def random_walk_velocity(dims: int, dt: float, sigma_a: float) -> MotionModel:
     Q_sqrt = np.zeros((n, n))
     Q_sqrt[dims:, dims:] = sigma_a * np.eye(dims)
     return MotionModel(f"rwv{dims}d", F, Q_sqrt @ Q_sqrt.T, Q_sqrt, float(dt),
-                       rebuild=lambda step: random_walk_velocity(dims, step, sigma_a))
+                       rebuild=lambda step: random_walk_velocity(dims, step, sigma_a), **_cartesian_layout(dims))
 
 
 def range_rate_model(dt: float, sigma_a: float) -> MotionModel:
     """The ``[R, Rdot]`` model: constant range-rate with white-noise acceleration (e.g. a bistatic range)."""
     model = constant_velocity(1, dt, sigma_a)
     return MotionModel("range-rate", model.F, model.Q, model.Q_sqrt, model.dt,
-                       rebuild=lambda step: range_rate_model(step, sigma_a))
+                       rebuild=lambda step: range_rate_model(step, sigma_a), state_names=("R", "Rdot"),
+                       state_units=("m", "m/s"))
 
 
 def _lower_factor(g: np.ndarray) -> np.ndarray:
@@ -164,12 +173,30 @@ class DetectionModel:
         The radial-velocity standard deviation (m/s).
     pfa : float
         The false-alarm probability per cell of the detector.
+    nominal_snr_db : callable or None
+        ``nominal_snr_db(position) -> snr_db``: the nominal SNR (dB, no fluctuation) of the sensor's design
+        target at positions ``(..., 3)`` -> ``(...)``.  ``None`` when the sensor states no design target.
+    log_detection : callable or None
+        ``log_detection(nominal_snr_db) -> log P_D``: the log probability that the sensor's detector reports the
+        design target when its nominal SNR is ``nominal_snr_db`` (elementwise).
+    log_snr_density : callable or None
+        ``log_snr_density(snr_db, nominal_snr_db) -> log f``: the log density (per dB) of a target detection's
+        measured SNR given its nominal SNR, conditioned on the detection (``-inf`` below the detector's
+        threshold), elementwise with broadcasting.
+    clutter_log_snr_density : callable or None
+        ``clutter_log_snr_density(snr_db) -> log f``: the log density (per dB) of a false (clutter) detection's
+        measured SNR, conditioned on the detection.  A sensor rarely knows its environment: whoever pairs the
+        sensor with a clutter model may set it (``dataclasses.replace``).
     """
 
     log_pd: Callable[[np.ndarray], np.ndarray]
     position_sigma: Callable[[np.ndarray, np.ndarray], np.ndarray]
     doppler_sigma: float
     pfa: float
+    nominal_snr_db: Callable[[np.ndarray], np.ndarray] | None = None
+    log_detection: Callable[[np.ndarray], np.ndarray] | None = None
+    log_snr_density: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    clutter_log_snr_density: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 @dataclass(frozen=True)

@@ -500,6 +500,11 @@ def _draw(data: Mapping[str, np.ndarray], fig) -> None:
     ax2.legend(fontsize=7)
 
 
+def _file_label(label: str) -> str:
+    """A filter label as a file-name part: ``sir(particles=2000)`` -> ``sir_particles=2000_``."""
+    return "".join(c if c.isalnum() or c in "-_=." else "_" for c in label)
+
+
 def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | None = None) -> ScenarioResult:
     """Run every filter of the scenario on the same truth and detections; write NPZ, JSON and plots.
 
@@ -562,6 +567,14 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
             arrays[f"sq_error_{fname}"] = err
             rmse[fname] = float(np.sqrt(err.mean(axis=0)).mean())
     save_arrays(out / "results.npz", arrays)
+    from .tracks_io import write_track, write_track_log
+
+    for fname, est in estimates.items():
+        write_track(out / f"tracks-{_file_label(fname)}.csv", est, scans.times, motion=scenario.motion,
+                    notes=(f"scenario {scenario.name}, filter {fname}, seed {seed}",))
+    for fname, log in logs.items():
+        write_track_log(out / f"tracks-{_file_label(fname)}.csv", log, scans.times, motion=scenario.motion,
+                        notes=(f"scenario {scenario.name}, filter {fname}, seed {seed}",))
     (out / "summary.json").write_text(json.dumps({
         "scenario": scenario.name, "seed": seed, "runs": scans.batch, "steps": scans.steps,
         "tracker": scenario.tracker, "detections": str(scenario.detections or "simulated"), "frame": scenario.frame,

@@ -175,15 +175,18 @@ def state_layout(n: int, motion: MotionModel | None = None, names: Sequence[str]
                  units: Sequence[str] | None = None) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The names and units of ``n`` state components.
 
-    Given ``names`` (and ``units``) win.  Otherwise, from the motion model's layout (positions, then velocities,
-    :mod:`workbench.models`): ``x, y[, z]`` in m and ``vx, vy[, vz]`` in m/s; without a motion model (or for a
-    layout of more than three positions) ``s0, s1, ...`` with no unit.
+    Given ``names`` (and ``units``) win.  Otherwise the motion model's declared ``state_names`` and ``state_units``,
+    or its layout (positions, then velocities, :mod:`workbench.models`): ``x, y[, z]`` in m and ``vx, vy[, vz]`` in
+    m/s; without a motion model (or for a layout of more than three positions) ``s0, s1, ...`` with no unit.
     """
     if names is None:
         if motion is not None and motion.dim != n:
             raise InputError(f"the motion model {motion.name!r} has {motion.dim} state components, the tracks {n}")
         d = n // 2
-        if motion is not None and n == 2 * d and 1 <= d <= 3:
+        if motion is not None and len(motion.state_names) == n:
+            names = motion.state_names
+            units = (motion.state_units if len(motion.state_units) == n else ("",) * n) if units is None else units
+        elif motion is not None and n == 2 * d and 1 <= d <= 3:
             names = ("x", "y", "z")[:d] + ("vx", "vy", "vz")[:d]
             units = ("m",) * d + ("m/s",) * d if units is None else units
         else:
