@@ -29,6 +29,23 @@ class TaichiUnavailable(RuntimeError):
     """The requested Taichi arch cannot be started on this machine."""
 
 
+def _floating_point_environment():
+    """Save and restore the process's floating-point environment (rounding, exception masks and, on x86-64,
+    MXCSR's flush-to-zero and denormals-are-zero bits) with C's ``fegetenv``/``fesetenv``; ``None`` where the C
+    library does not offer them."""
+    try:
+        import ctypes
+        import ctypes.util
+
+        libm = ctypes.CDLL(ctypes.util.find_library("m") or None)
+        env = ctypes.create_string_buffer(512)  # larger than any fenv_t
+        if libm.fegetenv(env) != 0:
+            return None
+        return lambda: libm.fesetenv(env)
+    except (OSError, AttributeError):  # pragma: no cover - no C maths library to ask
+        return None
+
+
 def _import_taichi():
     # Quiet the import banner and the version-check thread unless the user asked for them.
     os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
@@ -84,8 +101,14 @@ def ensure_taichi(arch: str = "cpu") -> str:
         # Checked before ti.init, which would first reset a runtime that is already running.
         raise TaichiUnavailable(f"Taichi cannot start on arch {arch!r} here (not available); use 'cpu' or 'auto'")
     wanted = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "auto": [ti.cuda, ti.vulkan]}[arch]
+    # ti.init turns on flush-to-zero and denormals-are-zero for the whole process (Python and NumPy arithmetic
+    # included: 5e-324 * 1.0 becomes 0.0), so results computed after a Taichi kernel would differ from those
+    # computed before it.  The calling thread's floating-point environment is restored after it.
+    restore = _floating_point_environment()
     with contextlib.redirect_stdout(io.StringIO()):  # ti.init prints "[Taichi] Starting on arch=..."
         ti.init(arch=wanted, enable_fallback=(arch == "auto"), offline_cache=True, log_level="warn")
+    if restore is not None:
+        restore()
     running = current_arch()
     if arch == "auto" and running == "cpu":
         print("workbench: no GPU available to Taichi; kernels run on the CPU", file=sys.stderr)
