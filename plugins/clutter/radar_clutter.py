@@ -33,8 +33,17 @@ PARAMETERS = (
 PARAMS = defaults(PARAMETERS)
 
 
+def intensity(**params) -> float:
+    """The clutter intensity per unit ``(x, y, z, vr)`` volume inside the cube and the altitude band (m^-3 (m/s)^-1):
+    ``rate P(power >= t) / (cube^3 2 doppler_max)``."""
+    p = {**PARAMS, **params}
+    passing = 1.0 if p["threshold_db"] is None else float(clutter_pass_fraction(p["threshold_db"], p["mean_power"]))
+    return float(p["rate"] * passing / (p["cube"] ** 3 * 2.0 * p["doppler_max"])) if p["doppler_max"] > 0 else np.inf
+
+
 def generate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
-    """Clutter detections ``z (B, T, M, 4)`` padded to the largest count, ``origin = CLUTTER``."""
+    """Clutter detections ``z (B, T, M, 4)`` padded to the largest count, ``origin = CLUTTER``; every detection
+    carries the intensity of the law it was drawn from (``clutter_density``, :func:`intensity`)."""
     unknown = set(params) - set(PARAMS)
     if unknown:
         raise InputError(f"radar-clutter: unknown parameter(s) {sorted(unknown)}; known: {sorted(PARAMS)}")
@@ -50,14 +59,21 @@ def generate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
     count = rng.poisson(lam, size=(B, T))
     M = int(count.max()) if count.size else 0
     live = np.arange(M)[None, None, :] < count[..., None]
-    u = rng.random((B, T, M, 3)) - 0.5
-    pos = x[:, :, None, :3] + p["cube"] * u
+    z = np.empty((B, T, M, 4))
+    # position uniform in the cube around the true position: p = x + cube (u - 1/2)
+    pos = z[..., :3]
+    pos[...] = rng.random((B, T, M, 3))
+    pos -= 0.5
+    pos *= p["cube"]
+    pos += x[:, :, None, :3]
     # discard candidates outside the altitude band
     valid = live & (pos[..., 2] >= p["z_min"]) & (pos[..., 2] <= p["z_max"])
-    power = t_lin + rng.exponential(p["mean_power"], size=(B, T, M))  # memoryless: t + Exp(mean)
-    vr = rng.uniform(-p["doppler_max"], p["doppler_max"], size=(B, T, M))
-    z = np.concatenate([pos, vr[..., None]], axis=-1)
-    return Scans(z, valid, truth.times, snr=db(power), doppler=vr, origin=np.full((B, T, M), CLUTTER))
+    power = rng.exponential(p["mean_power"], size=(B, T, M))
+    power += t_lin  # memoryless: t + Exp(mean)
+    z[..., 3] = rng.uniform(-p["doppler_max"], p["doppler_max"], size=(B, T, M))
+    density = np.broadcast_to(intensity(**p), valid.shape)
+    return Scans(z, valid, truth.times, snr=db(power), doppler=z[..., 3], origin=np.full((B, T, M), CLUTTER),
+                 clutter_density=density)
 
 
 def _inside_band(truth: Truth, p: dict) -> np.ndarray:

@@ -1,56 +1,75 @@
-"""Method C of paper 000: a particle filter weighted directly by every gated detection (eqs 12-15).
+"""A track-before-detect particle filter weighted directly by every gated detection, and its pseudo-measurement
+companions (the methods of the L-band TBD study; docs/paper000.md).
 
 For particle ``i`` (state ``s_i``) and gated detection ``m`` (position ``p_m``, radial velocity
 ``vr_m``, measured SNR ``snr_m``)::
 
     w_{m,i} = P_D(snr_m) N(p_m; p_i, sigma_p,m^2 I_3) N(vr_m; vr(s_i), sigma_vr^2)      (13)
     w_i     = sum_m w_{m,i}                                                              (14)
-    log w_k,i = log w_{k-1,i} + log(eps + w_i), normalised over i                        (15, SIS)
+    log w_k,i = log w_{k-1,i} + log(eps_i + w_i), normalised over i                      (15, SIS)
 
 ``p_i, vr(s_i)`` is the sensor's ``h(s_i)`` (a model in the ``position-doppler-3d`` frame), and ``P_D`` and
 ``sigma_p,m`` follow the detection's own SNR as the sensor declares them (``model.detection``, a
-:class:`workbench.models.DetectionModel`).  The floor
-``eps = floor_density * max_m P_D(snr_m) N(0; 0, sigma_vr^2)`` is the "target missed, every detection
-is clutter" alternative: a spatial density (m^-3, default 5e-11 = 0.05 per km^3, a quarter of the
-5 dB clutter density) in place of the position kernel.  Relative to the kernel's peak it is large
-when the kernels are wide (low SNR, far away: a lone clutter point hardly drags the cloud) and tiny
-when they are sharp (high SNR: a lagging cloud still feels the detection, e.g. in the sharp turn).
-The brief's fixed ``1e-3 x peak`` lost almost every run at the turn or in the clutter of the low-SNR
-segment (docs/paper000.md).  ``floor_density = 0`` is the literal paper (filter ``tbd-pf-eps0``).
+:class:`workbench.models.DetectionModel`).
+
+The floor ``eps_i`` is the "target missed, every gated detection is clutter" alternative (parameter ``floor``):
+
+- ``"amplitude"`` (default): the clutter intensity the scan declares at its detections (``Scan.clutter_density``,
+  per unit ``(x, y, z, vr)`` volume), scaled like the detections' own terms and by how target-like the strongest
+  detection is::
+
+      eps = kappa lambda max_m P_D(snr_m) (1 - P_D^T(p_hat)) / max(1, l)
+      l   = f_T(snr_* | SNR(p_hat)) / f_C(snr_*)
+
+  ``snr_*`` is the strongest gated detection, ``p_hat`` the cloud's predicted (weighted mean) position,
+  ``SNR(p_hat)`` the nominal SNR of the sensor's design target there (``detection.nominal_snr_db``), ``f_T`` the
+  declared law of a target detection's measured SNR (``detection.log_snr_density``) and ``f_C`` that of a clutter
+  detection (``detection.clutter_log_snr_density``): a strong detection that clutter almost never makes lowers the
+  floor, so a cloud that lags a sharp high-SNR detection still follows it.  ``P_D^T`` is the sensor's detection
+  probability of its design target (``detection.log_detection``): the "all clutter" alternative needs the target
+  to have been missed.  ``kappa = floor_scale``.  Each declaration the model or the scan lacks drops its factor (no
+  clutter density: no floor).  With ``missed_detection = "particle"`` (an ablation) the factor is taken at every
+  particle, ``1 - P_D^T(s_i)``, and also weights the particles of a scan with an empty gate; the filter does not
+  know the gate, so a target detection that fell outside it counts as a miss and this factor drives the cloud
+  towards lower SNR (docs/paper000.md).
+- ``"flat"`` (the previous floor, an ablation): ``eps = floor_density max_m P_D(snr_m) N(0; 0, sigma_vr^2)``, a
+  spatial density (m^-3) in place of the position kernel; an empty gate leaves the weights as they are.
+- ``"none"``: ``eps = 0`` (the literal eqs 13-15).
 
 Everything is in the log domain; the sum over ``m`` is the compiled kernel
-:func:`workbench.kernels.tbd_weights.tbd_log_weight_sums` (streaming, no (B, N, M) array).  Items
-without a gated detection keep their weights (predict only); an item whose weights all underflow
-keeps its previous weights (counted).  Systematic resampling when
-``N_eff < threshold * N`` (eq 16), followed by post-regularisation (:func:`regularise`, Musso, Oudjane
-and Le Gland's regularised particle filter): each resampled particle is jittered by
-``h D e``, ``D D^T`` the cloud's weighted covariance before resampling, ``h = 0.5 h_opt``
-(:func:`regularisation_bandwidth`), so that the copies of the few particles that keep up with a sharp
-manoeuvre become distinct particles (``regularisation = 0`` turns it off).  The state, prediction and
-estimate are those of the bootstrap filter (:mod:`workbench.particle_core`).
+:func:`workbench.kernels.tbd_weights.tbd_log_weight_sums` (streaming, no (B, N, M) array) and every floor term is
+``O(B N + M)``.  An item whose weights all underflow keeps its previous weights (counted).  Systematic resampling
+when ``N_eff < threshold * N`` (eq 16), followed by post-regularisation (:func:`regularise`, Musso, Oudjane and
+Le Gland's regularised particle filter): each resampled particle is jittered by ``h D e``, ``D D^T`` the cloud's
+weighted covariance before resampling, ``h = regularisation x h_opt`` (:func:`regularisation_bandwidth`), so that
+the copies of the few particles that keep up with a sharp manoeuvre become distinct particles.  The state,
+prediction and estimate are those of the bootstrap filter (:mod:`workbench.particle_core`).
+
+``sigma_vr`` (default 15 m/s) is the width of the Doppler kernel.  The sensor's radial-velocity noise is 2 m/s;
+the wider kernel is a tempering device (``N(vr; 15^2) ∝ N(vr; 2^2)^(4/225)``) that keeps a cloud of a few hundred
+particles from collapsing onto the few that match the Doppler (docs/paper000.md shows the collapse).
 
 The update takes the whole gated scan: ``scan.z = [x, y, z, vr]`` (B, M, 4), ``scan.snr`` (dB).
 
-Manoeuvres (the same two-level process noise for methods A, B and C; docs/paper000.md).  The particle
-filters predict with a jump-Markov (two-mode) CV model, :func:`predict_jump_markov`: each particle
-carries a mode, quiet (the motion model's ``W``) or manoeuvre (``MANOEUVRE_SCALE^2 W``), switching
-quiet -> manoeuvre with probability ``SWITCH_ON`` and back with ``SWITCH_OFF`` per scan; the mode
-rides along through resampling.  Filters registered here:
+Manoeuvres (the same two-level process noise for every method; docs/paper000.md).  The particle filters predict
+with a jump-Markov (two-mode) CV model, :func:`predict_jump_markov`: each particle carries a mode, quiet (the
+motion model's ``W``) or manoeuvre (``manoeuvre_scale^2 W``), switching quiet -> manoeuvre with probability
+``switch_on`` and back with ``switch_off`` per scan; the mode rides along through resampling.  Filters registered
+here:
 
-- ``tbd-pf`` (method C) and ``tbd-pf-eps0`` (no floor), both with the two-mode prediction;
-- ``sir-jm`` (method B): the bootstrap filter of :mod:`workbench.particle_core` (its likelihood),
-  with the same two-mode prediction;
-- ``ekf-nis`` (method A): the EKF (:func:`workbench.kalman_core.ekf_update`) whose process noise
-  switches to ``MANOEUVRE_SCALE^2 W`` for the next prediction when the normalised innovation squared
-  of the pseudo-measurement exceeds the chi-square 99 % point (4 dof), the Gaussian filter's
-  counterpart of the two modes (noise-level switching by manoeuvre detection).
+- ``tbd-pf``: the direct-weight filter above, with the two-mode prediction;
+- ``sir-jm``: the bootstrap filter of :mod:`workbench.particle_core` (its likelihood), with the same two-mode
+  prediction;
+- ``ekf-nis``: the EKF (:func:`workbench.kalman_core.ekf_update`) whose process noise switches to
+  ``manoeuvre_scale^2 W`` for the next prediction when the normalised innovation squared of the measurement
+  exceeds the chi-square 99 % point (4 dof), the Gaussian filter's counterpart of the two modes (noise-level
+  switching by manoeuvre detection).
 
-Clutter (methods A and B): where the scan declares the clutter density at the measurement
-(``Scan.clutter_density = b`` per unit measurement volume; the paper-000 pipeline computes it from the
-clutter model and the measurement's amplitude), the measurement may be clutter: B's likelihood is the mixture
-``b + N(z; h(x_i), R)``; A's update is the PDAF's for one validated measurement,
+Clutter (``sir-jm``, ``ekf-nis``): where the scan declares the clutter density at the measurement
+(``Scan.clutter_density = b`` per unit measurement volume), the measurement may be clutter: the particle filter's
+likelihood is the mixture ``b + N(z; h(x_i), R)``; the EKF's update is the PDAF's for one validated measurement,
 ``beta_0 = b / (b + N(nu; 0, S))``.  ``R`` is the measurement's own covariance where the scan carries one
-(``Scan.cov``, e.g. the pseudo-measurement's ``R_bar``), else the model's.
+(``Scan.cov``), else the model's.
 """
 
 from __future__ import annotations
@@ -76,11 +95,15 @@ from workbench.resampling import effective_sample_size, normalise_log_weights, r
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
 
-#: two-mode process noise [U, chosen by a sweep, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre -> quiet)
-#: per scan and the manoeuvre mode's factor on sigma_a
+#: two-mode process noise [U, chosen on tuning seeds, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre ->
+#: quiet) per scan and the manoeuvre mode's factor on sigma_a
 SWITCH_ON, SWITCH_OFF, MANOEUVRE_SCALE = 0.05, 0.2, 4.0
-#: post-regularisation of method C (tbd-pf) after resampling, as a fraction of the optimal kernel bandwidth
+#: post-regularisation of tbd-pf after resampling, as a fraction of the optimal kernel bandwidth
 REGULARISATION = 0.5
+#: the floors of tbd-pf
+FLOORS = ("amplitude", "flat", "none")
+#: kappa of the amplitude-aware floor: its level relative to the declared clutter intensity [chosen on tuning seeds]
+FLOOR_SCALE = 16.0
 
 
 def _detection(model: MeasurementModel):
@@ -91,11 +114,86 @@ def _detection(model: MeasurementModel):
     return model.detection
 
 
-def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, sigma_vr: float,
-                   floor_density: float, backend: str = "auto") -> np.ndarray:
-    """``log(eps + sum_m w_{m,i})`` for particles ``(B, N, 6)`` and a gated scan -> ``(B, N)``.
+def _centre(particles: np.ndarray, log_weights: np.ndarray) -> np.ndarray:
+    """The cloud's weighted mean position, ``(B, 3)``."""
+    return np.einsum("bn,bnk->bk", np.exp(log_weights), particles[..., :3])
 
-    ``-inf`` for items without a valid detection.
+
+def log_missed(model: MeasurementModel, particles: np.ndarray, log_weights: np.ndarray | None = None) -> np.ndarray | None:
+    """``log(1 - P_D^T)``: the log probability that the sensor misses its design target, at the cloud's predicted
+    position ``(B, 1)`` (``log_weights`` given) or at every particle ``(B, N)``; ``None`` when the model declares no
+    design target (``detection.nominal_snr_db``, ``detection.log_detection``)."""
+    detection = _detection(model)
+    if detection.nominal_snr_db is None or detection.log_detection is None:
+        return None
+    where = particles[..., :3] if log_weights is None else _centre(particles, log_weights)[:, None, :]
+    log_pd = np.minimum(detection.log_detection(detection.nominal_snr_db(where)), 0.0)
+    # log(1 - P_D) = log(-expm1(log P_D))
+    with np.errstate(divide="ignore"):
+        return np.log(-np.expm1(log_pd))
+
+
+def log_amplitude_ratio(model: MeasurementModel, snr_db: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """``log l = log f_T(snr | SNR(position)) - log f_C(snr)``: how much more likely a detection of measured SNR
+    ``snr_db`` is the design target's (nominal SNR at ``position``) than clutter's, from the model's declared laws;
+    0 where the model lacks one of them.  Shapes: ``snr_db (B,)``, ``position (B, 3)`` -> ``(B,)``."""
+    detection = _detection(model)
+    snr_db = np.asarray(snr_db, dtype=float)
+    if (detection.nominal_snr_db is None or detection.log_snr_density is None
+            or detection.clutter_log_snr_density is None):
+        return np.zeros(snr_db.shape)
+    nominal = detection.nominal_snr_db(position)
+    with np.errstate(invalid="ignore"):
+        out = detection.log_snr_density(snr_db, nominal) - detection.clutter_log_snr_density(snr_db)
+    return np.nan_to_num(out, nan=0.0, posinf=np.inf, neginf=-np.inf)
+
+
+def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model: MeasurementModel,
+              log_pd: np.ndarray, *, floor: str, floor_density: float = 0.0, floor_scale: float = 1.0,
+              sigma_vr: float = 15.0, missed: np.ndarray | None = None) -> np.ndarray:
+    """``log eps`` of the floor ``floor`` (see the module docstring), ``(B, 1)`` or ``(B, N)``; ``-inf`` for an
+    item without a valid detection.
+
+    Shapes
+    ------
+    particles (B, N, n); log_weights (B, N) (the predicted cloud's); log_pd (B, M) = log P_D(snr_m) of every
+    detection; missed (B, N) = :func:`log_missed` or None
+    """
+    B = scan.batch
+    top = np.max(np.where(scan.valid, log_pd, -np.inf), axis=1, initial=-np.inf)[:, None]  # log max_m P_D(snr_m)
+    if floor == "none":
+        return np.full((B, 1), -np.inf)
+    if floor == "flat":
+        # eps = floor_density max_m P_D(snr_m) N(0; 0, sigma_vr^2)
+        with np.errstate(divide="ignore"):
+            return np.log(floor_density) + top - 0.5 * np.log(2.0 * np.pi * sigma_vr**2)
+    if floor != "amplitude":
+        raise InputError(f"tbd-pf: unknown floor {floor!r}; expected one of {', '.join(FLOORS)}")
+    if scan.clutter_density is None or scan.z.shape[1] == 0:
+        return np.full((B, 1), -np.inf)  # no clutter declared: nothing but the target
+    snr = np.where(scan.valid, scan.snr, -np.inf)
+    star = np.argmax(snr, axis=1)  # the strongest gated detection
+    rows = np.arange(B)
+    density = np.where(scan.valid[rows, star], scan.clutter_density[rows, star], 0.0)
+    if np.any(~np.isfinite(density) | (density < 0)):
+        raise InputError("a scan's clutter_density must be finite and >= 0 at every valid detection")
+    # the cloud's predicted position: the weighted mean of the predicted particles
+    centre = _centre(particles, log_weights)
+    log_l = log_amplitude_ratio(model, np.where(scan.valid[rows, star], snr[rows, star], 0.0), centre)
+    with np.errstate(divide="ignore"):
+        # log eps = log kappa + log lambda + log max_m P_D(snr_m) - log max(1, l) [+ log(1 - P_D^T(s_i))]
+        out = np.log(floor_scale) + np.log(density)[:, None] + top - np.maximum(log_l, 0.0)[:, None]
+    return out if missed is None else out + missed
+
+
+def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, sigma_vr: float,
+                   floor_density: float = 0.0, backend: str = "auto", *, floor: str = "flat",
+                   floor_scale: float = 1.0, log_weights: np.ndarray | None = None,
+                   missed: np.ndarray | None = None) -> np.ndarray:
+    """``log(eps_i + sum_m w_{m,i})`` for particles ``(B, N, 6)`` and a gated scan -> ``(B, N)``.
+
+    ``-inf`` for items without a valid detection.  ``log_weights (B, N)`` are the predicted cloud's (uniform when
+    not given), ``missed`` is :func:`log_missed` (the amplitude floor's ``1 - P_D^T`` factor).
     """
     if scan.snr is None:
         raise InputError("tbd-pf needs the measured SNR of every detection (scan.snr, dB)")
@@ -105,17 +203,22 @@ def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, s
     z = scan.z
     points = model.h(particles)  # [p_i, vr(s_i)]
     snr_db = np.where(scan.valid, scan.snr, 0.0)
-    log_pd = detection.log_pd(snr_db)
+    log_pd = np.full(snr_db.shape, -np.inf)
+    log_pd[scan.valid] = detection.log_pd(snr_db[scan.valid])
     sigma_p = detection.position_sigma(snr_db, np.linalg.norm(z[..., :3], axis=-1))
     # log sum_m P_D(snr_m) N(p_m; p_i, sigma_p,m^2 I_3) N(vr_m; vr_i, sigma_vr^2)     (13), (14)
-    log_sum = tbd_log_weight_sums(points, z, scan.valid, log_pd, sigma_p, sigma_vr, backend=backend)
-    if floor_density <= 0.0:
+    log_sum = tbd_log_weight_sums(points, z, scan.valid, np.where(scan.valid, log_pd, 0.0), sigma_p, sigma_vr,
+                                  backend=backend)
+    if floor == "none":
         return log_sum
-    # eps = floor_density * max_m P_D(snr_m) N(0; 0, sigma_vr^2)
-    top = np.max(np.where(scan.valid, log_pd, -np.inf), axis=1, keepdims=True)
-    log_eps = np.log(floor_density) + top - 0.5 * np.log(2.0 * np.pi * sigma_vr**2)
-    # log(eps + sum_m w_{m,i})
-    return np.where(np.isfinite(log_eps), np.logaddexp(log_eps, log_sum), -np.inf)
+    if log_weights is None:
+        log_weights = np.full(particles.shape[:2], -np.log(particles.shape[1]))
+    log_eps = log_floor(particles, log_weights, scan, model, log_pd, floor=floor, floor_density=floor_density,
+                        floor_scale=floor_scale, sigma_vr=sigma_vr, missed=missed)
+    present = scan.valid.any(axis=1)[:, None]
+    # log(eps + sum_m w_{m,i})  (a NaN particle, e.g. from a NaN prior, stays NaN: it reaches the estimate)
+    with np.errstate(invalid="ignore"):
+        return np.where(present, np.logaddexp(log_eps, log_sum), -np.inf)
 
 
 @dataclass(frozen=True)
@@ -156,7 +259,7 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     e *= np.where(mode > 0, scale, 1.0)[..., None]
     # x_i <- F x_i + s_i W^(1/2) e_i  (small products written out per component, no threaded BLAS call)
     moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), x, e)
-    return ModeState(Particles(moved, state.cloud.log_weights), state.resamples, state.underflows, mode)
+    return ModeState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows, mode)
 
 
 def regularisation_bandwidth(particles: int, dim: int) -> float:
@@ -188,8 +291,18 @@ def regularise(x: np.ndarray, cov: np.ndarray, rows: np.ndarray, scale: float, r
     e = rng.standard_normal((int(rows.sum()), N, n))
     out = x.copy(order="K")
     # x_i <- x_i + h D e_i
-    out[rows] += h * np.einsum("bij,bnj->bni", D, e)
+    out[rows] += h * (e @ np.swapaxes(D, 1, 2))
     return out
+
+
+def weighted_covariance(x: np.ndarray, log_w: np.ndarray) -> np.ndarray:
+    """``sum_i w_i (x_i - x_bar)(x_i - x_bar)^T`` of normalised log-weights: ``x (R, N, n)``, ``log_w (R, N)`` ->
+    ``(R, n, n)``."""
+    w = np.exp(log_w)[..., None]
+    mean = np.sum(w * x, axis=1, keepdims=True)
+    d = x - mean
+    # sum_i w_i d_i d_i^T as one batched product (d^T (w d))
+    return symmetrise(np.swapaxes(d, 1, 2) @ (w * d))
 
 
 def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, threshold: float, dead: np.ndarray,
@@ -199,35 +312,72 @@ def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, thresh
     cloud = state.cloud
     n = log_w.shape[1]
     resample = present & (effective_sample_size(log_w) < threshold * n)
-    cov = Particles(cloud.particles, log_w).to_gaussian().cov if regularisation > 0.0 and resample.any() else None
+    cov = None
+    if regularisation > 0.0 and resample.any():
+        cov = np.zeros(cloud.particles.shape[:1] + cloud.particles.shape[2:] * 2)
+        cov[resample] = weighted_covariance(cloud.particles[resample], log_w[resample])
     mode = getattr(state, "mode", None)
-    if mode is None:
-        x, log_w = resample_where(resample, cloud.particles, log_w, rng)
-        if cov is not None:
-            x = regularise(x, cov, resample, regularisation, rng)
-        return ParticleState(Particles(x, log_w), state.resamples + int(resample.sum()),
-                             state.underflows + int(dead.sum()))
-    joint, log_w = resample_where(resample, np.concatenate([cloud.particles, mode[..., None]], axis=-1), log_w, rng)
-    x = np.ascontiguousarray(joint[..., :-1])
+    extra = () if mode is None else (mode,)
+    x, log_w, *moved = resample_where(resample, cloud.particles, log_w, rng, *extra)
     if cov is not None:
         x = regularise(x, cov, resample, regularisation, rng)
-    return ModeState(Particles(x, log_w), state.resamples + int(resample.sum()),
-                     state.underflows + int(dead.sum()), np.ascontiguousarray(joint[..., -1]))
+    cloud = Particles.trusted(x, log_w)
+    if mode is None:
+        return ParticleState(cloud, state.resamples + int(resample.sum()), state.underflows + int(dead.sum()))
+    return ModeState(cloud, state.resamples + int(resample.sum()), state.underflows + int(dead.sum()), moved[0])
 
 
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
-           threshold: float, floor_density: float, sigma_vr: float, backend: str,
-           regularisation: float = 0.0) -> ParticleState:
+           threshold: float, sigma_vr: float, backend: str, floor: str = "amplitude", floor_density: float = 0.0,
+           floor_scale: float = FLOOR_SCALE, missed_detection: str = "cloud", regularisation: float = 0.0,
+           tempering: int = 1) -> ParticleState:
+    """The direct-weight update (eqs 13-15) with the floor ``floor``.
+
+    With the amplitude floor the "every detection is clutter" term carries the missed-detection factor
+    ``1 - P_D^T``, at the cloud's predicted position (``missed_detection = "cloud"``: a constant over the cloud, so
+    an empty gate leaves the weights as they are) or at every particle (``"particle"``: an empty gate weights the
+    particles by ``1 - P_D^T(s_i)``; an ablation: the filter does not know the gate, so a target detection that fell
+    outside it counts as a miss and the factor pushes the cloud towards lower SNR, docs/paper000.md).
+
+    ``tempering = K > 1`` is progressive correction (Oudjane and Musso): the likelihood is applied as ``K`` equal
+    powers ``L^(1/K)``, each followed by the resampling test and the regularisation, so that a sharp likelihood
+    meets a cloud already moved towards it instead of collapsing it at once."""
+    for _ in range(int(tempering)):
+        state = _update_once(state, scan, model, rng, threshold=threshold, sigma_vr=sigma_vr, backend=backend,
+                             floor=floor, floor_density=floor_density, floor_scale=floor_scale,
+                             missed_detection=missed_detection, regularisation=regularisation,
+                             power=1.0 / int(tempering))
+    return state
+
+
+def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
+                 threshold: float, sigma_vr: float, backend: str, floor: str, floor_density: float,
+                 floor_scale: float, missed_detection: str, regularisation: float, power: float) -> ParticleState:
+    """One (power ``power`` of the) likelihood step of :func:`update`, then resampling and regularisation."""
     present = scan.valid.any(axis=1)
-    if not present.any():
-        return state
     cloud = state.cloud
-    log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend)
-    log_w = cloud.log_weights + log_lik
-    dead = present & ~np.isfinite(np.max(log_w, axis=1))
+    missed = None
+    if floor == "amplitude":
+        per_cloud = missed_detection == "cloud"
+        missed = log_missed(model, cloud.particles, cloud.log_weights if per_cloud else None)
+    touched = present if missed is None or missed.shape[1] == 1 else np.ones_like(present)
+    if not touched.any():
+        return state
+    log_w = cloud.log_weights
+    if present.any():
+        # log w_i <- log w_i + power log(eps_i + sum_m w_{m,i})
+        log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend, floor=floor,
+                                 floor_scale=floor_scale, log_weights=cloud.log_weights, missed=missed)
+        log_w = log_w + (log_lik if power == 1.0 else power * log_lik)
+    if not present.all():
+        # an empty gate: log w_i <- log w_i + power log(1 - P_D^T(s_i)) (per particle), or unchanged
+        empty = touched & ~present
+        if empty.any():
+            log_w = np.where(empty[:, None], cloud.log_weights + power * missed, log_w)
+    dead = touched & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
-    log_w = keep_where(present, log_w, cloud.log_weights)
-    return _finish(state, log_w, present, threshold, dead, rng, regularisation)
+    log_w = keep_where(touched, log_w, cloud.log_weights)
+    return _finish(state, log_w, touched, threshold, dead, rng, regularisation)
 
 
 def _predict(switch_on: float, switch_off: float, scale: float):
@@ -245,9 +395,18 @@ def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) ->
 TBD_PARAMETERS = (
     Param("particles", 600, "particles per run", "int", minimum=1),
     Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
-    Param("floor_density", 5e-11, "spatial density (m^-3) of the 'every detection is clutter' floor eps; 0: the "
-          "literal paper", minimum=0.0),
-    Param("sigma_vr", 15.0, "width of the Doppler kernel", unit="speed", above=0.0),
+    Param("floor", "amplitude", "the 'target missed, every detection is clutter' floor: amplitude (the scan's clutter "
+          "density, lowered by the strongest detection's amplitude likelihood ratio, times 1 - P_D of the design "
+          "target; empty gates weighted by 1 - P_D), flat (floor_density, the previous floor) or none (eqs 13-15 "
+          "as printed)", "str", choices=FLOORS),
+    Param("floor_scale", FLOOR_SCALE, "the amplitude floor's level relative to the scan's clutter density",
+          above=0.0),
+    Param("missed_detection", "cloud", "where the amplitude floor's 1 - P_D of the design target is taken: at the "
+          "cloud's predicted position (cloud) or at every particle (particle, an ablation)", "str",
+          choices=("cloud", "particle")),
+    Param("floor_density", 5e-11, "spatial density (m^-3) of the flat floor", minimum=0.0),
+    Param("sigma_vr", 15.0, "width of the Doppler kernel (the sensor's 2 m/s, widened as a tempering device)",
+          unit="speed", above=0.0),
     Param("backend", "auto", "kernel backend of the weights (auto: the policy's choice)", "str", choices=BACKENDS),
     Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
           minimum=0.0, maximum=1.0),
@@ -255,39 +414,54 @@ TBD_PARAMETERS = (
     Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
     Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
           minimum=0.0),
+    Param("tempering", 1, "progressive correction: the likelihood applied as this many equal powers, each followed by "
+          "resampling and regularisation (1: off)", "int", minimum=1),
 )
 
 
-def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor_density: float = 5e-11, sigma_vr: float = 15.0,
+def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor: str = "amplitude",
+                floor_scale: float = FLOOR_SCALE, missed_detection: str = "cloud", floor_density: float = 5e-11,
+                sigma_vr: float = 15.0,
                 backend: str = "auto", name: str | None = None, switch_on: float = SWITCH_ON,
                 switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
-                regularisation: float = REGULARISATION) -> FilterSpec:
-    """Method C with ``particles`` particles, floor density ``floor_density`` (m^-3) and Doppler sigma
-    ``sigma_vr`` (m/s); resampling when ``N_eff < threshold N``; weights by the kernel ``backend``; the
-    two-mode (jump-Markov) prediction of :func:`predict_jump_markov` (``switch_on = 0``: plain CV);
+                regularisation: float = REGULARISATION, tempering: int = 1) -> FilterSpec:
+    """The direct-weight TBD particle filter with ``particles`` particles, the floor ``floor`` (see the module
+    docstring) and Doppler kernel ``sigma_vr`` (m/s); resampling when ``N_eff < threshold N``; weights by the kernel
+    ``backend``; the two-mode (jump-Markov) prediction of :func:`predict_jump_markov` (``switch_on = 0``: plain CV);
     ``regularisation`` x the optimal kernel bandwidth jitters the resampled particles (:func:`regularise`)."""
     if regularisation < 0.0:
         raise InputError(f"tbd-pf: need regularisation >= 0, got {regularisation}")
     if backend not in BACKENDS:
         raise InputError(f"tbd-pf: unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
-    if floor_density < 0 or particles < 1 or not 0 <= threshold <= 1 or sigma_vr <= 0:
-        raise InputError(f"tbd-pf: need particles >= 1, 0 <= threshold <= 1, floor_density >= 0, sigma_vr > 0; "
-                         f"got {particles}, {threshold}, {floor_density}, {sigma_vr}")
+    if int(tempering) < 1:
+        raise InputError(f"tbd-pf: need tempering >= 1, got {tempering}")
+    if missed_detection not in ("cloud", "particle"):
+        raise InputError(f"tbd-pf: missed_detection must be 'cloud' or 'particle', got {missed_detection!r}")
+    if floor not in FLOORS:
+        raise InputError(f"tbd-pf: unknown floor {floor!r}; expected one of {', '.join(FLOORS)}")
+    if floor_density < 0 or not floor_scale > 0 or particles < 1 or not 0 <= threshold <= 1 or sigma_vr <= 0:
+        raise InputError(f"tbd-pf: need particles >= 1, 0 <= threshold <= 1, floor_density >= 0, floor_scale > 0, "
+                         f"sigma_vr > 0; got {particles}, {threshold}, {floor_density}, {floor_scale}, {sigma_vr}")
     _check_modes("tbd-pf", switch_on, switch_off, manoeuvre_scale)
+    level = {"amplitude": f"amplitude-aware floor ({floor_scale:g} x clutter density)",
+             "flat": f"flat floor {floor_density:g} m^-3", "none": "no floor"}[floor]
     return FilterSpec(
         name=name or "tbd-pf",
-        summary=(f"TBD particle filter (paper 000, method C): weights from every gated detection, N={particles}, "
-                 f"floor {floor_density:g} m^-3, two-mode CV (x{manoeuvre_scale:g} noise, on {switch_on:g}, "
-                 f"off {switch_off:g}), regularised resampling ({regularisation:g} h_opt)"),
+        summary=(f"TBD particle filter: weights from every gated detection, N={particles}, {level}, Doppler kernel "
+                 f"{sigma_vr:g} m/s, two-mode CV (x{manoeuvre_scale:g} noise, on {switch_on:g}, off {switch_off:g}), "
+                 f"regularised resampling ({regularisation:g} h_opt)"),
         init=partial(init, particles=particles),
         predict=_predict(switch_on, switch_off, manoeuvre_scale),
-        update=partial(update, threshold=threshold, floor_density=floor_density, sigma_vr=sigma_vr,
-                       backend=backend, regularisation=regularisation),
+        update=partial(update, threshold=threshold, floor=floor, floor_scale=floor_scale,
+                       missed_detection=missed_detection, floor_density=floor_density,
+                       sigma_vr=sigma_vr, backend=backend, regularisation=regularisation, tempering=int(tempering)),
         estimate=estimate,
         capabilities=frozenset({"stochastic", "multi_measurement", "position_doppler_3d", "manoeuvre_modes"}),
-        params={"particles": particles, "threshold": threshold, "floor_density": floor_density, "sigma_vr": sigma_vr,
-                "backend": backend, "switch_on": switch_on, "switch_off": switch_off,
-                "manoeuvre_scale": manoeuvre_scale, "regularisation": regularisation},
+        params={"particles": particles, "threshold": threshold, "floor": floor, "floor_scale": floor_scale,
+                "missed_detection": missed_detection,
+                "floor_density": floor_density, "sigma_vr": sigma_vr, "backend": backend, "switch_on": switch_on,
+                "switch_off": switch_off, "manoeuvre_scale": manoeuvre_scale, "regularisation": regularisation,
+                "tempering": int(tempering)},
         diagnostics=diagnostics,
         parameters=TBD_PARAMETERS,
         build=make_tbd_pf,
@@ -321,9 +495,20 @@ def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: n
         return state
     cloud = state.cloud
     m = z.shape[-1]
+    # a NaN or inf would make every weight of its item NaN, which the fallback would then hide: refuse it
+    bad = present & ~np.all(np.isfinite(z), axis=1)
+    if bad.any():
+        item = int(np.argmax(bad))
+        raise InputError(f"sir-jm: the valid measurement of batch item {item} holds a non-finite value (NaN or inf): "
+                         f"{z[item]}")
     if scan.cov is not None:
+        R = measurement_covariance(scan, model, present)
+        bad = present & ~np.all(np.isfinite(R), axis=(1, 2))
+        if bad.any():
+            raise InputError(f"sir-jm: the own covariance (Scan.cov) of batch item {int(np.argmax(bad))}'s valid "
+                             "detection holds a non-finite value (NaN or inf)")
         # log N(z; h(x_i), R_b) with the measurement's own covariance
-        log_lik = log_likelihood_cov(z, cloud.particles, model, measurement_covariance(scan, model, present))
+        log_lik = log_likelihood_cov(z, cloud.particles, model, R)
     else:
         # log N(z; h(x_i), R) = -|L^-1 (z - h)|^2 / 2 - (m log 2 pi + log |R|) / 2
         log_det = np.linalg.slogdet(np.asarray(model.R, dtype=float))[1]
@@ -346,13 +531,14 @@ SIR_JM_PARAMETERS = (
           minimum=0.0, maximum=1.0),
     Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
     Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
-    Param("regularisation", 0.0, "post-regularisation bandwidth after resampling, x h_opt (0: off)", minimum=0.0),
+    Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
+          minimum=0.0),
 )
 
 
 def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float = SWITCH_ON,
                 switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
-                name: str | None = None, regularisation: float = 0.0) -> FilterSpec:
+                name: str | None = None, regularisation: float = REGULARISATION) -> FilterSpec:
     """Method B: the bootstrap filter with the same two-mode prediction as method C; where the scan declares a
     clutter density the likelihood is the clutter mixture (:func:`sir_update`), ``regularisation > 0`` jitters
     the resampled particles (:func:`regularise`; off by default: it widened B's cloud in the low-SNR segment)."""
@@ -481,4 +667,4 @@ def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float 
 
 @hookimpl
 def workbench_filters():
-    return [make_tbd_pf(), make_tbd_pf(floor_density=0.0, name="tbd-pf-eps0"), make_sir_jm(), make_ekf_nis()]
+    return [make_tbd_pf(), make_sir_jm(), make_ekf_nis()]

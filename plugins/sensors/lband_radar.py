@@ -13,7 +13,12 @@ Measurement vector ``z = [x, y, z, vr]``; ``Scans.snr`` holds the measured SNR (
 (the brief's default pseudo-measurement noise; the paper-000 recipe replaces it per scan by the PDA-like
 ``R_bar`` of its pseudo-measurement step); it declares the position-doppler-3d frame and how its detections'
 quality follows their SNR (``detection``: ``log P_D`` by Marcum Q, the position sigma at that SNR and range, the
-radial-velocity sigma), for filters that weight detections by their own SNR.
+radial-velocity sigma), for filters that weight detections by their own SNR.  Its design target is the
+front-aspect (reference, ``rcs_ref_dbsm``) RCS: the detection model also declares that target's nominal SNR at a
+position, the threshold detector's ``P_D = Phi((SNR - threshold) / rcs_sigma_db)`` and the law of a detection's
+measured SNR (Gaussian in dB about the nominal, cut at the threshold), so that a filter can weigh how target-like a
+detection's strength is.  The brighter top and side aspects are not part of the declared target (a filter does not
+know the aspect); their detections are stronger than declared.
 """
 
 from __future__ import annotations
@@ -141,7 +146,9 @@ def measurement_model(**params) -> MeasurementModel:
         frame="position-doppler-3d",
         std=(p["pseudo_sigma_pos"],) * 3 + (p["pseudo_sigma_vr"],),
         sensor_position=(0.0, 0.0, 0.0),
-        detection=detection_model(_radar(p), p["sigma_vr"]),
+        detection=detection_model(_radar(p), p["sigma_vr"], rcs_dbsm=p["rcs_ref_dbsm"],
+                                  snr_sigma_db=p["rcs_sigma_db"] if p["rcs_sigma_db"] > 0 else None,
+                                  threshold_db=p["threshold_db"]),
     )
 
 

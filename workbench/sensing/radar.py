@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.special import erfc
+from scipy.special import chndtr, erfc, log_ndtr
 from scipy.stats import ncx2
 
 from ..models import DetectionModel
@@ -43,6 +43,9 @@ __all__ = [
     "position_radial_velocity_jacobian",
     "aspect_rcs_db",
     "clutter_pass_fraction",
+    "exponential_power_log_density",
+    "fluctuating_log_detection",
+    "fluctuating_snr_log_density",
     "detection_model",
 ]
 
@@ -129,9 +132,21 @@ def detection_probability(snr, pfa: float = 1e-6) -> np.ndarray:
 
 
 def log_detection_probability(snr, pfa: float = 1e-6) -> np.ndarray:
-    """``log P_D`` computed by ``ncx2.logsf`` (no underflow at low SNR, where ``P_D -> Pfa``)."""
+    """``log P_D`` of :func:`detection_probability` (no underflow at low SNR, where ``P_D -> Pfa``).
+
+    ``log(1 - F(b^2))`` with ``F`` the noncentral chi-square CDF (``scipy.special.chndtr``, a plain ufunc: this
+    runs once per scan in the filters); where ``P_D`` is below ``1e-9`` the difference would lose digits, and
+    ``ncx2.logsf`` is used instead.
+    """
     snr = np.maximum(np.asarray(snr, dtype=float), 0.0)
-    return ncx2.logsf(-2.0 * np.log(pfa), 2, 2.0 * snr)
+    b2 = -2.0 * np.log(pfa)
+    sf = 1.0 - chndtr(b2, 2.0, 2.0 * snr)
+    with np.errstate(divide="ignore"):
+        out = np.log(sf)
+    small = sf < 1e-9
+    if np.any(small):
+        out = np.where(small, ncx2.logsf(b2, 2, 2.0 * snr), out)
+    return out
 
 
 def north_detection_probability(snr, pfa: float = 1e-6) -> np.ndarray:
@@ -235,13 +250,91 @@ def clutter_pass_fraction(threshold_db, mean_power: float = 2.0) -> np.ndarray:
     return np.exp(-from_db(threshold_db) / mean_power)
 
 
-def detection_model(radar: RadarParameters, sigma_vr: float) -> DetectionModel:
+def exponential_power_log_density(snr_db, mean_power: float = 2.0, threshold_db: float | None = None) -> np.ndarray:
+    """Log density (per dB) of the SNR of a return with exponential power (Rayleigh amplitude), given that it
+    passed ``threshold_db``.
+
+    With ``p = 10^(s/10)`` and the threshold ``t = 10^(threshold_db/10)`` (``t = 0`` for no threshold), the power
+    above the threshold is ``t + Exp(mean_power)`` (memoryless), so per unit of ``s`` (dB)::
+
+        f(s) = exp(-(p - t) / mu) / mu * dp/ds,   dp/ds = p ln(10) / 10,   s >= threshold_db
+
+    and ``-inf`` below the threshold.  Shapes: as ``snr_db``.
+    """
+    s = np.asarray(snr_db, dtype=float)
+    p = 10.0 ** (s / 10.0)
+    t = 0.0 if threshold_db is None else float(10.0 ** (threshold_db / 10.0))
+    # log f = -(p - t) / mu - log mu + log(p ln 10 / 10)
+    log_f = -(p - t) / mean_power - np.log(mean_power) + s * (np.log(10.0) / 10.0) + np.log(np.log(10.0) / 10.0)
+    if threshold_db is None:
+        return log_f
+    return np.where(s >= threshold_db, log_f, -np.inf)
+
+
+def fluctuating_log_detection(nominal_snr_db, sigma_db: float, threshold_db: float | None) -> np.ndarray:
+    """``log P_D`` of a detector that reports a return when its measured SNR, the nominal SNR plus a Gaussian
+    fluctuation of ``sigma_db`` (dB), reaches ``threshold_db``::
+
+        P_D = Phi((SNR_nominal - threshold) / sigma)
+
+    ``threshold_db`` None (every return reported) gives ``log P_D = 0``.  Shapes: as ``nominal_snr_db``.
+    """
+    n = np.asarray(nominal_snr_db, dtype=float)
+    if threshold_db is None:
+        return np.zeros_like(n)
+    if not sigma_db > 0:
+        raise InputError(f"fluctuating_log_detection needs sigma_db > 0, got {sigma_db}")
+    return log_ndtr((n - threshold_db) / sigma_db)
+
+
+def fluctuating_snr_log_density(snr_db, nominal_snr_db, sigma_db: float, threshold_db: float | None) -> np.ndarray:
+    """Log density (per dB) of the measured SNR ``s`` of a detected return whose nominal SNR is ``n``, for the
+    detector of :func:`fluctuating_log_detection`::
+
+        f(s | n, detected) = N(s; n, sigma^2) / P_D(n),   s >= threshold   (-inf below)
+
+    Shapes: broadcast of ``snr_db`` and ``nominal_snr_db``.
+    """
+    if not sigma_db > 0:
+        raise InputError(f"fluctuating_snr_log_density needs sigma_db > 0, got {sigma_db}")
+    s = np.asarray(snr_db, dtype=float)
+    n = np.asarray(nominal_snr_db, dtype=float)
+    z = (s - n) / sigma_db
+    # log N(s; n, sigma^2) - log P_D(n)
+    log_f = -0.5 * z * z - np.log(sigma_db * np.sqrt(2.0 * np.pi)) - fluctuating_log_detection(n, sigma_db,
+                                                                                                threshold_db)
+    if threshold_db is None:
+        return log_f
+    return np.where(s >= threshold_db, log_f, -np.inf)
+
+
+def detection_model(radar: RadarParameters, sigma_vr: float, *, rcs_dbsm: float | None = None,
+                    snr_sigma_db: float | None = None, threshold_db: float | None = None) -> DetectionModel:
     """What a monostatic radar declares about its detections (:class:`~workbench.models.DetectionModel`):
     ``log P_D`` of a return of a given SNR by Marcum Q at the radar's ``Pfa``, the isotropic position sigma of
-    :func:`position_sigma` at that SNR and range, and the radial-velocity sigma ``sigma_vr`` (m/s)."""
+    :func:`position_sigma` at that SNR and range, and the radial-velocity sigma ``sigma_vr`` (m/s).
+
+    With a design target of ``rcs_dbsm`` (dBsm) whose measured SNR fluctuates by ``snr_sigma_db`` (> 0) about the
+    radar equation's, and a detector that reports returns reaching ``threshold_db`` (None: every return), it also
+    declares the target's nominal SNR at a position (:func:`radar_snr`), the detector's ``P_D`` of that target
+    (:func:`fluctuating_log_detection`) and the law of a detection's measured SNR
+    (:func:`fluctuating_snr_log_density`).
+    """
+    target = {}
+    if rcs_dbsm is not None and snr_sigma_db is not None and snr_sigma_db > 0:
+        rcs = float(from_db(rcs_dbsm))
+        sigma = float(snr_sigma_db)
+        target = dict(
+            nominal_snr_db=lambda position: db(radar_snr(np.linalg.norm(np.asarray(position, dtype=float), axis=-1),
+                                                         rcs, radar)),
+            log_detection=lambda nominal_db: fluctuating_log_detection(nominal_db, sigma, threshold_db),
+            log_snr_density=lambda snr_db, nominal_db: fluctuating_snr_log_density(snr_db, nominal_db, sigma,
+                                                                                   threshold_db),
+        )
     return DetectionModel(
         log_pd=lambda snr_db: log_detection_probability(from_db(snr_db), radar.pfa),
         position_sigma=lambda snr_db, range_m: position_sigma(snr_db, range_m, radar),
         doppler_sigma=float(sigma_vr),
         pfa=float(radar.pfa),
+        **target,
     )

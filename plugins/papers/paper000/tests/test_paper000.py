@@ -1,28 +1,24 @@
-"""Paper 000 (TBD particle filter, L-band radar): radar maths, sensor, clutter, gating, filters, recipe."""
+"""Paper 000 (TBD particle filter, L-band radar): the scenario, the pseudo-measurements of methods A and B, the
+metrics, the method rows, the recipe's tasks, figures, tables and criteria, and the tuning rule.
 
-from dataclasses import replace
+The radar physics, the gate, the filters, the sensor and the clutter model have their own tests
+(tests/test_radar.py, tests/test_tracking_gated.py, plugins/*/tests)."""
 
 import numpy as np
 import pytest
-from scipy import integrate
-from scipy.special import i0e
+from scipy.stats import norm
 
+from workbench.criteria import Criterion
 from workbench.models import constant_velocity
 from workbench.plugins import load_host
-from workbench.sensing.radar import (RadarParameters, angle_accuracy, cartesian_to_spherical, clutter_pass_fraction,
-                                     detection_probability, from_db, log_detection_probability, marcum_q,
-                                     north_detection_probability, position_radial_velocity,
-                                     position_radial_velocity_jacobian, radial_velocity, range_accuracy,
-                                     spherical_to_cartesian, position_sigma)
-from workbench.tracking import radius_gate
-from workbench_papers.paper000.pipeline import (estimation_error, lost_track, measurement_error,
+from workbench.sensing.radar import (db, detection_probability, exponential_power_log_density, from_db, position_sigma,
+                                     radar_snr)
+from workbench.specs import RecipeOptions, TaskContext
+from workbench.types import Gaussian, Scan
+from workbench_papers.paper000 import methods, recipe, scenario, tuning
+from workbench_papers.paper000.pipeline import (estimation_error, lost_track, measurement_error, moment_matched_scale,
                                                 pseudo_measurement_covariance, weighted_mean_measurement,
                                                 whitened_model)
-from workbench_papers.paper000 import recipe as paper000
-from workbench.resampling import systematic_resample
-from workbench.rng import generator
-from workbench.specs import RecipeOptions, TaskContext
-from workbench.types import CLUTTER, Gaussian, Particles, Scan, Truth
 
 
 @pytest.fixture(scope="module")
@@ -30,34 +26,19 @@ def host():
     return load_host()
 
 
-# -- radar maths ------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def model(host):
+    return scenario.tracking_model(host)
 
 
-@pytest.mark.parametrize(("snr_db", "pd", "tol"), [(3, 0.0009, 0.00005), (5, 0.0046, 0.00005), (7, 0.025, 0.0005),
-                                                   (9, 0.12, 0.005), (12, 0.68, 0.005), (13.2, 0.90, 0.005),
-                                                   (15, 0.997, 0.0005)])
-def test_detection_probability_matches_the_brief(snr_db, pd, tol):
-    assert detection_probability(from_db(snr_db), 1e-6) == pytest.approx(pd, abs=tol)
-
-
-def test_marcum_q_against_its_integral_and_north():
-    # Q1(a, b) = int_b^inf x exp(-(x^2 + a^2)/2) I0(a x) dx, with I0 scaled to avoid overflow
-    for a, b in [(0.5, 1.0), (3.0, 5.26), (6.0, 5.26), (2.0, 0.1)]:
-        integral, _ = integrate.quad(lambda x: x * np.exp(-(x - a) ** 2 / 2) * i0e(a * x), b, np.inf)
-        assert marcum_q(a, b) == pytest.approx(integral, rel=1e-8)
-    snr = from_db(np.linspace(3, 18, 31))
-    assert np.max(np.abs(north_detection_probability(snr) - detection_probability(snr))) < 0.02
-    assert north_detection_probability(from_db(13.2)) == pytest.approx(0.90, abs=0.01)
-    np.testing.assert_allclose(log_detection_probability(snr), np.log(detection_probability(snr)), rtol=1e-10,
-                               atol=1e-14)
-    assert detection_probability(0.0) == pytest.approx(1e-6, rel=1e-6)  # no signal: P_D = Pfa
+# -- scenario ---------------------------------------------------------------------------------------------
 
 
 def test_snr_checkpoints_along_the_scenario(host):
-    truth = paper000.scenario_truth(1)
+    truth = scenario.scenario_truth(1)
     assert truth.steps == 300
-    res = paper000._scenario_task(TaskContext({"runs": 2, "thresholds": [5.0]}, seed=0, host=host))
-    want = {0: 2.3, 50: 5.7, 100: 9.9, 130: 18.0, 160: 22.0, 200: 19.6, 299: 12.5}
+    res = recipe._scenario_task(TaskContext({"runs": 2, "thresholds": [5.0]}, seed=0, host=host))
+    want = {0: 2.3, 50: 5.7, 100: 9.9, 130: 18.0, 160: 22.0, 200: 19.6, 299: 12.5}  # the brief's check
     got = res["nominal_snr_db"]
     for k, snr in want.items():
         assert got[k] == pytest.approx(snr, abs=0.15), k
@@ -67,110 +48,33 @@ def test_snr_checkpoints_along_the_scenario(host):
     np.testing.assert_allclose(s[-1, 3:], [0.0, 200.0, 0.0], atol=1e-9)
 
 
-def test_accuracies_and_coordinates():
-    radar = RadarParameters()
-    assert np.rad2deg(radar.beamwidth) == pytest.approx(2.9, abs=0.05)
-    assert angle_accuracy(from_db(10.0), radar.beamwidth) == pytest.approx(7.1e-3, abs=1e-4)
-    assert range_accuracy(from_db(10.0), radar.pulse_width) == pytest.approx(299792458e-6 / (2 * np.sqrt(20)))
-    p = np.random.default_rng(0).normal(size=(50, 3)) * 2e4
-    np.testing.assert_allclose(spherical_to_cartesian(cartesian_to_spherical(p)), p, atol=1e-7)
-    sph = cartesian_to_spherical(np.array([[0.0, 1.0, 1.0]]))[0]
-    np.testing.assert_allclose(sph, [np.sqrt(2), np.pi / 2, np.pi / 4])
+def test_scans_carry_the_clutter_intensity_and_share_draws_across_the_rcs(host):
+    truth = scenario.scenario_truth(3)
+    a = scenario.simulate_scans(host, truth, 5, 5.0, -20.0)
+    b = scenario.simulate_scans(host, truth, 5, 5.0, -17.0)
+    lam = 1000 * np.exp(-from_db(5.0) / 2) / 1e12 / 600.0  # 1000 per (10 km)^3 above 5 dB, Doppler over 600 m/s
+    np.testing.assert_allclose(a.clutter_density[a.valid], lam, rtol=1e-12)  # the target's rows too
+    # common random numbers: the same clutter and noise, the target 3 dB stronger
+    clutter = a.origin < 0
+    np.testing.assert_array_equal(a.z[clutter], b.z[b.origin < 0])
+    np.testing.assert_allclose(b.snr[..., 0] - a.snr[..., 0], 3.0, atol=1e-9)
+    other = scenario.simulate_scans(host, truth, 5, 5.0, -20.0, stream="replicate")
+    assert not np.array_equal(other.snr[..., 0], a.snr[..., 0])  # independent runs
 
 
-def test_radial_velocity_sign_and_jacobian():
-    receding = np.array([10e3, 0.0, 0.0, 50.0, 0.0, 0.0])
-    approaching = np.array([10e3, 0.0, 0.0, -50.0, 3.0, 0.0])
-    assert radial_velocity(receding) == pytest.approx(50.0) and radial_velocity(approaching) == pytest.approx(-50.0)
-    x = np.random.default_rng(1).normal(size=(4, 6)) * [2e4, 2e4, 3e3, 200, 200, 20]
-    jac = position_radial_velocity_jacobian(x)
-    step = 1e-4 * np.maximum(np.abs(x), 1.0)
-    for j in range(6):
-        dx = np.zeros_like(x)
-        dx[:, j] = step[:, j]
-        fd = (position_radial_velocity(x + dx) - position_radial_velocity(x - dx)) / (2 * step[:, j:j + 1])
-        np.testing.assert_allclose(jac[:, :, j], fd, rtol=1e-6, atol=1e-9)
+def test_tracking_model_declares_the_clutter_law(host, model):
+    s = np.array([5.5, 8.0, 14.0])
+    np.testing.assert_allclose(model.detection.clutter_log_snr_density(s), exponential_power_log_density(s, 2.0, 5.0))
+    p0 = np.array(scenario.START_POSITION)
+    assert float(model.detection.nominal_snr_db(p0)) == pytest.approx(2.29, abs=0.01)
+    loud = scenario.tracking_model(host, -17.0)
+    assert float(loud.detection.nominal_snr_db(p0) - model.detection.nominal_snr_db(p0)) == pytest.approx(3.0)
 
 
-# -- sensor and clutter -----------------------------------------------------------------------------------
+# -- methods A and B: the pseudo-measurement ----------------------------------------------------------------
 
 
-def test_sensor_detections_accuracy_threshold_and_doppler(host):
-    sensor = host.sensor("lband-radar")
-    state = np.array([30e3, 4e3, 2e3, -150.0, 20.0, 0.0])
-    truth = Truth(np.broadcast_to(state, (4000, 1, 6)).copy(), np.array([0.0]))
-    scans = sensor.simulate(truth, generator(0, "sensor"), threshold_db=None)
-    snr = scans.snr[:, 0, 0]
-    assert np.std(snr) == pytest.approx(2.0, rel=0.05)  # RCS fluctuation
-    sph = cartesian_to_spherical(scans.z[:, 0, 0, :3]) - cartesian_to_spherical(state[:3])
-    radar = RadarParameters()
-    # errors normalised by the SNR-dependent sigmas are standard normal
-    for err, sigma in ((sph[:, 0], range_accuracy(from_db(snr), radar.pulse_width)),
-                       (sph[:, 1], angle_accuracy(from_db(snr), radar.beamwidth)),
-                       (sph[:, 2], angle_accuracy(from_db(snr), radar.beamwidth))):
-        assert np.mean((err / sigma) ** 2) == pytest.approx(1.0, abs=0.07)
-    vr = scans.z[:, 0, 0, 3]
-    assert np.mean(vr) == pytest.approx(radial_velocity(state), abs=0.2) and np.std(vr) == pytest.approx(2.0, rel=0.06)
-    np.testing.assert_array_equal(scans.doppler[:, 0, 0], vr)
-    cut = sensor.simulate(truth, generator(0, "sensor"), threshold_db=9.0)
-    np.testing.assert_array_equal(cut.valid[:, 0, 0], snr >= 9.0)  # same draws, CFAR-style cut
-    model = sensor.measurement_model()
-    np.testing.assert_allclose(model.h(state[None])[0], [*state[:3], radial_velocity(state)])
-    assert model.jacobian(state[None]).shape == (1, 4, 6) and model.detection.pfa == 1e-6
-    assert model.frame == "position-doppler-3d" and model.detection.doppler_sigma == 2.0
-    # the declared detection quality is the radar's: Marcum-Q P_D and the SNR-dependent position sigma
-    snrs = np.array([3.0, 8.0, 20.0])
-    np.testing.assert_allclose(np.exp(model.detection.log_pd(snrs)), detection_probability(from_db(snrs)), rtol=1e-9)
-    np.testing.assert_allclose(model.detection.position_sigma(snrs, 3e4), position_sigma(snrs, 3e4), rtol=1e-12)
-    with pytest.raises(ValueError, match="unknown parameter"):
-        sensor.simulate(truth, generator(0), threshold=5)
-
-
-@pytest.mark.parametrize(("threshold", "count"), [(3.0, 370), (5.0, 206), (7.0, 82), (9.0, 19), (12.0, 0.4)])
-def test_clutter_count_per_threshold_follows_the_amplitude_law(threshold, count):
-    assert 1000 * clutter_pass_fraction(threshold) == pytest.approx(count, rel=0.02, abs=0.05)
-
-
-def test_clutter_generator_counts_power_and_doppler(host):
-    gen = host.clutter_generator("radar-clutter")
-    truth = Truth(np.broadcast_to([20e3, 0.0, 3e3, 0, 0, 0], (50, 40, 6)).copy(), np.arange(40.0))
-    wide = gen.generate(truth, generator(0, "clutter"), z_min=-1e9, z_max=1e9)
-    per_scan = wide.valid.sum(axis=2)
-    assert per_scan.mean() == pytest.approx(205.7, abs=3 * np.sqrt(205.7 / per_scan.size) + 0.5)
-    assert per_scan.var() == pytest.approx(205.7, rel=0.1)  # Poisson
-    snr = wide.snr[wide.valid]
-    assert snr.min() >= 5.0
-    # memoryless thinning: P(power >= 7 dB | power >= 5 dB) = exp(-(10^0.7 - 10^0.5) / 2)
-    assert np.mean(snr >= 7.0) == pytest.approx(np.exp(-(from_db(7.0) - from_db(5.0)) / 2), abs=0.01)
-    pos = wide.z[wide.valid][:, :3] - [20e3, 0.0, 3e3]
-    assert np.all(np.abs(pos) <= 5000.0) and np.all(wide.origin[wide.valid] == CLUTTER)
-    assert np.abs(wide.doppler[wide.valid]).max() <= 300.0
-    band = gen.generate(truth, generator(0, "clutter"))
-    kept = band.z[band.valid][:, 2]
-    assert kept.min() >= 0.0 and kept.max() <= 6000.0
-    assert band.valid.sum(axis=2).mean() == pytest.approx(205.7 * 0.6, rel=0.03)  # z in [-2, 8] km, band 0..6
-
-
-# -- gating, pseudo-measurement, metrics ------------------------------------------------------------------
-
-
-def test_gate_keeps_detections_inside_the_radius_batch_first():
-    z = np.zeros((2, 5, 4))
-    z[0, :, 0] = [0.0, 900.0, 1100.0, -2400.0, 2600.0]
-    z[1, :, 1] = [5000.0, 6000.0, 0.0, 0.0, 0.0]
-    valid = np.array([[True] * 5, [True, True, False, False, False]])
-    scan = Scan(z, valid, snr=np.full((2, 5), 6.0), origin=np.array([[0, -1, -1, -1, -1]] * 2))
-    g1, keep1 = radius_gate(scan, np.zeros((2, 3)), 1000.0)
-    assert g1.counts.tolist() == [2, 0] and g1.z.shape == (2, 2, 4)
-    np.testing.assert_array_equal(g1.z[0, :2, 0], [0.0, 900.0])
-    assert keep1.tolist() == [[True, True, False, False, False], [False] * 5]
-    g25, _ = radius_gate(scan, np.zeros((2, 3)), 2500.0)
-    assert g25.counts.tolist() == [4, 0]
-    assert g25.origin[0, 0] == 0 and np.all(g25.snr[0, :4] == 6.0)
-
-
-def test_weighted_mean_measurement_eqs_9_to_11(host):
-    model = host.sensor("lband-radar").measurement_model()
+def test_weighted_mean_measurement_eqs_9_to_11(model):
     pred = np.array([[1e4, 0.0, 0.0, -100.0, 0.0, 0.0]] * 3)
     z = np.array([[[1e4 + 300, 0.0, 0.0, -100.0], [1e4 - 300, 0.0, 0.0, -100.0]]] * 3)
     snr = np.array([[8.0, 8.0], [8.0, 14.0], [8.0, 8.0]])
@@ -180,16 +84,18 @@ def test_weighted_mean_measurement_eqs_9_to_11(host):
     np.testing.assert_allclose(out.z[0, 0], [1e4, 0.0, 0.0, -100.0])  # symmetric: the midpoint
     w = detection_probability(from_db(np.array([8.0, 14.0])))
     np.testing.assert_allclose(out.z[1, 0, 0], (w[0] * (1e4 + 300) + w[1] * (1e4 - 300)) / w.sum())
-    single = weighted_mean_measurement(Scan(z[:1, :1], valid[:1, :1], snr=snr[:1, :1]), pred[:1], model)
-    np.testing.assert_allclose(single.z[0, 0], z[0, 0])
+    # the distance and Doppler kernels: a detection 1 km and 30 m/s off weighs exp(-2 - 2) less
+    z2 = np.array([[[1e4, 0.0, 0.0, -100.0], [1e4 + 1000, 0.0, 0.0, -70.0]]])
+    two = weighted_mean_measurement(Scan(z2, np.ones((1, 2), bool), snr=np.full((1, 2), 9.0)), pred[:1], model)
+    r = np.exp(-0.5 * (1000 / 500) ** 2 - 0.5 * (30 / 15) ** 2)
+    np.testing.assert_allclose(two.z[0, 0, 0], 1e4 + 1000 * r / (1 + r))
 
 
-def test_pseudo_measurement_covariance_is_the_pda_like_r_bar(host):
-    model = host.sensor("lband-radar").measurement_model()
+def test_pseudo_measurement_covariance_is_the_pda_like_r_bar(model):
     pred = np.array([[3e4, 0.0, 0.0, -100.0, 0.0, 0.0]] * 3)
     z = np.array([[[3e4 + 300, 0.0, 0.0, -100.0], [3e4 - 300, 0.0, 0.0, -100.0]]] * 3)
     z[2, 0, 3] = 20.0  # a lone detection with a Doppler 120 m/s off the prediction
-    snr = np.array([[8.0, 8.0], [8.0, 8.0], [8.0, 8.0]])
+    snr = np.full((3, 2), 8.0)
     valid = np.array([[True, True], [False, False], [True, False]])
     z_bar, r_bar = pseudo_measurement_covariance(Scan(z, valid, snr=snr), pred, model, 500.0, 15.0,
                                                  doppler_mismatch=True)
@@ -198,14 +104,12 @@ def test_pseudo_measurement_covariance_is_the_pda_like_r_bar(host):
     want = np.diag([var_p.mean() + 300.0**2, var_p.mean(), var_p.mean(), 2.0**2])
     np.testing.assert_allclose(r_bar[0], want, rtol=1e-9, atol=1e-12)
     np.testing.assert_array_equal(r_bar[1], np.eye(4))  # no detection: identity, ignored by the filter
-    # the lone detection: its own accuracy, and the Doppler mismatch to the prediction in the vr variance
     var_2 = position_sigma(8.0, np.linalg.norm(z[2, 0, :3])) ** 2
     np.testing.assert_allclose(r_bar[2], np.diag([var_2] * 3 + [2.0**2 + 120.0**2]), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(z_bar.z[2, 0], z[2, 0])
 
 
-def test_whitened_model_gives_the_ekf_update_with_r_bar(host):
-    model = host.sensor("lband-radar").measurement_model()
+def test_whitened_model_gives_the_ekf_update_with_r_bar(host, model):
     rng = np.random.default_rng(3)
     mean = np.array([[3e4, 1e3, 2e3, -200.0, 10.0, 0.0], [2e4, -5e3, 1e3, 50.0, 150.0, -5.0]])
     a = rng.normal(size=(2, 6, 6))
@@ -217,17 +121,54 @@ def test_whitened_model_gives_the_ekf_update_with_r_bar(host):
     out = host.filter("ekf").update(Gaussian(mean, cov), scan, white, None)
     for i in range(2):  # the textbook EKF update with R_bar, item by item
         H = model.jacobian(mean[i:i + 1])[0]
-        S = H @ cov[i] @ H.T + r_bar[i]
-        K = cov[i] @ H.T @ np.linalg.inv(S)
+        K = cov[i] @ H.T @ np.linalg.inv(H @ cov[i] @ H.T + r_bar[i])
         np.testing.assert_allclose(out.mean[i], mean[i] + K @ (z[i] - model.h(mean[i])), rtol=1e-9)
         np.testing.assert_allclose(out.cov[i], (np.eye(6) - K @ H) @ cov[i], rtol=1e-6, atol=1e-6)
-    # the particle likelihood is N(z; h(x), R_bar) up to a constant per item
-    particles = mean[:, None, :] + rng.normal(size=(2, 5, 6)) * 100.0
-    nu = scan.z[:, 0][:, None, :] - white.h(particles)
-    got = -0.5 * np.sum(nu**2, axis=-1)
-    d = z[:, None, :] - model.h(particles)
-    want = -0.5 * np.einsum("bni,bni->bn", d, np.linalg.solve(r_bar[:, None], d[..., None])[..., 0])
-    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_pseudo_measurement_forms_follow_the_row_and_the_capabilities(host, model):
+    pred = np.array([[3e4, 0.0, 2e3, -200.0, 0.0, 0.0]] * 2)
+    z = np.array([[[3e4 + 200, 0.0, 2e3, -195.0], [3e4 - 500, 300.0, 2e3, 50.0]]] * 2)
+    gated = Scan(z, np.array([[True, True], [True, False]]), snr=np.array([[9.0, 6.0], [14.0, 0.0]]))
+    # the paper's form: z_bar alone, the filter keeps the model's fixed R (the brief's R_bar), no clutter term
+    paper = methods.pseudo_measurement(gated, pred, model=model, filt=host.filter("ekf"), form="paper")
+    assert paper.cov is None and paper.clutter_density is None
+    np.testing.assert_allclose(model.R, np.diag([300.0**2] * 3 + [10.0**2]))
+    ekf = host.filter("ekf").update(Gaussian(pred, np.broadcast_to(np.eye(6) * 1e4, (2, 6, 6)).copy()), paper, model,
+                                    None)
+    H = model.jacobian(pred[:1])[0]
+    K = 1e4 * H.T @ np.linalg.inv(1e4 * H @ H.T + model.R)
+    np.testing.assert_allclose(ekf.mean[0], pred[0] + K @ (paper.z[0, 0] - model.h(pred[:1])[0]), rtol=1e-9)
+    # ours: R_bar as the scan's covariance and the clutter density for a filter that declares both
+    b, amplitude = methods.clutter_term_of(host, model)
+    ours = methods.pseudo_measurement(gated, pred, model=model, filt=host.filter("ekf-nis"), form="pda",
+                                      clutter_density=b, amplitude_mean_power=2.0 if amplitude else None)
+    ratio = methods.clutter_amplitude_ratio(gated, 2.0, 5.0)
+    np.testing.assert_allclose(ours.clutter_density[:, 0], b * ratio)
+    assert ours.cov.shape == (2, 1, 4, 4)
+    # a filter without the detection_covariance capability gets the whitened pair
+    from dataclasses import replace
+
+    bare = replace(host.filter("ekf"), name="bare", capabilities=frozenset({"gaussian", "needs_jacobian"}))
+    step = methods.pseudo_measurement(gated, pred, model=model, filt=bare, form="pda")
+    assert isinstance(step, tuple) and step[1].name.endswith("whitened")
+
+
+def test_clutter_term_from_the_clutter_and_sensor_models(host, model):
+    b, lam, pd = methods.clutter_floor(host, model)
+    # lambda = rate exp(-t / mu) / cube^3 / (2 vr_max) at 5 dB: 205.7 per (10 km)^3, Doppler over 600 m/s
+    assert lam == pytest.approx(1000 * np.exp(-from_db(5.0) / 2) / 1e12 / 600.0, rel=1e-12)
+    snr0 = db(radar_snr(np.linalg.norm(scenario.START_POSITION), from_db(-20.0)))
+    assert pd == pytest.approx(norm.cdf((snr0 - 5.0) / 2.0), rel=1e-9) and b == pytest.approx(lam * (1 - pd) / pd)
+    assert methods.clutter_term_of(host, model, "none") == (0.0, False)
+    assert methods.clutter_term_of(host, model, "flat") == (pytest.approx(lam), False)
+    snr = np.array([[5.0, 3.0], [12.0, 6.0], [0.0, 0.0]])
+    gated = Scan(np.zeros((3, 2, 4)), np.array([[True, False], [True, True], [False, False]]), snr=snr)
+    ratio = methods.clutter_amplitude_ratio(gated, 2.0, 5.0)
+    np.testing.assert_allclose(ratio, [1.0, np.exp(-(from_db(12.0) - from_db(5.0)) / 2.0), 1.0])
+
+
+# -- metrics and models ---------------------------------------------------------------------------------------
 
 
 def test_error_metrics_and_lost_flag():
@@ -239,340 +180,198 @@ def test_error_metrics_and_lost_flag():
     assert lost_track(err, 3000.0, 5).tolist() == [False, True, True]
 
 
-def test_systematic_resampling_counts_are_floor_or_ceil():
-    w = np.array([[0.5, 0.25, 0.125, 0.0625, 0.0625, 0.0]])
-    for seed in range(20):
-        with np.errstate(divide="ignore"):
-            idx = systematic_resample(np.log(w), np.random.default_rng(seed), count=16)
-        counts = np.bincount(idx[0], minlength=6)
-        expected = 16 * w[0]
-        assert np.all((counts == np.floor(expected)) | (counts == np.ceil(expected)))
-
-
-# -- method C filter --------------------------------------------------------------------------------------
-
-
-def _cloud(host, n=400, seed=0):
-    spec = paper000.with_particles(host.filter("tbd-pf"), n)
-    prior = Gaussian.broadcast([30e3, 2e3, 2e3, -200.0, 0.0, 0.0], np.diag([300.0, 300, 300, 20, 20, 5]) ** 2, 2)
-    return spec, spec.init(prior, generator(seed, "cloud"))
-
-
-def test_tbd_filter_moves_towards_a_consistent_detection(host):
-    spec, state = _cloud(host)
-    model = host.sensor("lband-radar").measurement_model()
-    assert "multi_measurement" in spec.capabilities and spec.params["particles"] == 400
-    target = np.array([30.2e3, 2e3, 2e3, -199.0])
-    z = np.stack([np.stack([target, [30e3, 2.5e3, 2e3, 150.0]])] * 2)  # + a Doppler-inconsistent clutter point
-    scan = Scan(z, np.array([[True, True], [False, False]]), snr=np.full((2, 2), 15.0))
-    new = spec.update(state, scan, model, generator(1))
-    before, after = spec.estimate(state).mean, spec.estimate(new).mean
-    assert after[0, 0] - before[0, 0] > 100.0  # pulled towards x = 30.2 km
-    np.testing.assert_array_equal(new.cloud.particles[1], state.cloud.particles[1])  # empty gate: unchanged
-    np.testing.assert_array_equal(new.cloud.log_weights[1], state.cloud.log_weights[1])
-    again = spec.update(state, scan, model, generator(1))
-    np.testing.assert_array_equal(again.cloud.particles, new.cloud.particles)  # same seed, same numbers
-
-
-def test_tbd_filter_weights_finite_when_every_likelihood_underflows(host):
-    spec, state = _cloud(host)
-    model = host.sensor("lband-radar").measurement_model()
-    z = np.array([[[400e3, 0.0, 0.0, 100.0]]] * 2)
-    scan = Scan(z, np.ones((2, 1), bool), snr=np.full((2, 1), 25.0))
-    for name in ("tbd-pf", "tbd-pf-eps0"):
-        spec = paper000.with_particles(host.filter(name), 400)
-        new = spec.update(state, scan, model, generator(2))
-        lw = new.cloud.log_weights
-        assert np.all(np.isfinite(lw)) and np.allclose(np.exp(lw).sum(axis=1), 1.0)
-
-
-def test_tbd_filter_backends_agree(host):
-    from workbench_filters.tbd import make_tbd_pf
-
-    model = host.sensor("lband-radar").measurement_model()
-    rng = np.random.default_rng(4)
-    z = np.concatenate([rng.normal(size=(2, 6, 3)) * 500 + [30e3, 2e3, 2e3], rng.normal(size=(2, 6, 1)) * 50 - 200],
-                       axis=2)
-    scan = Scan(z, rng.random((2, 6)) < 0.8, snr=rng.uniform(5, 15, (2, 6)))
-    _, state = _cloud(host)
-    outs = [make_tbd_pf(400, backend=be, threshold=0.0).update(state, scan, model, generator(3)).cloud.log_weights
-            for be in ("numpy", "taichi", "auto")]
-    np.testing.assert_allclose(outs[1], outs[0], rtol=1e-10, atol=1e-10)
-    np.testing.assert_allclose(outs[2], outs[0], rtol=1e-10, atol=1e-10)
-
-
-# -- manoeuvre handling shared by methods A, B and C ---------------------------------------------------------
-
-
-def test_jump_markov_prediction_switches_modes_and_scales_the_noise():
-    from workbench.particle_core import ParticleState
-    from workbench_filters.tbd import ModeState, predict_jump_markov
-
-    motion = constant_velocity(3, 1.0, (10.0, 10.0, 5.0))
-    B, N = 2, 20000
-    x = np.zeros((B, N, 6))
-    mode = np.zeros((B, N))
-    mode[:, : N // 2] = 1.0
-    state = ModeState(Particles(x, np.full((B, N), -np.log(N))), 0, 0, mode)
-    out = predict_jump_markov(state, motion, generator(0, "jm"), switch_on=0.05, switch_off=0.2, scale=4.0)
-    new = out.mode
-    # quiet -> manoeuvre with 0.05, manoeuvre -> quiet with 0.2 (binomial, 5 standard errors)
-    for old, want in ((0.0, 0.05), (1.0, 0.8)):
-        frac = new[mode == old].mean()
-        assert abs(frac - want) < 5 * np.sqrt(want * (1 - want) / (B * N / 2))
-    # the noise: W in the quiet mode, scale^2 W in the manoeuvre mode (sample covariance, 10 % band)
-    for m, factor in ((0.0, 1.0), (1.0, 16.0)):
-        d = out.cloud.particles[new == m]
-        np.testing.assert_allclose(np.cov(d.T), factor * motion.Q, rtol=0.1, atol=0.02 * factor * motion.Q.max())
-    # a plain particle state starts quiet
-    plain = ParticleState(Particles(x, np.full((B, N), -np.log(N))))
-    assert predict_jump_markov(plain, motion, generator(1), switch_on=0.0, switch_off=0.2, scale=4.0).mode.sum() == 0
-
-
-def test_resampling_carries_each_particle_s_mode(host):
-    from workbench_filters.tbd import ModeState, make_sir_jm
-
-    model = host.sensor("lband-radar").measurement_model()
-    rng = np.random.default_rng(5)
-    x = np.array([3e4, 1e3, 2e3, -200.0, 0.0, 0.0]) + rng.normal(size=(2, 500, 6)) * [400, 400, 300, 30, 30, 10]
-    mode = (x[..., 0] > 3e4).astype(float)  # a function of the particle, so it must survive resampling with it
-    state = ModeState(Particles(x, np.full((2, 500), -np.log(500))), 0, 0, mode)
-    z = model.h(np.array([[3.03e4, 1e3, 2e3, -200.0, 0.0, 0.0]] * 2))
-    spec = make_sir_jm(500, threshold=1.0)
-    new = spec.update(state, Scan.single(z), model, generator(2))
-    assert new.resamples == 2
-    np.testing.assert_array_equal(new.mode, (new.cloud.particles[..., 0] > 3e4).astype(float))
-    # without resampling: log w_i + log N(z; h(x_i), R), normalised (NumPy reference), modes untouched
-    kept = make_sir_jm(500, threshold=0.0).update(state, Scan.single(z), model, generator(2))
-    d = z[:, None, :] - model.h(x)
-    log_w = -0.5 * np.einsum("bni,ij,bnj->bn", d, np.linalg.inv(model.R), d)
-    want = log_w - np.log(np.exp(log_w - log_w.max(1, keepdims=True)).sum(1, keepdims=True)) - log_w.max(1, keepdims=True)
-    np.testing.assert_allclose(kept.cloud.log_weights, want, rtol=1e-9, atol=1e-9)
-    np.testing.assert_array_equal(kept.mode, mode)
-
-
-def test_moment_matched_noise_of_the_ekf():
-    from workbench_papers.paper000.pipeline import moment_matched_scale
-
+def test_moment_matched_noise_and_the_motion_of_each_filter(host):
     # stationary share on / (on + off) = 0.2; variance factor 0.8 + 0.2 * 16 = 4
     assert moment_matched_scale(0.05, 0.2, 4.0) == pytest.approx(2.0)
     assert moment_matched_scale(0.0, 0.2, 4.0) == pytest.approx(1.0)
+    proposed = host.filter("tbd-pf")
+    quiet = constant_velocity(3, 1.0, methods.SIGMA_A)
+    for name in ("tbd-pf", "sir-jm", "ekf-nis"):
+        np.testing.assert_allclose(methods.motion_for(host.filter(name), proposed).Q, quiet.Q)
+    p = proposed.params
+    factor = moment_matched_scale(p["switch_on"], p["switch_off"], p["manoeuvre_scale"])
+    for name in ("ekf", "sir"):  # the paper's A and B: one noise with the two-mode model's covariance
+        np.testing.assert_allclose(methods.motion_for(host.filter(name), proposed).Q, factor**2 * quiet.Q)
 
 
-def test_ekf_nis_switches_its_noise_on_a_large_innovation(host):
-    from workbench_filters.tbd import make_ekf_nis
-
-    spec = make_ekf_nis()
-    model = host.sensor("lband-radar").measurement_model()
-    motion = constant_velocity(3, 1.0, (10.0, 10.0, 5.0))
-    mean = np.array([[3e4, 1e3, 2e3, -200.0, 0.0, 0.0]] * 3)
-    prior = Gaussian(mean, np.broadcast_to(np.diag([100.0, 100, 100, 10, 10, 5]) ** 2, (3, 6, 6)).copy())
-    state = spec.init(prior, None)
-    z = model.h(mean) + np.array([[30.0, 0, 0, 1.0], [3000.0, 0, 0, 1.0], [0.0, 0, 0, 0]])
-    scan = Scan(z[:, None, :], np.array([[True], [True], [False]]))
-    new = spec.update(state, scan, model, None)
-    assert new.manoeuvre.tolist() == [False, True, False]  # NIS 0.1 vs about 1000 (chi2_4 99 % = 13.3)
-    # the update itself is the EKF's
-    ekf = host.filter("ekf").update(prior, scan, model, None)
-    np.testing.assert_allclose(spec.estimate(new).mean, ekf.mean)
-    # next prediction: Q for quiet items, scale^2 Q for the flagged one
-    pred = spec.predict(new, motion, None).gaussian
-    base = host.filter("ekf").predict(ekf, motion, None)
-    np.testing.assert_allclose(pred.cov[0], base.cov[0], rtol=1e-12)
-    np.testing.assert_allclose(pred.cov[1], base.cov[1] + 15.0 * motion.Q, rtol=1e-9)
+def test_method_rows(host):
+    roles = {m.role for m in methods.METHODS}
+    assert {"A", "B", "C", "ours", "ablation"} <= roles
+    for m in methods.METHODS:
+        spec = host.filter(m.filter)  # every row resolves to an installed, configured filter
+        assert (m.pseudo == "") == ("multi_measurement" in spec.capabilities)
+        assert methods.method_for(m.filter) is m
+    extra = methods.method_for("ukf", host.filter("ukf").capabilities)
+    assert extra.role == "extra" and extra.pseudo == "pda"
+    with pytest.raises(ValueError):
+        methods.Method("x", "x", "ekf", "neither", "A")
 
 
-def test_every_method_runs_with_the_quiet_noise_and_others_with_the_moment_match(host):
-    quiet = paper000.motion_for(host.filter("tbd-pf"), host.filter("tbd-pf"))
-    np.testing.assert_allclose(quiet.Q, constant_velocity(3, 1.0, paper000.SIGMA_A).Q)
-    np.testing.assert_allclose(paper000.motion_for(host.filter("ekf-nis"), host.filter("tbd-pf")).Q, quiet.Q)
-    plain = paper000.motion_for(host.filter("ekf"), host.filter("tbd-pf"))
-    np.testing.assert_allclose(plain.Q, 4.0 * quiet.Q)
+# -- the recipe ------------------------------------------------------------------------------------------------
 
 
-# -- the report recipe ------------------------------------------------------------------------------------
+def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
+    rcp = host.recipe("000")
+    full = RecipeOptions("full", rcp.sizes["full"], 0, rcp.default_filters + ("ukf",))
+    tasks = {t.key: t for t in rcp.tasks(full)}
+    assert set(tasks) == {"scenario", "table@-20dBsm", "sweep@-20dBsm", "table@-18.5dBsm", "table@-17dBsm",
+                          "replicate@-20dBsm"}
+    combos = {tuple(c) for c in tasks["table@-20dBsm"].params["combos"]}
+    assert ("ukf", 600, 1000.0) in combos and ("tbd-pf", 600, 2500.0) in combos
+    assert all((m.filter, 600, 1000.0) in combos for m in methods.METHODS)
+    sweep = {c[1] for c in tasks["sweep@-20dBsm"].params["combos"] if c[2] == 1000.0}
+    assert sweep == {50, 100, 200, 300, 400, 500, 800, 1000}  # 600 comes from the table task
+    rep = tasks["replicate@-20dBsm"].params
+    assert rep["stream"] == "replicate" and rep["runs"] == 80
+    assert {c[0] for c in rep["combos"]} == {m.filter for m in methods.METHODS if m.role in "ABC"}
+    assert rcp.sizes["full"]["runs"] == 20
+    quick = {t.key for t in rcp.tasks(RecipeOptions("quick", rcp.sizes["quick"], 0, ("tbd-pf",)))}
+    assert quick == {"scenario", "table@-20dBsm", "sweep@-20dBsm"}
 
 
 @pytest.fixture(scope="module")
 def results(host):
-    recipe = host.recipe("000")
-    values = {"runs": 2, "path_particles": [100, 600], "radii": [2500.0, 1000.0], "sweep_particles": [100, 600]}
-    options = RecipeOptions(size="test", values=values, seed=1, filters=recipe.default_filters)
-    tasks = recipe.tasks(options)
-    keys = [t.key for t in tasks]
-    assert len(keys) == len(set(keys))
+    rcp = host.recipe("000")
+    values = {"runs": 2, "path_particles": [100, 600], "sweep_particles": [100, 600], "sensitivity": [-17.0],
+              "replicated_runs": 2}
+    options = RecipeOptions(size="test", values=values, seed=1, filters=rcp.default_filters)
     return {t.key: {k: np.asarray(v) for k, v in t.run(TaskContext(t.params, seed=1, host=host)).items()}
-            for t in tasks}
-
-
-def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
-    recipe = host.recipe("000")
-    options = RecipeOptions("full", recipe.sizes["full"], 0, ("ekf-nis", "sir-jm", "tbd-pf", "ukf"))
-    keys = {t.key for t in recipe.tasks(options)}
-    assert "track-ukf-N600-R1000" in keys and "track-tbd-pf-N50-R1000" in keys and "track-tbd-pf-N100-R2500" in keys
-    assert recipe.sizes["full"]["runs"] == 20 and len(recipe.sizes["full"]["sweep_particles"]) == 9
+            for t in rcp.tasks(options)}
 
 
 def test_report_figures_hold_the_scenario_and_the_runs(host, results):
-    recipe = host.recipe("000")
-    figs = {f.id: f.data(results) for f in recipe.figures}
-    assert {"fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11", "fig12",
-            "fig13"} <= set(figs)
+    rcp = host.recipe("000")
+    figs = {f.id: f.data(results) for f in rcp.figures}
+    assert set(figs) == {"fig2", "fig3", "fig4", "fig5", "fig5_counts", "fig6", "fig7", "fig8", "fig9", "fig10",
+                         "fig11", "fig12", "fig13", "fig14"}
+    truth = results["scenario"]["truth"]
+    np.testing.assert_allclose(figs["fig2"]["truth_km"], truth[:, :3] / 1e3)
     np.testing.assert_allclose(figs["fig2"]["truth_km"][0], [56.0, 2.0, 3.0])
     assert figs["fig3"]["thresholds_db"].tolist() == [12.0, 9.0, 7.0, 5.0, 3.0]
+    np.testing.assert_array_equal(figs["fig3"]["snr_run0_db"], results["scenario"]["snr_db"][0])
+    pts = results["scenario"]["points"]
+    assert figs["fig4"]["is_target"].sum() == np.sum(pts[:, 5] >= 0)  # every target detection is drawn
+    assert figs["fig4"]["points_km"].shape[0] < pts.shape[0]  # clutter subsampled
+    assert np.all(figs["fig5"]["snr_db"] >= 3.0)
     counts = results["scenario"]["count_per_scan"].mean(axis=1)
     assert np.all(np.diff(counts) > 0)  # lower threshold, more detections
     np.testing.assert_array_equal(figs["fig5_counts"]["count_per_scan"], results["scenario"]["count_per_scan"])
-    assert figs["fig5_counts"]["k"].shape[0] == figs["fig5_counts"]["count_per_scan"].shape[1]
-    assert results["scenario"]["clutter_per_scan"][3] == pytest.approx(results["scenario"]["clutter_expected"][3],
-                                                                      rel=0.05)
-    tgt = figs["fig7"]["gated_target_R1000"]
-    assert tgt.any() and figs["fig7"]["gated_km_R2500"].shape[0] > figs["fig7"]["gated_km_R1000"].shape[0]
-    assert figs["fig9"]["estimate_km_R1000"].shape == (300, 3)
-    assert figs["fig12"]["particles"].tolist() == [100, 600] and figs["fig12"]["e_avg_mean"].shape == (2,)
-    assert set(figs["fig13"]["filters"]) == {"ekf-nis", "sir-jm", "tbd-pf", "tbd-pf-eps0"}
-    e = results["track-tbd-pf-N600-R1000"]["error"]
-    np.testing.assert_allclose(figs["fig10"]["e_error_R1000"], e.mean(axis=0))
+    assert np.all(figs["fig6"]["distance_km"] >= 0) and figs["fig6"]["radii_km"].tolist() == [2.5, 1.0]
+    g7 = figs["fig7"]
+    assert g7["gated_km_R2500"].shape[0] > g7["gated_km_R1000"].shape[0]  # a wider gate takes in more
+    c600 = recipe._get(results, "C", 600, 1000.0)
+    np.testing.assert_allclose(figs["fig9"]["estimate_km_R1000"], c600["path0"] / 1e3)
+    np.testing.assert_allclose(figs["fig8"]["estimate_km_R2500"], recipe._get(results, "C", 100, 2500.0)["path0"] / 1e3)
+    np.testing.assert_allclose(figs["fig10"]["e_error_R1000"], c600["error"].mean(axis=0))
+    np.testing.assert_allclose(figs["fig10"]["m_error_R1000"], recipe.mean_over_runs(c600["m_error"]))
+    assert figs["fig11"]["particles"].tolist() == [100, 600]
+    np.testing.assert_allclose(figs["fig11"]["e_error"][1], c600["error"].mean(axis=0))
+    np.testing.assert_allclose(figs["fig12"]["e_avg_mean"][1], c600["error"][:, 1:].mean())
+    np.testing.assert_allclose(figs["fig12"]["e_avg_median"][1], np.median(c600["error"][:, 1:].mean(axis=1)))
+    assert figs["fig13"]["methods"].tolist() == [m.key for m in methods.METHODS]
+    np.testing.assert_allclose(figs["fig13"]["e_error"][2], c600["error"].mean(axis=0))
+    f14 = figs["fig14"]
+    assert f14["rcs_dbsm"].tolist() == [-20.0, -17.0] and set(f14["methods"]) == {"A", "B", "C", "A+", "B+"}
+    c17 = recipe._get(results, "C", 600, 1000.0, rcs=-17.0)
+    j = f14["methods"].tolist().index("C")
+    assert f14["whole_mean"][j, 1] == pytest.approx(c17["error"][:, 1:].mean())
+    assert f14["lost"][j, 0] == int(c600["lost"].sum())
     from matplotlib.figure import Figure
 
-    for spec in recipe.figures:
+    for spec in rcp.figures:
         fig = Figure()
         spec.draw(figs[spec.id], fig)
         assert fig.axes, spec.id
+        for ax in fig.axes:
+            assert ax.get_xlabel() and ax.get_ylabel(), (spec.id, ax.get_title())
 
 
-def test_report_table3_and_criteria_are_computed(host, results):
-    recipe = host.recipe("000")
-    table = next(t for t in recipe.tables if t.id == "table3").make(results)
-    rows = {r[0]: r for r in table.rows}
-    assert rows["(A) ekf-nis"][3:5] == (332.0, 236.0) and rows["(B) sir-jm"][3:5] == (291.0, 214.0)
-    assert rows["(C) tbd-pf"][3:5] == (221.0, 124.0)
-    e = results["track-tbd-pf-N600-R1000"]["error"]
-    assert rows["(C) tbd-pf"][1] == pytest.approx(round(e[:, 1:101].mean(), 1))
-    assert rows["(C) tbd-pf"][2] == pytest.approx(round(e[:, 1:].mean(), 1))
-    crit = recipe.criteria(results)
-    assert [c.id for c in crit] == ["1", "2", "3", "4", "5", "6"]
-    a = results["track-ekf-nis-N600-R1000"]["error"][:, 1:].mean()
-    ratio = a / e[:, 1:].mean()
-    assert crit[1].met == (ratio >= 1.3) and f"{ratio:.2f}" in crit[1].detail
-    clutter = next(t for t in recipe.tables if t.id == "table_clutter").make(results)
-    assert [r[1] for r in clutter.rows] == [0.4, 18.8, 81.6, 205.7, 368.8]
-    assert "sigma_a" in recipe.notes and recipe.published["table3_whole_m"]["C"] == 124.0
+def test_report_table3_shows_mean_median_not_lost_and_lost(host, results):
+    rcp = host.recipe("000")
+    tables = {t.id: t.make(results) for t in rcp.tables}
+    assert {"table2", "table3", "table3_all_runs", "table3_rcs-18.5", "table3_rcs-17", "table_clutter",
+            "table_tuning"} == set(tables)
+    t3 = tables["table3"]
+    rows = {r[0]: dict(zip(t3.columns, r)) for r in t3.rows}
+    c = recipe._get(results, "C", 600, 1000.0)
+    early, whole = c["error"][:, 1:101].mean(axis=1), c["error"][:, 1:].mean(axis=1)
+    row = rows[methods.METHODS[2].label]
+    assert row["role"] == "C" and row["runs"] == 2
+    assert row["k=1..100: mean (m)"] == pytest.approx(round(early.mean(), 1))
+    assert row["whole: median (m)"] == pytest.approx(round(float(np.median(whole)), 1))
+    kept = whole[~c["lost"]]
+    if kept.size:
+        assert row["whole: mean of runs not lost (m)"] == pytest.approx(round(kept.mean(), 1))
+    assert row["lost runs"] == f"{int(c['lost'].sum())}/2"
+    assert len(t3.rows) == len(methods.METHODS)
+    assert rows[methods.METHODS[5].label]["paper whole (m)"] == ""  # no published value for an ablation
+    # the pooled table: the paper's protocol and the replications, 2 + 2 runs
+    assert {r[2] for r in tables["table3_all_runs"].rows} == {4}
+    # the sensitivity tables: run (-17) or saying it was not run at this size (-18.5)
+    assert len(tables["table3_rcs-17"].rows) == len(methods.METHODS)
+    assert tables["table3_rcs-18.5"].rows[0][0].startswith("not run at this size")
+    # the tuning table shows the values the filters really use, each one of its step's candidates
+    tun = {r[0]: r for r in tables["table_tuning"].rows}
+    used = float(tun[tuning.STEPS[0].name][4])
+    assert used == host.filter("tbd-pf").params["floor_scale"]
+    assert {"floor_scale": used} in tuning.STEPS[0].candidates
+    assert tun["rule"][2] == tuning.RULE
 
 
-# -- lost-track remedies: regularised resampling (C), clutter floor / PDA update (A, B) ---------------------
+def test_criteria_records_carry_n_interval_and_verdict(host, results):
+    crit = host.recipe("000").criteria(results)
+    ids = [c.id for c in crit]
+    assert ids[:6] == ["1", "2", "3", "4", "5", "6"]
+    assert {"1@-17dBsm", "2@-17dBsm", "3@-17dBsm", "5@-17dBsm", "6@-17dBsm"} <= set(ids)
+    for c in crit:
+        assert isinstance(c, Criterion) and c.verdict in ("met", "not met", "inconclusive", "not attainable")
+        assert c.n is not None and c.interval is not None
+    first = crit[0]
+    assert first.n == 4 and first.verdict == "inconclusive"  # 2 + 2 runs: fewer than the paper's 20
+    # the A/C ratio is the ratio of the mean whole-track errors of the pooled runs
+    pooled = [np.concatenate([recipe._get(results, k, 600, 1000.0, stream=s)["error"] for s in ("", "replicate")])
+              for k in ("A", "C")]
+    assert crit[1].ours == pytest.approx(pooled[0][:, 1:].mean() / pooled[1][:, 1:].mean())
 
 
-def test_regularisation_bandwidth_and_jitter_follow_the_kernel_covariance():
-    from workbench_filters.tbd import regularisation_bandwidth, regularise
-
-    # h_opt = (4 / (N (n + 2)))^(1 / (n + 4)): n = 1 gives Silverman's 1.06 N^(-1/5)
-    assert regularisation_bandwidth(600, 6) == pytest.approx((4.0 / 4800.0) ** 0.1)
-    assert regularisation_bandwidth(1000, 1) == pytest.approx((4.0 / 3.0) ** 0.2 * 1000 ** -0.2)
-    B, N = 2, 40000
-    cov = np.diag([400.0, 400.0, 300.0, 30.0, 30.0, 10.0]) ** 2
-    x = np.zeros((B, N, 6))
-    rows = np.array([True, False])
-    out = regularise(x, np.broadcast_to(cov, (B, 6, 6)), rows, 0.5, generator(0, "reg"))
-    h = 0.5 * regularisation_bandwidth(N, 6)
-    # the jitter of a resampled row is N(0, h^2 cov) (sample covariance, 5 % band); other rows untouched
-    np.testing.assert_allclose(np.cov(out[0].T), h**2 * cov, rtol=0.05, atol=0.01 * h**2 * cov.max())
-    np.testing.assert_array_equal(out[1], x[1])
-    np.testing.assert_array_equal(regularise(x, cov[None].repeat(2, 0), rows, 0.0, generator(0)), x)
+def _fake_results(errors: dict, runs: int) -> dict:
+    """Results of the Table 3 and replicate tasks with hand-made error curves: key -> (runs, 300) errors."""
+    res = {"table@-20dBsm": {"rcs": np.array(-20.0), "stream": np.array(""), "runs": np.array(20)},
+           "replicate@-20dBsm": {"rcs": np.array(-20.0), "stream": np.array("replicate"),
+                                 "runs": np.array(runs - 20)}}
+    for key, e in errors.items():
+        for task, part in (("table@-20dBsm", e[:20]), ("replicate@-20dBsm", e[20:])):
+            res[task][f"{key}__N600__R1000__error"] = part
+            res[task][f"{key}__N600__R1000__lost"] = lost_track(part)
+            res[task][f"{key}__N600__R1000__seconds"] = np.array(1.0)
+    return res
 
 
-def test_tbd_filter_regularises_only_after_resampling(host):
-    from workbench_filters.tbd import make_tbd_pf
+def test_criteria_verdicts_on_hand_made_runs():
+    rng = np.random.default_rng(0)
+    k = np.arange(300)
+    shape = np.where(k <= 100, 2.0, 1.0)  # every method: the early part twice the later part
 
-    model = host.sensor("lband-radar").measurement_model()
-    _, state = _cloud(host)
-    z = np.array([[[30.1e3, 2e3, 2e3, -200.0]]] * 2)
-    scan = Scan(z, np.array([[True], [False]]), snr=np.full((2, 1), 15.0))
-    plain = make_tbd_pf(400, regularisation=0.0).update(state, scan, model, generator(3))
-    jittered = make_tbd_pf(400, regularisation=0.5).update(state, scan, model, generator(3))
-    assert plain.resamples == jittered.resamples == 1  # the sharp detection collapses item 0's N_eff
-    n_distinct = lambda s: len(np.unique(s.cloud.particles[0, :, 0]))  # noqa: E731
-    assert n_distinct(plain) < 400 and n_distinct(jittered) == 400  # copies made distinct
-    np.testing.assert_array_equal(jittered.cloud.particles[1], state.cloud.particles[1])  # empty gate
-    assert make_tbd_pf().params["regularisation"] == 0.5
+    def method(level, spread=0.05):
+        return level * shape * (1 + spread * rng.standard_normal((100, 1)))
 
-
-def test_sir_clutter_floor_is_the_mixture_likelihood(host):
-    from scipy.stats import multivariate_normal
-
-    from workbench_filters.tbd import make_sir_jm
-
-    model = host.sensor("lband-radar").measurement_model()
-    rng = np.random.default_rng(6)
-    x = np.array([3e4, 1e3, 2e3, -200.0, 0.0, 0.0]) + rng.normal(size=(2, 300, 6)) * [400, 400, 300, 30, 30, 10]
-    from workbench_filters.tbd import ModeState
-
-    state = ModeState(Particles(x, np.full((2, 300), -np.log(300))), 0, 0, np.zeros((2, 300)))
-    z_bar = np.array([[3.1e4, 1.2e3, 2e3, 150.0], [3.0e4, 1e3, 2e3, -200.0]])
-    r_bar = np.stack([np.diag([600.0, 600, 600, 120]) ** 2, np.diag([300.0, 300, 300, 10]) ** 2])
-    lam = 3.5e-12
-    step = Scan.single(z_bar, cov=r_bar, clutter_density=np.full(2, lam))
-    new = make_sir_jm(300, threshold=0.0).update(state, step, model, generator(1))
-    # NumPy/SciPy reference on the un-whitened pseudo-measurement: w_i ∝ lambda + N(z_bar; h(x_i), R_bar)
-    for b in range(2):
-        lik = lam + multivariate_normal(z_bar[b], r_bar[b]).pdf(model.h(x[b]))
-        np.testing.assert_allclose(np.exp(new.cloud.log_weights[b]), lik / lik.sum(), rtol=1e-9)
-    # a Doppler-inconsistent (clutter) pseudo-measurement hardly moves the weights; without the floor it does
-    bare = make_sir_jm(300, threshold=0.0).update(state, Scan.single(z_bar, cov=r_bar), model, generator(1))
-    spread = lambda lw: np.exp(lw.max() - lw.min())  # noqa: E731
-    assert spread(new.cloud.log_weights[0]) < 30.0 < spread(bare.cloud.log_weights[0])
+    good = _fake_results({"A": method(300.0), "B": method(200.0), "C": method(100.0)}, 100)
+    crit = {c.id: c for c in recipe.criteria(good)}
+    assert crit["1"].verdict == "met" and crit["1"].replication == (5, 5) and crit["1"].n == 100
+    assert crit["2"].verdict == "met" and crit["2"].ours == pytest.approx(3.0, rel=0.05)
+    assert crit["3"].verdict == "met"
+    swapped = _fake_results({"A": method(100.0), "B": method(200.0), "C": method(300.0)}, 100)
+    crit = {c.id: c for c in recipe.criteria(swapped)}
+    assert crit["1"].verdict == "not met" and crit["1"].replication == (0, 5)
+    assert crit["2"].verdict == "not met"
+    # A/C straddling 1.3 with a wide spread between runs: the interval decides nothing
+    close = _fake_results({"A": method(130.0, 0.8), "B": method(120.0, 0.8), "C": method(100.0, 0.8)}, 100)
+    assert {c.id: c for c in recipe.criteria(close)}["2"].verdict == "inconclusive"
 
 
-def test_ekf_pda_update_against_the_textbook_pdaf(host):
-    from scipy.stats import multivariate_normal
-
-    from workbench_filters.tbd import make_ekf_nis
-
-    model = host.sensor("lband-radar").measurement_model()
-    mean = np.array([[3e4, 1e3, 2e3, -200.0, 0.0, 0.0]] * 3)
-    P = np.broadcast_to(np.diag([300.0, 300, 300, 20, 20, 10]) ** 2, (3, 6, 6)).copy()
-    prior = Gaussian(mean, P)
-    z = model.h(mean) + np.array([[100.0, 0, 0, 2.0], [1500.0, -900.0, 0, 250.0], [0.0, 0, 0, 0]])
-    valid = np.array([True, True, False])
-    lam = 3.5e-12
-    spec = make_ekf_nis()
-    density = np.full((3, 1), lam)
-    new = spec.update(spec.init(prior, None), Scan(z[:, None, :], valid[:, None], clutter_density=density), model,
-                      None)
-    ekf = host.filter("ekf").update(prior, Scan(z[:, None, :], valid[:, None]), model, None)
-    for b in range(2):
-        H = model.jacobian(mean[b:b + 1])[0]
-        S = H @ P[b] @ H.T + model.R
-        nu = z[b] - model.h(mean[b])
-        beta0 = lam / (lam + multivariate_normal(np.zeros(4), S).pdf(nu))
-        K = P[b] @ H.T @ np.linalg.inv(S)
-        want_mean = mean[b] + (1 - beta0) * K @ nu
-        want_cov = beta0 * P[b] + (1 - beta0) * ekf.cov[b] + beta0 * (1 - beta0) * np.outer(K @ nu, K @ nu)
-        np.testing.assert_allclose(new.gaussian.mean[b], want_mean, rtol=1e-9)
-        np.testing.assert_allclose(new.gaussian.cov[b], want_cov, rtol=1e-7, atol=1e-6)
-    assert np.linalg.norm(new.gaussian.mean[1] - mean[1]) < 1.0  # the clutter-like measurement is ignored
-    np.testing.assert_array_equal(new.gaussian.mean[2], mean[2])  # no measurement: unchanged
-    assert new.manoeuvre.tolist() == [False, False, False]  # clutter does not switch the manoeuvre noise on
-    # the measurement's own covariance (the pipeline's R_bar) equal to the model's R gives the same update
-    r_bar = np.broadcast_to(model.R, (3, 1, 4, 4)).copy()
-    again = spec.update(spec.init(prior, None), Scan(z[:, None, :], valid[:, None], cov=r_bar, clutter_density=density),
-                        model, None)
-    np.testing.assert_allclose(again.gaussian.mean[:2], new.gaussian.mean[:2], rtol=1e-9)
-
-
-def test_recipe_clutter_floor_from_the_clutter_and_sensor_models(host):
-    from scipy.stats import norm
-
-    b, lam, pd = paper000.clutter_floor(host)
-    # lambda = rate exp(-t / mu) / cube^3 / (2 vr_max) at 5 dB: 205.7 per (10 km)^3, Doppler over 600 m/s
-    assert lam == pytest.approx(1000 * np.exp(-from_db(5.0) / 2) / 1e12 / 600.0, rel=1e-12)
-    snr0 = 10 * np.log10(float(paper000.radar_snr(np.linalg.norm(paper000.START_POSITION), from_db(-20.0))))
-    assert snr0 == pytest.approx(2.3, abs=0.1)  # the brief's SNR at k = 0
-    assert pd == pytest.approx(norm.cdf((snr0 - 5.0) / 2.0)) and b == pytest.approx(lam * (1 - pd) / pd)
-    assert "clutter_density" in host.filter("sir-jm").capabilities  # A and B read the scan's clutter density
-    assert "clutter_density" not in host.filter("tbd-pf").capabilities
-    # amplitude ratio: 1 at the threshold, exp(-(p - t) / mu) above it, from the strongest gated detection
-    snr = np.array([[5.0, 3.0], [12.0, 6.0], [0.0, 0.0]])
-    gated = Scan(np.zeros((3, 2, 4)), np.array([[True, False], [True, True], [False, False]]), snr=snr)
-    ratio = paper000.clutter_amplitude_ratio(gated, 2.0, 5.0)
-    np.testing.assert_allclose(ratio, [1.0, np.exp(-(from_db(12.0) - from_db(5.0)) / 2.0), 1.0])
+def test_tuning_rule_scores_lost_runs_first():
+    assert tuning.score(np.array([True, False, False]), np.array([9e3, 100.0, 200.0])) == (1, 150.0)
+    assert tuning.score(np.array([True]), np.array([5e3]))[1] == np.inf
+    assert 0 not in tuning.TUNING_SEEDS  # the report's seed never serves the search
+    for step in tuning.STEPS:
+        assert step.method in {m.key for m in methods.METHODS} and len(step.candidates) >= 2
