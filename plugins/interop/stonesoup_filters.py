@@ -155,6 +155,15 @@ def _g_estimate(state: Gaussian) -> Gaussian:
     return state
 
 
+#: Checks a Stone Soup filter fails because of Stone Soup itself; the adapter reproduces the library as it is.
+KNOWN_FAILURES = {
+    "ss-ckf": {"check_bearing_wrap": "Stone Soup 1.9.1's cubature2gauss forms the predicted covariance from raw second "
+                                     "moments without wrapping the cubature points' bearings, so near +-pi its "
+                                     "bearing variance comes out negative (-0.0367 rad^2 at (-400, 0.5) with "
+                                     "P = diag(25, 25, 4, 4), where its UKF gives 0.000556) and the track diverges"},
+}
+
+
 def make_gaussian(name: str = "ss-ukf", **params) -> FilterSpec:
     """The Stone Soup Gaussian filter ``name`` (``ss-kf``, ``ss-ekf``, ``ss-ukf``, ``ss-ckf``) as a
     :class:`~workbench.specs.FilterSpec`; ``ss-ukf`` takes ``alpha``, ``beta``, ``kappa``."""
@@ -173,7 +182,7 @@ def make_gaussian(name: str = "ss-ukf", **params) -> FilterSpec:
         predict=partial(_g_predict, predictor=predictor, options=options),
         update=partial(_g_update, updater=updater, options=options, name=name), estimate=_g_estimate,
         capabilities=frozenset(caps), params=values, parameters=declared,
-        build=lambda **v: make_gaussian(name, **v))
+        build=lambda **v: make_gaussian(name, **v), expected_failures=KNOWN_FAILURES.get(name, {}))
 
 
 # -- particle filter -----------------------------------------------------------------------------------
