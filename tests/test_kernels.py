@@ -1,4 +1,5 @@
-"""The method-C weight kernels against their NumPy reference, on every backend and Taichi arch here."""
+"""The method-C weight kernels against their NumPy reference, on every backend and Taichi arch here, in float64 and
+float32."""
 
 import subprocess
 import sys
@@ -10,8 +11,9 @@ from scipy.special import logsumexp
 from workbench.kernels.reference import kernel_inputs, naive_log_weight_sums
 from workbench.kernels.reference import tbd_log_weight_sums_reference
 from workbench.kernels.runtime import TaichiUnavailable, ensure_taichi, taichi_available_arches
-from workbench.kernels.tbd_weights import (EXP_FLOOR, numba_available, pack_measurements, poly_exp, resolve_backend,
-                                           tbd_log_weight_sums)
+from workbench.kernels.tbd_weights import (EXP_FLOOR, FLOAT32_WEIGHT_RTOL, numba_available, pack_measurements,
+                                           pack_points, poly_exp, poly_exp2, resolve_backend, tbd_log_weight_sums)
+from workbench.kernels.tbd_weights_numpy import tbd_log_weight_sums_float32
 
 BACKENDS = [("taichi", arch) for arch in taichi_available_arches()] + \
     ([("numba", "cpu")] if numba_available() else [])
@@ -28,11 +30,20 @@ def random_case(rng, B=4, N=300, M=40, p_valid=0.6):
     return points, z, valid, log_pd, sigma_p, 15.0
 
 
-def test_poly_exp_matches_libm_to_double_precision():
-    x = -np.concatenate([np.linspace(0.0, 700.0, 200_001), np.geomspace(1e-300, 1.0, 1000)])
-    rel = np.abs(poly_exp(x) / np.exp(x) - 1.0)
-    assert rel.max() < 5e-14
-    assert poly_exp(np.array([-1e300, EXP_FLOOR - 1]))[0] == pytest.approx(np.exp(EXP_FLOOR), rel=1e-13)
+def test_poly_exp2_matches_libm_in_each_precision():
+    x = -np.concatenate([np.linspace(0.0, 1000.0, 200_001), np.geomspace(1e-300, 1.0, 1000)])
+    assert np.max(np.abs(poly_exp2(x) / np.exp2(x) - 1.0)) < 1e-14
+    x32 = x[x > -120.0].astype(np.float32)
+    got = poly_exp2(x32, "float32")
+    assert got.dtype == np.float32
+    assert np.max(np.abs(got / np.exp2(x32.astype(float)) - 1.0)) < 4e-7  # a few float32 ulp
+    # clamped at the smallest normal of each precision
+    assert poly_exp2(np.array([-1e300]))[0] == 2.0**-1022
+    assert poly_exp2(np.array([-1e30], dtype=np.float32), "float32")[0] == np.float32(2.0**-126)
+    # exp(x) = 2^(x log2 e), for the documentation's natural-log form
+    xe = -np.linspace(0.0, 700.0, 10_001)
+    assert np.max(np.abs(poly_exp(xe) / np.exp(xe) - 1.0)) < 2e-13
+    assert poly_exp(np.array([EXP_FLOOR - 1.0]))[0] == pytest.approx(np.exp(EXP_FLOOR), rel=1e-12)
 
 
 def test_reference_equals_direct_logsumexp():
@@ -57,7 +68,7 @@ def test_kernel_matches_reference_on_random_inputs(backend, arch, serial_pairs, 
 
     monkeypatch.setattr(kernels, "SERIAL_PAIRS", serial_pairs)  # the Numba backend has both variants
     rng = np.random.default_rng(11)
-    for B, N, M in ((4, 300, 40), (3, 257, 1), (2, 1, 9), (5, 130, 129)):
+    for B, N, M in ((4, 300, 40), (3, 257, 1), (2, 1, 9), (5, 130, 129), (2, 600, 3)):
         args = random_case(rng, B, N, M)
         ref = tbd_log_weight_sums_reference(*args)
         out = tbd_log_weight_sums(*args, backend=backend, arch=arch)
@@ -66,6 +77,90 @@ def test_kernel_matches_reference_on_random_inputs(backend, arch, serial_pairs, 
         assert np.all(np.isneginf(out[1]))  # the empty gate
         live = np.isfinite(ref)
         np.testing.assert_allclose(out[live], ref[live], rtol=1e-12, atol=1e-9)
+
+
+def _normalised(log_sums: np.ndarray) -> np.ndarray:
+    """Particle weights normalised over each run: ``w_i = exp(l_i) / sum_k exp(l_k)`` per row."""
+    return np.exp(log_sums - logsumexp(log_sums, axis=1, keepdims=True))
+
+
+def _weight_error(log32: np.ndarray, log64: np.ndarray) -> float:
+    """The largest ``|w32 - w64| / w64`` over the particles whose normalised weight is at least 1e-12 of the row's
+    largest: the float32 tolerance's measure (:data:`FLOAT32_WEIGHT_RTOL`)."""
+    w32, w64 = _normalised(log32), _normalised(log64)
+    keep = w64 >= 1e-12 * w64.max(axis=1, keepdims=True)
+    return float(np.max(np.abs(w32[keep] - w64[keep]) / w64[keep]))
+
+
+@pytest.mark.parametrize("serial_pairs", [0, 10**12], ids=["threaded", "serial"])
+@pytest.mark.parametrize(("backend", "arch"), BACKENDS + [("numpy", "cpu")], ids=IDS + ["numpy"])
+def test_float32_kernels_match_the_reference_within_the_stated_tolerance(backend, arch, serial_pairs, monkeypatch):
+    import workbench.kernels.tbd_weights as kernels
+
+    monkeypatch.setattr(kernels, "SERIAL_PAIRS", serial_pairs)
+    rng = np.random.default_rng(12)
+    for B, N, M in ((4, 300, 40), (3, 257, 1), (5, 130, 129)):
+        args = random_case(rng, B, N, M)
+        ref = tbd_log_weight_sums_reference(*args)
+        out = tbd_log_weight_sums(*args, backend=backend, arch=arch, precision="float32")
+        assert out.shape == (B, N) and out.dtype == np.float64
+        assert np.array_equal(np.isneginf(out), np.isneginf(ref))
+        live = np.isfinite(ref)
+        # single-precision log-sums: relative error of a few float32 ulp of the log-weights summed
+        np.testing.assert_allclose(out[live], ref[live], rtol=2e-6, atol=1e-4)
+        rows = np.isfinite(ref).all(axis=1)
+        if rows.any():
+            assert _weight_error(out[rows], ref[rows]) < FLOAT32_WEIGHT_RTOL
+        # the compiled float32 kernels agree with their NumPy float32 twin as closely as with the float64 reference
+        twin = tbd_log_weight_sums_float32(*args)
+        np.testing.assert_allclose(out[live], twin[live], rtol=2e-6, atol=1e-4)
+
+
+def realistic_scene(rng, B=3, N=6_000, clutter=300):
+    """Method-C inputs as the filter makes them: particles of the paper-000 prior's spread (500, 500, 300 m; radial
+    velocity +-10 m/s) around a target at ~35 km, and in each run the target's detection (SNR ~ 13 dB) among
+    ``clutter`` detections spread over a 2.5 km gate (SNR 3..8 dB above the threshold, radial velocity +-300 m/s);
+    ``log P_D`` and the position sigmas from the L-band radar's declared detection model, Doppler sigma 15 m/s."""
+    from workbench.plugins import load_host
+
+    detection = load_host().sensor("lband-radar").measurement_model().detection
+    target = np.array([35e3, 2e3, 2e3, -200.0])
+    points = target + rng.normal(size=(B, N, 4)) * [500.0, 500.0, 300.0, 10.0]
+    M = clutter + 1
+    u = rng.normal(size=(B, M, 3))
+    z = np.empty((B, M, 4))
+    z[..., :3] = target[:3] + 2500.0 * u / np.linalg.norm(u, axis=-1, keepdims=True) * rng.random((B, M, 1)) ** (1 / 3)
+    z[..., 3] = rng.uniform(-300.0, 300.0, (B, M))
+    snr = rng.uniform(3.0, 8.0, (B, M))
+    snr[:, 0] = 13.0 + rng.normal(size=B)
+    rng_m = np.linalg.norm(z[..., :3], axis=-1)
+    sigma_p = detection.position_sigma(snr, rng_m)
+    z[:, 0, :3] = target[:3] + sigma_p[:, :1] * rng.normal(size=(B, 3))  # the target's own detection
+    z[:, 0, 3] = target[3] + 15.0 * rng.normal(size=B)
+    return points, z, np.ones((B, M), dtype=bool), detection.log_pd(snr), sigma_p, 15.0
+
+
+def test_float32_changes_normalised_weights_of_a_realistic_scene_by_less_than_the_tolerance():
+    points, z, valid, log_pd, sigma_p, s_vr = realistic_scene(np.random.default_rng(3))
+    assert np.all((sigma_p > 5.0) & (sigma_p < 5e3)) and np.all(np.isfinite(log_pd))
+    ref = tbd_log_weight_sums(points, z, valid, log_pd, sigma_p, s_vr, backend="numpy")
+    w64 = _normalised(ref)
+    assert np.all(w64.max(axis=1) < 0.05)  # the weights are spread over many particles (a real update)
+    assert np.all(1.0 / np.sum(w64**2, axis=1) > 100)
+    backends = ["numba"] if numba_available() else []
+    for backend in backends + ["taichi", "numpy"]:
+        out = tbd_log_weight_sums(points, z, valid, log_pd, sigma_p, s_vr, backend=backend, arch="cpu",
+                                  precision="float32")
+        err = _weight_error(out, ref)
+        assert err < FLOAT32_WEIGHT_RTOL, (backend, err)
+        assert err < FLOAT32_WEIGHT_RTOL / 5, (backend, err)  # with a margin: in fact about 5e-6 here
+        # the total variation distance between the two weight vectors is smaller still
+        assert 0.5 * np.abs(_normalised(out) - w64).sum(axis=1).max() < 1e-5
+
+
+def test_precision_is_checked():
+    with pytest.raises(ValueError, match="unknown kernel precision"):
+        tbd_log_weight_sums(*kernel_inputs(10, 3), backend="numpy", precision="float16")
 
 
 @pytest.mark.parametrize(("backend", "arch"), BACKENDS, ids=IDS)
@@ -98,14 +193,31 @@ def test_pack_measurements_puts_valid_rows_first_with_counts():
     rng = np.random.default_rng(2)
     z = rng.normal(size=(3, 5, 4))
     valid = np.array([[False, True, False, True, True], [False] * 5, [True, False, False, False, False]])
-    meas, counts = pack_measurements(z, valid, np.zeros((3, 5)), np.ones((3, 5)), 1.0)
+    meas, counts = pack_measurements(z, valid, np.zeros((3, 5)), np.ones((3, 5)), 1.0, "float32")
     assert counts.tolist() == [3, 0, 1]
-    assert meas.shape == (3, 6, 3)
-    np.testing.assert_array_equal(meas[0, :4].T, z[0, [1, 3, 4]])
-    np.testing.assert_array_equal(meas[2, :4, 0], z[2, 0])
-    # c_m = log P_D - 3/2 log(2 pi) - 1/2 log(2 pi) for unit sigmas, a_m = 1/2
-    assert meas[0, 4, 0] == pytest.approx(-2.0 * np.log(2 * np.pi))
-    assert meas[0, 5, 0] == 0.5
+    assert meas.shape == (3, 6, 3) and meas.dtype == np.float32
+    np.testing.assert_allclose(meas[0, :4].T, z[0, [1, 3, 4]], rtol=1e-7)
+    np.testing.assert_allclose(meas[2, :4, 0], z[2, 0], rtol=1e-7)
+    # c_m = log P_D - 3/2 log(2 pi) - 1/2 log(2 pi) for unit sigmas, a_m = 1/2, both in log2 units
+    assert meas[0, 4, 0] == pytest.approx(-2.0 * np.log(2 * np.pi) / np.log(2.0), rel=1e-6)
+    assert meas[0, 5, 0] == pytest.approx(0.5 / np.log(2.0), rel=1e-6)
+
+
+def test_float64_packing_expands_the_log_weight_exactly():
+    # log2 w = C_m + T_m . q_i + u_m vr_i - A_m |q_i|^2 + K_i  equals  (c_m - a_m |p_m - p_i|^2 - beta dv^2) / ln 2
+    points, z, valid, log_pd, sigma_p, s_vr = random_case(np.random.default_rng(4), B=2, N=7, M=5, p_valid=1.0)
+    valid[:] = True
+    pts, origin = pack_points(points, s_vr)
+    meas, counts = pack_measurements(z, valid, log_pd, sigma_p, s_vr, origin=origin)
+    np.testing.assert_allclose(origin, points[:, :, :3].mean(axis=1))
+    got = (meas[:, 5, :, None] + np.einsum("bkm,bki->bmi", meas[:, :4], pts[:, :4]) + meas[:, 4, :, None] * pts[:, None, 4]
+           + pts[:, None, 5])
+    var = sigma_p**2
+    c = log_pd - 1.5 * np.log(2 * np.pi * var) - 0.5 * np.log(2 * np.pi * s_vr**2)
+    d2 = np.sum((z[:, :, None, :3] - points[:, None, :, :3]) ** 2, axis=-1)
+    dv2 = (z[:, :, None, 3] - points[:, None, :, 3]) ** 2
+    expect = (c[..., None] - d2 / (2 * var[..., None]) - dv2 / (2 * s_vr**2)) / np.log(2.0)
+    np.testing.assert_allclose(got, expect, rtol=1e-12, atol=1e-9)
 
 
 def test_backends_resolve_and_reject_unknown_names():
@@ -151,3 +263,4 @@ def test_the_one_backend_policy():
     with pytest.raises(RuntimeError), backend.using("vulkan"):
         raise RuntimeError("boom")
     assert backend.current_arch() == "cpu"
+

@@ -207,7 +207,7 @@ def test_resolve_filters(demo_host):
     # configured filters: the commas inside the parentheses do not split, and the label names the values
     got = resolve_filters(("kf", "ekf"), "+sir(particles=300, threshold=0.25),~ekf", demo_host)
     assert got == ("kf", "sir(particles=300, threshold=0.25)")
-    assert demo_host.filter(got[1]).params == {"particles": 300, "threshold": 0.25}
+    assert demo_host.filter(got[1]).params == {"particles": 300, "threshold": 0.25, "backend": "auto"}
     with pytest.raises(InputError, match="leaves no filter"):
         resolve_filters(("kf",), "-kf", demo_host)  # removing the last filter is an error, not undone
     with pytest.raises(InputError, match="cannot remove 'ukf'"):

@@ -104,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="small sizes (seconds, for CI)")
     bench.add_argument("--json", default="workbench-bench.json", help="write the figures here as JSON")
     bench.add_argument("--only", action="append", default=[], help="only this benchmark group (repeatable)")
+    bench.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan"],
+                       help="run the Taichi kernels on this arch (cuda: the GPU; default: cpu)")
+    bench.add_argument("--plot", default=None, metavar="DIR",
+                       help="draw the scaling figures (PNG, SVG and CSV per figure) into DIR")
+    bench.add_argument("--from", dest="from_json", default=None, metavar="JSON",
+                       help="run nothing: draw the figures of a saved --json file (needs --plot)")
     return parser
 
 
@@ -284,10 +290,23 @@ def cmd_check_plugin(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import run_bench
+    from .bench import replot, run_bench
 
+    if args.from_json is not None:
+        if args.plot is None:
+            raise InputError("bench --from JSON draws figures: give --plot DIR as well")
+        if not Path(args.from_json).is_file():
+            raise InputError(f"bench --from: no such file {args.from_json!r}")
+        return replot(Path(args.from_json), Path(args.plot))
+    if args.arch != "cpu":
+        from .kernels.runtime import taichi_available_arches
+
+        if args.arch not in taichi_available_arches():
+            raise InputError(f"bench --arch {args.arch}: Taichi finds no {args.arch} device on this machine, so GPU "
+                             f"figures are not available here; run it where a GPU is lent, or use --arch cpu")
     host = _host(args)
-    return run_bench(host, quick=args.quick, json_path=Path(args.json), only=args.only, block=tuple(args.block))
+    return run_bench(host, quick=args.quick, json_path=Path(args.json), only=args.only, block=tuple(args.block),
+                     arch=args.arch, plot_dir=None if args.plot is None else Path(args.plot))
 
 
 COMMANDS = {"plugins": cmd_plugins, "report": cmd_report, "run": cmd_run, "check-plugin": cmd_check_plugin,

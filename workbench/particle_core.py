@@ -15,6 +15,17 @@ Speed: the particle arrays made here are stored component-major (``(n, B, N)`` i
 matrix products (``F x``, ``Q_sqrt e``, the whitening by ``chol(R)^-1``) are written out one component at a
 time, skipping zero entries, instead of calling BLAS on ``(N, 4) x (4, 4)`` shapes.  Any layout of the input
 particles is accepted.
+
+Backends.  :func:`predict`, :func:`weighted_log_likelihood`, :func:`reweight` and :func:`estimate` take a
+``backend`` that the kernel policy resolves (:func:`workbench.kernels.backend.resolve`): ``"numba"`` runs the
+compiled twins of :mod:`workbench.kernels.particle_numba` (one pass per step where NumPy makes several, the
+propagation noise drawn inside the loop from the same generator, the same numbers), ``"numpy"`` the array code
+here, which is the reference the compiled code is held to.  There is no Taichi version: where the policy picks
+Taichi (a GPU arch) the NumPy code runs.  The default is ``"numpy"``, so a filter that does not ask gets the
+array code; the bootstrap filter asks for ``"auto"``.  With the same seed both give the same particles: the
+propagation bit for bit, the weights to float round-off (a polynomial ``exp`` and ``atan2`` within an ulp or
+two of the library's, sums in another order), so a resampled particle can differ only when ``N c_i - u_0`` falls
+within that round-off of a whole number (about ``N 1e-16`` per particle and step).
 """
 
 from __future__ import annotations
@@ -24,12 +35,13 @@ from functools import lru_cache
 
 import numpy as np
 
+from .kernels.backend import resolve
 from .linalg import safe_cholesky
 from .models import MeasurementModel, MotionModel
 from .types import Gaussian, Particles
 
 __all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "log_likelihood",
-           "log_likelihood_cov", "estimate", "diagnostics"]
+           "weighted_log_likelihood", "log_likelihood_cov", "reweight", "estimate", "diagnostics", "compiled"]
 
 
 @dataclass(frozen=True)
@@ -92,6 +104,38 @@ def combine_columns(out: np.ndarray, matrix: np.ndarray, *sources: np.ndarray) -
     return out
 
 
+def compiled(backend: str) -> bool:
+    """Whether ``backend`` (``"auto"``, ``"numba"``, ``"numpy"``; the policy of :mod:`workbench.kernels.backend`)
+    runs the compiled steps; ``"taichi"`` has none here and runs the NumPy code."""
+    return resolve(backend) == "numba"
+
+
+def _kernels():
+    from .kernels import particle_numba
+
+    return particle_numba
+
+
+def _rows(x: np.ndarray) -> np.ndarray:
+    """Particles ``(B, N, n)`` as C-contiguous component rows ``(n, B, N)`` (no copy for a component-major array)."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(x, dtype=float), -1, 0))
+
+
+@lru_cache(maxsize=64)
+def _plan_arrays(matrix_bytes: bytes, rows: int, cols: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_plan` as flat arrays for the compiled :func:`~workbench.kernels.particle_numba.combine`: per row its
+    scaled terms, then its unit ones (coefficient 1), in :func:`combine_columns`' order."""
+    src, coef, ptr = [], [], [0]
+    for scaled, unit in _plan(matrix_bytes, rows, cols):
+        src += [j for j, _ in scaled] + list(unit)
+        coef += [c for _, c in scaled] + [1.0] * len(unit)
+        ptr.append(len(src))
+    out = (np.array(src, dtype=np.int64), np.array(coef, dtype=float), np.array(ptr, dtype=np.int64))
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 def init(prior: Gaussian, rng: np.random.Generator, particles: int) -> ParticleState:
     chol, _ = safe_cholesky(prior.cov)
     e = rng.standard_normal((prior.batch, particles, prior.dim))
@@ -106,15 +150,32 @@ def _noise_columns(motion: MotionModel) -> np.ndarray:
     return motion.Q_sqrt[:, np.flatnonzero(np.any(motion.Q_sqrt != 0.0, axis=0))]
 
 
-def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator) -> ParticleState:
+def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
+            backend: str = "numpy") -> ParticleState:
+    """``x_i <- F x_i + Q_sqrt e_i`` with ``e = rng.standard_normal((B, N, k))`` for the ``k`` non-zero columns of
+    ``Q_sqrt``; ``backend`` as in the module docstring (the same particles either way)."""
     x = state.cloud.particles
     B, N, n = x.shape
     g = _noise_columns(motion)
-    # x_i <- F x_i + Q_sqrt e_i, drawing e only for the non-zero columns of Q_sqrt
-    sources = [x]
-    if g.shape[1]:
-        sources.append(rng.standard_normal((B, N, g.shape[1])))
-    moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), *sources)
+    matrix = np.ascontiguousarray(np.hstack([motion.F, g]), dtype=float)
+    if compiled(backend):
+        out = np.empty((n, B, N))
+        k = g.shape[1]
+        plan = _plan_arrays(matrix.tobytes(), *matrix.shape)
+        rows = _rows(x).reshape(n, B * N)
+        if k == 0 or type(rng) is np.random.Generator:
+            # e drawn inside the loop: the numbers of rng.standard_normal((B, N, k)), in that order
+            _kernels().propagate(out.reshape(n, B * N), rows, rng, k, *plan)
+        else:  # a generator Numba cannot type: NumPy draws, compiled product
+            e = np.ascontiguousarray(rng.standard_normal((B, N, k))).reshape(B * N, k)
+            _kernels().combine(out.reshape(n, B * N), rows, e, *plan)
+        moved = out.transpose(1, 2, 0)
+    else:
+        # x_i <- F x_i + Q_sqrt e_i, drawing e only for the non-zero columns of Q_sqrt
+        sources = [x]
+        if g.shape[1]:
+            sources.append(rng.standard_normal((B, N, g.shape[1])))
+        moved = combine_columns(component_major(B, N, n), matrix, *sources)
     return ParticleState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows)
 
 
@@ -146,6 +207,65 @@ def log_likelihood(z: np.ndarray, x: np.ndarray, model: MeasurementModel) -> np.
     return out
 
 
+def _plane_range_bearing(model: MeasurementModel, dim: int = 4) -> np.ndarray | None:
+    """The sensor position ``(2,)`` when ``model`` declares the planar range-bearing frame (``h(x) = [|p - s|,
+    atan2(p_y - s_y, p_x - s_x)]`` for ``p = x[:2]``, the bearing angular) and its ``h`` agrees with that on a
+    set of probe points, else ``None``: the compiled likelihood is chosen by what the model declares, and the
+    probe keeps a model that declares the frame but computes something else on the general path.  ``dim``: the
+    state dimension the probe points have."""
+    if model.frame != "range-bearing" or model.sensor_position is None or len(model.sensor_position) != 2 \
+            or tuple(model.angular) != (False, True):
+        return None
+    key = (id(model), int(dim))
+    hit = _PROBED.get(key)
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    sensor = np.array(model.sensor_position, dtype=float)
+    d = _PROBE_OFFSETS
+    if dim < 2:
+        return None
+    probe = np.zeros((1, d.shape[0], int(dim)))
+    probe[0, :, :2] = sensor + d
+    try:
+        got = np.asarray(model.h(probe), dtype=float)
+        expect = np.stack([np.sqrt(d[:, 0] ** 2 + d[:, 1] ** 2), np.arctan2(d[:, 1], d[:, 0])], axis=-1)[None]
+        ok = got.shape == expect.shape and bool(np.allclose(got, expect, rtol=1e-12, atol=1e-12))
+    except Exception:  # noqa: BLE001 - a model that cannot take the probe takes the general path
+        ok = False
+    result = sensor if ok else None
+    if len(_PROBED) > 256:
+        _PROBED.clear()
+    _PROBED[key] = (model, result)
+    return result
+
+
+#: Probe offsets from the sensor (every quadrant, the axes, near and far) for :func:`_plane_range_bearing`.
+_PROBE_OFFSETS = np.array([[3.0, 4.0], [-120.0, 35.0], [-7.5, -2e4], [5e3, -0.25], [0.0, 9.0], [-1.0, 0.0],
+                           [2e5, 1e5], [1e-3, -1e-3]])
+_PROBED: dict = {}
+
+
+def weighted_log_likelihood(z: np.ndarray, x: np.ndarray, model: MeasurementModel, log_weights: np.ndarray,
+                            backend: str = "numpy") -> np.ndarray:
+    """``log w_bi + log N(z_b; h(x_bi), R)`` (up to the likelihood's constant): :func:`log_likelihood` plus the
+    previous log-weights.  ``backend`` as in the module docstring; the compiled path fuses the planar
+    range-bearing model (declared by its ``frame``) into one pass, and runs any other model's ``h`` in NumPy.
+
+    Shapes: ``z (B, m)``, ``x (B, N, n)``, ``log_weights (B, N)`` -> ``(B, N)``.
+    """
+    sensor = _plane_range_bearing(model, x.shape[-1]) if compiled(backend) else None
+    if sensor is None:
+        out = log_likelihood(z, x, model)
+        out += log_weights
+        return out
+    rows = _rows(x)
+    out = np.empty(np.shape(log_weights))
+    _kernels().range_bearing_log_weights(rows[0], rows[1], np.ascontiguousarray(z, dtype=float), sensor,
+                                         _inverse_cholesky(model.R), np.ascontiguousarray(log_weights, dtype=float),
+                                         out)
+    return out
+
+
 def log_likelihood_cov(z: np.ndarray, x: np.ndarray, model: MeasurementModel, R: np.ndarray) -> np.ndarray:
     """``log N(z_b; h(x_bi), R_b)`` for a per-item covariance ``R (B, m, m)``, including the normalising
     ``-(m log 2 pi + log |R_b|) / 2``; ``z (B, m)``, ``x (B, N, n)`` -> ``(B, N)``."""
@@ -158,8 +278,78 @@ def log_likelihood_cov(z: np.ndarray, x: np.ndarray, model: MeasurementModel, R:
     return -0.5 * np.einsum("bmn,bmn->bn", white, white) - 0.5 * (m * np.log(2.0 * np.pi) + log_det)[:, None]
 
 
-def estimate(state: ParticleState) -> Gaussian:
-    return state.cloud.to_gaussian()
+def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, present: np.ndarray, threshold: float,
+             rng: np.random.Generator, backend: str = "numpy") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Normalise, and resample where the effective sample size is low: the end of a bootstrap update.
+
+    Items with ``present``: ``log_w`` normalised (an item whose every weight underflowed, or that holds a NaN or
+    ``+inf``, keeps ``previous`` and is counted as ``dead``); items without: ``previous``.  Then the items with
+    ``present`` and ``N_eff < threshold N`` (every such item when ``threshold > 1``) are resampled
+    systematically (:func:`workbench.resampling.resample_where`: one offset ``u_0 ~ U[0, 1)`` per resampled item,
+    drawn as ``rng.random((R, 1))``) and get weights ``1/N``.  ``backend`` as in the module docstring.
+
+    Shapes: ``particles (B, N, n)``; ``log_w, previous (B, N)``; ``present (B,)`` ->
+    ``particles (B, N, n)`` (component-major), ``log_w (B, N)``, ``resampled (B,)``, ``dead (B,)``.
+    """
+    from .resampling import effective_sample_size, normalise_log_weights, resample_where
+
+    B, N = np.shape(log_w)
+    present = np.asarray(present, dtype=bool)
+    top = np.max(log_w, axis=1)
+    if not compiled(backend):
+        # every weight of an item underflowed (or a NaN/inf crept in): its max is not finite
+        dead = present & ~np.isfinite(top)
+        log_w = normalise_log_weights(log_w, fallback=previous)
+        if not present.all():
+            log_w = np.where(present[:, None], log_w, previous)
+        # N_eff <= N, so a threshold above one resamples every item with a measurement
+        resample = present if threshold > 1.0 else present & (effective_sample_size(log_w) < threshold * N)
+        x, log_w = resample_where(resample, particles, log_w, rng)
+        return x, log_w, resample, dead
+    k = _kernels()
+    previous = np.ascontiguousarray(previous, dtype=float)
+    if threshold > 1.0:
+        # every present item is resampled, so its normalised weights are never kept: the CDF comes from
+        # exp(log_w - max) directly (the twin's exp(normalised - max) up to round-off), a dead item's from its
+        # previous weights, as the twin's fallback gives
+        resample = present
+        dead = present & ~np.isfinite(top)
+        weights = log_w
+        if dead.any():
+            weights = np.where(dead[:, None], previous, log_w)
+            top = np.max(weights, axis=1)
+        out = np.where(present[:, None], -np.log(N), previous) if not present.all() else np.full((B, N), -np.log(N))
+    else:
+        out = np.empty((B, N))
+        dead = np.empty(B, dtype=bool)
+        k.normalise(log_w, top, present, previous, out, dead)
+        weights, top = out, np.max(out, axis=1)
+        ess = k.effective_sample_size(out, top, np.empty(B))
+        resample = present & (ess < threshold * N)
+    if not resample.any():
+        return particles, out, resample, dead
+    rows = np.flatnonzero(resample)
+    u0 = rng.random((rows.size, 1))
+    src = _rows(particles)
+    n = src.shape[0]
+    moved = np.empty((n, B, N))
+    k.systematic_gather(np.ascontiguousarray(weights, dtype=float), top, rows, u0[:, 0], src, moved, np.empty(N),
+                        np.empty(N + 1, dtype=np.int64))
+    out[rows] = -np.log(N)
+    return moved.transpose(1, 2, 0), out, resample, dead
+
+
+def estimate(state: ParticleState, backend: str = "numpy") -> Gaussian:
+    """Weighted mean and covariance of each item's particles (``Particles.to_gaussian``); ``backend`` as in the
+    module docstring."""
+    if not compiled(backend):
+        return state.cloud.to_gaussian()
+    x = _rows(state.cloud.particles)
+    n, B, N = x.shape
+    mean = np.empty((B, n))
+    cov = np.empty((B, n, n))
+    _kernels().moments(x, np.ascontiguousarray(state.cloud.log_weights, dtype=float), mean, cov, np.empty(N))
+    return Gaussian.trusted(mean, cov)
 
 
 def diagnostics(state: ParticleState) -> dict:

@@ -278,8 +278,12 @@ class BenchmarkSpec:
     """A benchmark group for ``workbench bench``.
 
     ``run(quick: bool) -> dict`` returns flat figures (numbers or short strings); it runs in a fresh process
-    of its own (the host finds it again there by ``group``), so its peak memory is its own.  A figure named
-    ``target_*`` states a target and ``met_*`` whether it was met.
+    of its own (the host finds it again there by ``group``), so its peak memory is its own.
+
+    A target ``X`` is declared by three figures: ``target_X`` (the goal as text, e.g. ``"<= 2"``), ``measured_X``
+    (the measured number) and ``met_X`` (a bool), with an optional ``note_X`` (how it was measured, or why it is
+    missed); ``workbench bench`` prints one line per target and never says "met" in quick mode.  ``curves`` (a list
+    of series) feeds ``workbench bench --plot`` (:mod:`workbench.bench.plots`).
     """
 
     group: str

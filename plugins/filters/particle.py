@@ -8,7 +8,12 @@ Update:  ``log w_i <- log w_i + log N(z; h(x_i), R)`` with the residual wrapped 
 components (``R``: the detection's own covariance where the scan carries one); normalise with logsumexp;
 resample systematically where ``N_eff < threshold * N`` (``threshold > 1``, e.g. ``inf``, resamples at
 every update).  An item with every weight underflowed keeps its previous weights (counted in the
-diagnostics).  The shared pieces (state, proposal, likelihood) are :mod:`workbench.particle_core`.
+diagnostics).  The shared pieces (state, proposal, likelihood, reweighting, estimate) are
+:mod:`workbench.particle_core`.
+
+Backend: ``backend="auto"`` (the default) runs the compiled steps of :mod:`workbench.kernels.particle_numba` where
+the kernel policy picks Numba (the CPU with Numba installed), else the NumPy code they are held to; ``"numba"`` or
+``"numpy"`` ask for one.  The same seed gives the same particles on both (see :mod:`workbench.particle_core`).
 """
 
 from __future__ import annotations
@@ -18,57 +23,69 @@ from functools import partial
 import numpy as np
 
 from workbench import hookimpl
-from workbench.filtering import keep_where, single_measurement
+from workbench.filtering import single_measurement
 from workbench.kalman_core import measurement_covariance
-from workbench.params import Param
-from workbench.particle_core import (ParticleState, diagnostics, estimate, init, log_likelihood, log_likelihood_cov,
-                                     predict)
-from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
-from workbench.specs import FilterSpec
-from workbench.types import Particles, Scan
 from workbench.models import MeasurementModel
+from workbench.params import Param
+from workbench.particle_core import (ParticleState, diagnostics, estimate, init, log_likelihood_cov, predict, reweight,
+                                     weighted_log_likelihood)
+from workbench.specs import FilterSpec
+from workbench.types import InputError, Particles, Scan
+
+#: Backends the bootstrap filter takes (no Taichi version: see :mod:`workbench.particle_core`).
+SIR_BACKENDS = ("auto", "numba", "numpy")
 
 PARAMETERS = (
-    Param("particles", 500, "particles per run", "int", minimum=1),
+    Param("particles", 500, "particles per run", "int", minimum=1, footprint=40.0),
     Param("threshold", 0.5, "resample where N_eff < threshold N (above 1: at every update)", minimum=0.0),
+    Param("backend", "auto", "array steps: compiled (numba) or NumPy (auto: the kernel policy's choice)", "str",
+          choices=SIR_BACKENDS),
 )
 
 
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
-           threshold: float) -> ParticleState:
+           threshold: float, backend: str = "numpy") -> ParticleState:
     z, present = single_measurement(scan, "sir")
     if not present.any():
         return state
     cloud = state.cloud
+    # a NaN or inf measurement would make every weight of its item NaN, which the update would then replace by
+    # the previous weights: refuse it instead of hiding it
+    bad = present & ~np.all(np.isfinite(z), axis=1)
+    if bad.any():
+        item = int(np.argmax(bad))
+        raise InputError(f"sir: the valid measurement of batch item {item} holds a non-finite value (NaN or inf): "
+                         f"{z[item]}")
     if scan.cov is None:
-        log_w = log_likelihood(z, cloud.particles, model)
+        log_w = weighted_log_likelihood(z, cloud.particles, model, cloud.log_weights, backend)
     else:
-        log_w = log_likelihood_cov(z, cloud.particles, model, measurement_covariance(scan, model, present))
-    log_w += cloud.log_weights
-    # every weight of an item underflowed (or a NaN/inf crept in): its max is not finite
-    dead = ~np.isfinite(np.max(log_w, axis=1))
-    log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
-    if not present.all():
-        log_w = keep_where(present, log_w, cloud.log_weights)
-    n = log_w.shape[1]
-    # N_eff <= N, so a threshold above one resamples every item with a measurement
-    resample = present if threshold > 1.0 else present & (effective_sample_size(log_w) < threshold * n)
-    x, log_w = resample_where(resample, cloud.particles, log_w, rng)
-    return ParticleState(Particles.trusted(x, log_w), state.resamples + int(resample.sum()),
-                         state.underflows + int((dead & present).sum()))
+        R = measurement_covariance(scan, model, present)
+        bad = present & ~np.all(np.isfinite(R), axis=(1, 2))
+        if bad.any():
+            raise InputError(f"sir: the own covariance (Scan.cov) of batch item {int(np.argmax(bad))}'s valid "
+                             f"detection holds a non-finite value (NaN or inf)")
+        log_w = log_likelihood_cov(z, cloud.particles, model, R)
+        log_w += cloud.log_weights
+    x, log_w, resampled, dead = reweight(cloud.particles, log_w, cloud.log_weights, present, threshold, rng, backend)
+    return ParticleState(Particles.trusted(x, log_w), state.resamples + int(resampled.sum()),
+                         state.underflows + int(dead.sum()))
 
 
-def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = None) -> FilterSpec:
-    """A bootstrap particle filter with ``particles`` particles, resampling when ``N_eff < threshold N``."""
+def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = None,
+             backend: str = "auto") -> FilterSpec:
+    """A bootstrap particle filter with ``particles`` particles, resampling when ``N_eff < threshold N``; its array
+    steps compiled or in NumPy as ``backend`` says."""
+    if backend not in SIR_BACKENDS:
+        raise InputError(f"sir: unknown backend {backend!r}; expected one of {', '.join(SIR_BACKENDS)}")
     return FilterSpec(
         name=name or "sir",
         summary=f"Bootstrap (SIR) particle filter, N={particles}, systematic resampling at N_eff < {threshold} N",
         init=partial(init, particles=particles),
-        predict=predict,
-        update=partial(update, threshold=threshold),
-        estimate=estimate,
+        predict=partial(predict, backend=backend),
+        update=partial(update, threshold=threshold, backend=backend),
+        estimate=partial(estimate, backend=backend),
         capabilities=frozenset({"stochastic", "detection_covariance"}),
-        params={"particles": particles, "threshold": threshold},
+        params={"particles": particles, "threshold": threshold, "backend": backend},
         diagnostics=diagnostics,
         parameters=PARAMETERS,
         build=make_sir,

@@ -84,7 +84,7 @@ from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.kalman_core import ekf_update, measurement_covariance
 from workbench.kernels.backend import BACKENDS
-from workbench.kernels.tbd_weights import tbd_log_weight_sums
+from workbench.kernels.tbd_weights import PRECISIONS, tbd_log_weight_sums
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
@@ -189,7 +189,7 @@ def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model:
 def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, sigma_vr: float,
                    floor_density: float = 0.0, backend: str = "auto", *, floor: str = "flat",
                    floor_scale: float = 1.0, log_weights: np.ndarray | None = None,
-                   missed: np.ndarray | None = None) -> np.ndarray:
+                   missed: np.ndarray | None = None, precision: str = "float64") -> np.ndarray:
     """``log(eps_i + sum_m w_{m,i})`` for particles ``(B, N, 6)`` and a gated scan -> ``(B, N)``.
 
     ``-inf`` for items without a valid detection.  ``log_weights (B, N)`` are the predicted cloud's (uniform when
@@ -208,7 +208,7 @@ def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, s
     sigma_p = detection.position_sigma(snr_db, np.linalg.norm(z[..., :3], axis=-1))
     # log sum_m P_D(snr_m) N(p_m; p_i, sigma_p,m^2 I_3) N(vr_m; vr_i, sigma_vr^2)     (13), (14)
     log_sum = tbd_log_weight_sums(points, z, scan.valid, np.where(scan.valid, log_pd, 0.0), sigma_p, sigma_vr,
-                                  backend=backend)
+                                  backend=backend, precision=precision)
     if floor == "none":
         return log_sum
     if log_weights is None:
@@ -330,7 +330,7 @@ def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, thresh
 def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
            threshold: float, sigma_vr: float, backend: str, floor: str = "amplitude", floor_density: float = 0.0,
            floor_scale: float = FLOOR_SCALE, missed_detection: str = "cloud", regularisation: float = 0.0,
-           tempering: int = 1) -> ParticleState:
+           tempering: int = 1, precision: str = "float64") -> ParticleState:
     """The direct-weight update (eqs 13-15) with the floor ``floor``.
 
     With the amplitude floor the "every detection is clutter" term carries the missed-detection factor
@@ -346,13 +346,14 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
         state = _update_once(state, scan, model, rng, threshold=threshold, sigma_vr=sigma_vr, backend=backend,
                              floor=floor, floor_density=floor_density, floor_scale=floor_scale,
                              missed_detection=missed_detection, regularisation=regularisation,
-                             power=1.0 / int(tempering))
+                             power=1.0 / int(tempering), precision=precision)
     return state
 
 
 def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator, *,
                  threshold: float, sigma_vr: float, backend: str, floor: str, floor_density: float,
-                 floor_scale: float, missed_detection: str, regularisation: float, power: float) -> ParticleState:
+                 floor_scale: float, missed_detection: str, regularisation: float, power: float,
+                 precision: str = "float64") -> ParticleState:
     """One (power ``power`` of the) likelihood step of :func:`update`, then resampling and regularisation."""
     present = scan.valid.any(axis=1)
     cloud = state.cloud
@@ -367,7 +368,8 @@ def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng:
     if present.any():
         # log w_i <- log w_i + power log(eps_i + sum_m w_{m,i})
         log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend, floor=floor,
-                                 floor_scale=floor_scale, log_weights=cloud.log_weights, missed=missed)
+                                 floor_scale=floor_scale, log_weights=cloud.log_weights, missed=missed,
+                                 precision=precision)
         log_w = log_w + (log_lik if power == 1.0 else power * log_lik)
     if not present.all():
         # an empty gate: log w_i <- log w_i + power log(1 - P_D^T(s_i)) (per particle), or unchanged
@@ -393,7 +395,7 @@ def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) ->
 
 
 TBD_PARAMETERS = (
-    Param("particles", 600, "particles per run", "int", minimum=1),
+    Param("particles", 600, "particles per run", "int", minimum=1, footprint=48.0),
     Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
     Param("floor", "amplitude", "the 'target missed, every detection is clutter' floor: amplitude (the scan's clutter "
           "density, lowered by the strongest detection's amplitude likelihood ratio, times 1 - P_D of the design "
@@ -416,6 +418,8 @@ TBD_PARAMETERS = (
           minimum=0.0),
     Param("tempering", 1, "progressive correction: the likelihood applied as this many equal powers, each followed by "
           "resampling and regularisation (1: off)", "int", minimum=1),
+    Param("precision", "float64", "arithmetic of the weight kernel (float32: faster, normalised weights within 1e-4 "
+          "of float64)", "str", choices=PRECISIONS),
 )
 
 
@@ -424,7 +428,7 @@ def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor: str = "ampl
                 sigma_vr: float = 15.0,
                 backend: str = "auto", name: str | None = None, switch_on: float = SWITCH_ON,
                 switch_off: float = SWITCH_OFF, manoeuvre_scale: float = MANOEUVRE_SCALE,
-                regularisation: float = REGULARISATION, tempering: int = 1) -> FilterSpec:
+                regularisation: float = REGULARISATION, tempering: int = 1, precision: str = "float64") -> FilterSpec:
     """The direct-weight TBD particle filter with ``particles`` particles, the floor ``floor`` (see the module
     docstring) and Doppler kernel ``sigma_vr`` (m/s); resampling when ``N_eff < threshold N``; weights by the kernel
     ``backend``; the two-mode (jump-Markov) prediction of :func:`predict_jump_markov` (``switch_on = 0``: plain CV);
@@ -454,14 +458,15 @@ def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor: str = "ampl
         predict=_predict(switch_on, switch_off, manoeuvre_scale),
         update=partial(update, threshold=threshold, floor=floor, floor_scale=floor_scale,
                        missed_detection=missed_detection, floor_density=floor_density,
-                       sigma_vr=sigma_vr, backend=backend, regularisation=regularisation, tempering=int(tempering)),
+                       sigma_vr=sigma_vr, backend=backend, regularisation=regularisation, tempering=int(tempering),
+                       precision=precision),
         estimate=estimate,
         capabilities=frozenset({"stochastic", "multi_measurement", "position_doppler_3d", "manoeuvre_modes"}),
         params={"particles": particles, "threshold": threshold, "floor": floor, "floor_scale": floor_scale,
                 "missed_detection": missed_detection,
                 "floor_density": floor_density, "sigma_vr": sigma_vr, "backend": backend, "switch_on": switch_on,
                 "switch_off": switch_off, "manoeuvre_scale": manoeuvre_scale, "regularisation": regularisation,
-                "tempering": int(tempering)},
+                "tempering": int(tempering), "precision": precision},
         diagnostics=diagnostics,
         parameters=TBD_PARAMETERS,
         build=make_tbd_pf,
@@ -525,7 +530,7 @@ def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: n
 
 
 SIR_JM_PARAMETERS = (
-    Param("particles", 600, "particles per run", "int", minimum=1),
+    Param("particles", 600, "particles per run", "int", minimum=1, footprint=48.0),
     Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
     Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
           minimum=0.0, maximum=1.0),

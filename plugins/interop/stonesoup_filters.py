@@ -69,7 +69,7 @@ UKF_PARAMETERS = (
     Param("kappa", None, "secondary spread; none: Stone Soup's default 3 - n", type="float?"),
 )
 PF_PARAMETERS = (
-    Param("particles", 1000, "number of particles per run", type="int", minimum=10),
+    Param("particles", 1000, "number of particles per run", type="int", minimum=10, footprint=40.0),
     Param("ess_threshold", 0.5, "resample when the effective sample size falls below this fraction of the "
                                 "particles (1: after every update)", minimum=0.0, maximum=1.0),
 )

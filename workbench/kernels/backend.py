@@ -1,7 +1,8 @@
 """The one kernel-backend policy: which implementation of a compiled kernel runs, and on which arch.
 
-Every kernel of :mod:`workbench.kernels` has a NumPy twin (the reference its tests hold every backend to), a
-Numba version for the CPU and a Taichi version for any arch.  A kernel asks :func:`resolve` which to run:
+Every kernel of :mod:`workbench.kernels` has a NumPy twin (the reference its tests hold every backend to) and a
+Numba version for the CPU; the particle-filter weight kernels also have a Taichi version for any arch (a kernel
+without one runs its NumPy twin off the CPU).  A kernel asks :func:`resolve` which to run:
 
 - ``backend="auto"`` on ``arch="cpu"``: Numba where it is installed (its CPU code vectorises with AVX/FMA), else
   Taichi;

@@ -16,15 +16,23 @@ Backends (all held to :func:`workbench.kernels.reference.tbd_log_weight_sums_ref
   which LLVM vectorises, then the sum of exponentials); runs on any Taichi arch.
 - ``"numba"`` (the CPU default): particles in tiles of :data:`TILE`, a one-pass online logsumexp
   vectorised across the particles of a tile; CPU only.
-- ``"numpy"``: the chunked NumPy reference.
+- ``"numpy"``: the chunked NumPy reference (``float32``: :func:`.tbd_weights_numpy.tbd_log_weight_sums_float32`,
+  the single-precision arithmetic in NumPy).
 - ``"auto"``: Numba when the arch is the CPU and Numba is installed, else Taichi.
 
-Both compiled kernels use the same inlined polynomial ``exp`` (:func:`poly_exp`): range reduction
-``x = n ln2 + r`` with ``|r| <= ln2 / 2``, a degree-11 Taylor polynomial in Horner form (relative error
-below 1e-14) and ``2^n`` built by writing ``n + 1023`` into the exponent bits.  A call to ``libm``
-would stop the loop from vectorising.  Kernels take plain arrays; Taichi and Numba are imported and
-started on first use only.  (No ``from __future__ import annotations`` here: Taichi reads the kernel
-annotations as objects.)
+Precision (``precision=``): ``"float64"`` (the default) or ``"float32"``, on every backend.  The arithmetic is
+in base 2 (log-weights pre-multiplied by ``log2 e``, then ``2^x``) with a polynomial ``2^x`` inlined in the
+loop (a ``libm`` call would stop the loop from vectorising): degree 11 in float64 (relative error below
+1e-14), degree 6 in float32 (about one float32 ulp).  In float64 each pair costs five multiply-adds for its
+log-weight (the squared distance expanded about the particles' mean, :mod:`.tbd_weights_numpy`); in float32
+the differences are formed directly, which keeps single precision accurate.  Float32 runs twice as many
+numbers per vector instruction and a shorter polynomial; its log-sums carry float32 round-off (about
+``1e-6`` relative, growing with the number of measurements summed), which moves normalised particle weights
+by far less than :data:`FLOAT32_WEIGHT_RTOL` (tested on realistic scenes); the returned array is float64 either
+way.
+
+Kernels take plain arrays; Taichi and Numba are imported and started on first use only.  (No ``from __future__
+import annotations`` here: Taichi reads the kernel annotations as objects.)
 """
 
 import numpy as np
@@ -32,19 +40,29 @@ import numpy as np
 from .backend import BACKENDS, current_arch, numba_available, resolve
 from .reference import tbd_log_weight_sums_reference
 from .runtime import ensure_taichi
-from .tbd_weights_numpy import (EXP_COEFFS, EXP_FLOOR, INV_LN2, LN2_HI, LN2_LO, SERIAL_PAIRS, TILE,  # noqa: F401
-                                pack_measurements, pack_points, poly_exp)
+from .tbd_weights_numpy import (EXP_FLOOR, LOG2E, PRECISIONS, SERIAL_PAIRS, TILE, pack_measurements,  # noqa: F401
+                                pack_points, poly_exp, poly_exp2, tbd_log_weight_sums_float32)
 
 __all__ = [
     "BACKENDS",
+    "PRECISIONS",
     "TILE",
+    "FLOAT32_WEIGHT_RTOL",
     "numba_available",
     "resolve_backend",
     "pack_points",
     "pack_measurements",
     "poly_exp",
+    "poly_exp2",
     "tbd_log_weight_sums",
 ]
+
+#: The stated tolerance of the float32 variant: on every particle whose normalised weight is at least 1e-12 of the
+#: largest, ``|w32 - w64| <= FLOAT32_WEIGHT_RTOL * w64`` after normalisation over the particles of a run.  Measured
+#: on realistic track-before-detect scenes (tests/test_kernels.py): about 5e-6, every backend.  The error grows with the size
+#: of the log-weights that dominate a particle's sum (float32 keeps about 7 digits of ``c_m - a_m d^2 - ...``), so a
+#: particle whose best detection lies thousands of sigmas away has a log-sum, not a weight, of float32 accuracy.
+FLOAT32_WEIGHT_RTOL = 1e-4
 
 
 def resolve_backend(backend: str = "auto", arch: str | None = None) -> str:
@@ -53,7 +71,8 @@ def resolve_backend(backend: str = "auto", arch: str | None = None) -> str:
 
 
 def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray,
-                        sigma_p: np.ndarray, sigma_vr: float, backend: str = "auto", arch: str | None = None) -> np.ndarray:
+                        sigma_p: np.ndarray, sigma_vr: float, backend: str = "auto", arch: str | None = None,
+                        precision: str = "float64") -> np.ndarray:
     """``log sum_m w_{m,i}`` for every particle of every run (eqs 13-14), ``-inf`` where a run has no
     valid measurement.
 
@@ -64,37 +83,39 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
     log_pd : ``log P_D(snr_m)``; sigma_p : isotropic position sigma of each measurement (m)
     sigma_vr : radial-velocity sigma (m/s)
     backend, arch : see the module docstring
+    precision : ``"float64"`` or ``"float32"`` arithmetic (see the module docstring); the result is float64
 
     Shapes
     ------
     points : (B, N, 4); z : (B, M, 4); valid, log_pd, sigma_p : (B, M); returns (B, N)
     """
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown kernel precision {precision!r}; expected one of {', '.join(PRECISIONS)}")
     which = resolve_backend(backend, arch)
     if which == "numpy":
+        if precision == "float32":
+            return tbd_log_weight_sums_float32(points, z, valid, log_pd, sigma_p, sigma_vr)
         return tbd_log_weight_sums_reference(points, z, valid, log_pd, sigma_p, sigma_vr)
-    pts = pack_points(points)
-    meas, counts = pack_measurements(z, valid, log_pd, sigma_p, sigma_vr)
+    single = precision == "float32"
+    pts, origin = pack_points(points, sigma_vr, precision)
+    meas, counts = pack_measurements(z, valid, log_pd, sigma_p, sigma_vr, precision, origin)
     B, _, N = pts.shape
     out = np.zeros((B, N))
-    beta = 0.5 / float(sigma_vr) ** 2
+    # beta / ln 2 for the float32 kernels (the float64 packing carries it)
+    beta2 = 0.5 / float(sigma_vr) ** 2 * LOG2E
     if B and N and meas.shape[2]:
         if which == "numba":
-            parallel, serial = _numba_kernel()
-            (parallel if B * N * int(counts.max()) >= SERIAL_PAIRS else serial)(pts, meas, counts, beta, out)
+            from . import tbd_weights_numba as nb
+
+            big = B * N * int(counts.max()) >= SERIAL_PAIRS
+            if single:
+                (nb.parallel32 if big else nb.serial32)(pts, meas, counts, np.float32(beta2), out)
+            else:
+                (nb.parallel if big else nb.serial)(pts, meas, counts, out)
         else:
             ensure_taichi(current_arch() if arch is None else arch)
-            _taichi_kernel()(pts, meas, counts, beta, out)
+            from .tbd_weights_taichi import _taichi_kernel
+
+            _taichi_kernel(precision)(pts, meas, counts, beta2, out)
     out[counts == 0] = -np.inf
     return out
-
-
-def _taichi_kernel():
-    from .tbd_weights_taichi import _taichi_kernel as build
-
-    return build()
-
-
-def _numba_kernel():
-    from .tbd_weights_numba import parallel, serial
-
-    return parallel, serial

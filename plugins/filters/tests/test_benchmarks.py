@@ -18,28 +18,37 @@ from workbench_filters import benchmarks as bench_core
 from workbench_filters import particle
 
 
-def _expected_fields(stonesoup: bool, ukf: bool) -> dict:
+def _expected_fields(stonesoup: bool, ukf: bool, filterpy: bool) -> dict:
     """Every figure of ``core --quick`` -> ``"number"`` or the one string it may be instead."""
-    fields = {"cpu_count": "number", "load_avg_1min": "number", "speedup_target": "number",
-              "numpy_version": "string", "stonesoup_version": "string", "peak_rss_mib": "number",
-              "group_wall_s": "number"}
+    n = bench_core.TARGET_N
+    fields = {"cpu_count": "number", "load_avg_1min": "number", "numpy_version": "string", "pf_backend": "string",
+              "stonesoup_version": "string", "peak_rss_mib": "number", "group_wall_s": "number",
+              "kernel_arch": "string", "load_avg_1min_start_pf_end": "list", "curves": "list",
+              f"target_pf_over_floor_N{n}": "string", f"measured_pf_over_floor_N{n}": "number",
+              f"met_pf_over_floor_N{n}": "bool", f"note_pf_over_floor_N{n}": "string",
+              f"target_pf_speedup_vs_stonesoup_N{n}": "string",
+              f"measured_pf_speedup_vs_stonesoup_N{n}": "number" if stonesoup else "not installed",
+              f"met_pf_speedup_vs_stonesoup_N{n}": "bool" if stonesoup else "not installed"}
     for n in bench_core.PF_SIZES["quick"]:
-        for key in ("pf_ns_per_particle_step", "pf_floor_ns_per_particle_step", "pf_pos_rmse_m"):
+        for key in ("pf_ns_per_particle_step", "pf_floor_ns_per_particle_step", "pf_pos_rmse_m",
+                    "pf_floor_numpy_draws_ns_per_particle_step", "pf_floor_compiled_draws_ns_per_particle_step",
+                    "pf_over_floor", "pf_over_numpy_draws_floor"):
             fields[f"{key}_N{n}"] = "number"
-    for n in bench_core.PEER_SIZES:
+    for n in bench_core.PEER_SIZES["quick"]:
         for key in ("stonesoup_ns_per_particle_step", "stonesoup_pos_rmse_m", "pf_over_stonesoup",
                     "pf_speedup_vs_stonesoup"):
             fields[f"{key}_N{n}"] = "number" if stonesoup else "not installed"
-    fields["pf_speedup_target_met"] = "bool" if stonesoup else "not installed"
     for b in bench_core.UKF_BATCHES["quick"]:
         fields[f"ukf_ns_per_run_step_B{b}"] = "number" if ukf else "ukf not installed"
+    fields["filterpy_ukf_ns_per_run_step"] = ("number" if filterpy else "not installed") if ukf else "ukf not installed"
     return fields
 
 
-def test_bench_quick_core_reports_every_figure(tmp_path):
+def test_bench_quick_core_reports_every_figure_and_its_targets(tmp_path):
     out = tmp_path / "bench.json"
     code = "import sys; from workbench.cli import main; sys.exit(main(sys.argv[1:]))"
-    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--only", "core", "--json", str(out)],
+    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--only", "core", "--json", str(out),
+                           "--plot", str(tmp_path / "figs")],
                           capture_output=True, text=True, timeout=900, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
     report = json.loads(out.read_text())
@@ -47,8 +56,9 @@ def test_bench_quick_core_reports_every_figure(tmp_path):
     core = report["groups"]["core"]
     assert "error" not in core, core.get("error")
     stonesoup = importlib.util.find_spec("stonesoup") is not None
+    filterpy = importlib.util.find_spec("filterpy") is not None
     ukf = "ukf" in load_host().filters
-    expected = _expected_fields(stonesoup, ukf)
+    expected = _expected_fields(stonesoup, ukf, filterpy)
     assert set(core) == set(expected), f"missing {set(expected) - set(core)}, unexpected {set(core) - set(expected)}"
     for key, kind in expected.items():
         value = core[key]
@@ -59,19 +69,42 @@ def test_bench_quick_core_reports_every_figure(tmp_path):
             assert isinstance(value, bool), (key, value)
         elif kind == "string":
             assert isinstance(value, str) and value, (key, value)
+        elif kind == "list":
+            assert isinstance(value, list) and value, (key, value)
         else:
             assert value == kind, (key, value)
+    assert core["pf_backend"] == ("numba" if importlib.util.find_spec("numba") else "numpy")
     for n in bench_core.PF_SIZES["quick"]:
         assert core[f"pf_ns_per_particle_step_N{n}"] > 0
         # the filter tracks: its position error stays within a few range-noise sigmas of the truth
         assert core[f"pf_pos_rmse_m_N{n}"] < 20.0
+        # the floor is the faster of its two ways of drawing the same numbers
+        assert core[f"pf_floor_ns_per_particle_step_N{n}"] == min(
+            core[f"pf_floor_numpy_draws_ns_per_particle_step_N{n}"],
+            core[f"pf_floor_compiled_draws_ns_per_particle_step_N{n}"])
     assert core["stonesoup_version"] != "not installed" if stonesoup else core["stonesoup_version"] == "not installed"
+    n = bench_core.TARGET_N
     if stonesoup:
-        n = 100_000
         assert core[f"pf_over_stonesoup_N{n}"] == pytest.approx(1.0 / core[f"pf_speedup_vs_stonesoup_N{n}"])
-        assert core["pf_speedup_target_met"] == (core[f"pf_speedup_vs_stonesoup_N{n}"] >= bench_core.SPEEDUP_TARGET)
+        assert core[f"met_pf_speedup_vs_stonesoup_N{n}"] == (core[f"pf_speedup_vs_stonesoup_N{n}"]
+                                                            >= bench_core.SPEEDUP_TARGET)
         # Stone Soup solved the same problem: its error is of the same size as ours
         assert core[f"stonesoup_pos_rmse_m_N{n}"] < 3.0 * core[f"pf_pos_rmse_m_N{n}"] + 1.0
+    assert core[f"met_pf_over_floor_N{n}"] == (core[f"pf_over_floor_N{n}"] <= bench_core.FLOOR_TARGET)
+    # the printed table: one line per target, indicative in quick mode
+    table = proc.stdout[proc.stdout.index("targets (quick"):].splitlines()
+    lines = [line.split() for line in table[2:] if line.startswith("core ")]
+    assert [(line[1], line[-1]) for line in lines] == [(f"pf_over_floor_N{n}", "indicative"),
+                                                       (f"pf_speedup_vs_stonesoup_N{n}", "indicative")]
+    assert "GPU figures need" in proc.stdout
+    # the scaling figures: the PF against N beside Stone Soup and the floor, the UKF against B beside FilterPy
+    figs = {c["id"]: c for c in core["curves"]}
+    assert {s["role"] for s in figs["pf_vs_particles"]["series"]} == ({"ours", "peer", "limit", "reference"}
+                                                                      if stonesoup else {"ours", "limit", "reference"})
+    if ukf:
+        assert figs["ukf_vs_batch"]["series"][0]["x"] == list(bench_core.UKF_BATCHES["quick"])
+    for curve in core["curves"]:
+        assert (tmp_path / "figs" / f"core_{curve['id']}.png").is_file()
 
 
 def test_sir_every_step_resamples_at_every_update():
@@ -123,10 +156,13 @@ def _reference_sir(prior, scans, motion, model, rng, particles, threshold):
     return np.stack(means, axis=1), np.stack(covs, axis=1)
 
 
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
 @pytest.mark.parametrize("particles, threshold", [(400, 0.5), (BLAS_MOMENT_PARTICLES + 904, 0.5), (3000, 2.0)])
-def test_sir_equals_a_textbook_particle_filter_with_the_same_draws(particles, threshold):
+def test_sir_equals_a_textbook_particle_filter_with_the_same_draws(particles, threshold, backend):
+    if backend == "numba" and importlib.util.find_spec("numba") is None:
+        pytest.skip("numba is not installed")
     truth, scans, prior, motion, model = bench_core.problem(3, 8, seed=4)
-    spec = particle.make_sir(particles, threshold)
+    spec = particle.make_sir(particles, threshold, backend=backend)
     rng = np.random.default_rng(21)
     state = spec.init(prior, rng)
     means, covs = [], []
@@ -155,3 +191,29 @@ def test_bench_problem_measurements_are_h_of_truth_plus_noise_of_r():
     # the truth moves as the motion model says: velocity increments have the model's process noise
     dv = np.diff(truth.states[..., 2:], axis=1) / motion.Q_sqrt[2, 2]
     assert stats.kstest(dv.ravel(), "norm").pvalue > 1e-3
+
+
+def test_filterpy_ukf_of_the_benchmark_tracks_as_our_ukf_does():
+    # the peer of the UKF figure solves the same problem with the same sigma points: its estimates agree with ours
+    pytest.importorskip("filterpy")
+    host = load_host()
+    spec = host.filter("ukf")
+    truth, scans, prior, motion, model = bench_core.problem(2, 30, seed=5)
+    rng = np.random.default_rng(0)
+    state = spec.init(prior, rng)
+    ours = []
+    for k in range(scans.steps):
+        if k:
+            state = spec.predict(state, motion, rng)
+        state = spec.update(state, scans.scan(k).for_filter(), model, rng)
+        ours.append(spec.estimate(state).mean)
+    p = spec.params
+    for r in range(2):
+        ukf = bench_core._filterpy_ukf(prior.take(r), motion, model, p["alpha"], p["beta"], p["kappa"])
+        ukf.update(scans.z[r, 0, 0])
+        theirs = [ukf.x.copy()]
+        for k in range(1, scans.steps):
+            ukf.predict()
+            ukf.update(scans.z[r, k, 0])
+            theirs.append(ukf.x.copy())
+        np.testing.assert_allclose(np.array(theirs), np.stack(ours, axis=1)[r], rtol=1e-6, atol=1e-6)

@@ -1,0 +1,386 @@
+"""The Numba twin of the bootstrap particle filter's array steps (imported only when it is used).
+
+The NumPy twins, which the tests hold every function here to, are the array code of
+:mod:`workbench.particle_core` (:func:`~workbench.particle_core.combine_columns` after
+``rng.standard_normal``, :func:`~workbench.particle_core.log_likelihood`, ``Particles.to_gaussian``) and of
+:mod:`workbench.resampling` (:func:`~workbench.resampling.normalise_log_weights`,
+:func:`~workbench.resampling.effective_sample_size`, :func:`~workbench.resampling.systematic_counts` with the
+gather of :func:`~workbench.resampling.resample_where`).  :mod:`workbench.particle_core` chooses between them
+through the backend policy (:func:`workbench.kernels.backend.resolve`).
+
+Arrays arrive component-major: particles as rows ``(n, L)`` or ``(n, B, N)`` (row ``j`` holds component ``j`` of
+every particle of every item, ``L = B N``), log-weights as ``(B, N)``.  Module-level functions compiled with
+``cache=True``, so that Numba's on-disk cache holds across processes.
+
+Random numbers.  :func:`propagate` draws its normals from the caller's ``numpy.random.Generator`` inside the
+loop, in the order ``rng.standard_normal((B, N, k))`` would (Numba's ``Generator`` runs NumPy's algorithms on
+the same bit generator and state: the same numbers, and the generator is left where NumPy would leave it; tested),
+at about a third of the time of NumPy's own call on this machine.
+
+Floating point.  No fast-math where a result is held to its twin number for number: :func:`combine` and
+:func:`propagate` make the products and sums in the twin's order without fused multiply-adds, so the propagated
+particles are the same bit for bit.  The reductions (sums of exponentials, moments) are compiled with
+``reassoc`` only (vector partial sums), which changes their last bits; ``nnan``/``ninf`` are never given, so
+the NaN and infinity checks hold.  ``exp`` is a polynomial (:func:`exp`, within 1 ulp of the library's) because
+the library call does not vectorise.  ``error_model="numpy"``: a division by zero gives ``inf``, no exception
+branch.  Loops run over 1-D views from index 0, so that Numba emits no negative-index fix-ups and LLVM vectorises.
+"""
+
+import functools
+import math
+
+import numba
+import numpy as np
+from numba import types
+from numba.extending import intrinsic
+
+from .crpf_step_numpy import ATAN_P, ATAN_Q, TAN_PI_8
+from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
+
+jit = functools.partial(numba.njit, error_model="numpy", cache=True)
+#: Reductions and exponentials: reassociation lets LLVM keep vector partial sums, contraction fuses the
+#: polynomial's multiply-adds (half the instructions of :func:`exp`).
+reduce_jit = functools.partial(numba.njit, error_model="numpy", cache=True, fastmath={"reassoc", "contract"})
+
+p0, p1, p2, p3, p4 = ATAN_P
+q0, q1, q2, q3, q4 = ATAN_Q
+tan_pi_8, pi, two_pi, inv_two_pi = TAN_PI_8, math.pi, 2.0 * math.pi, 1.0 / (2.0 * math.pi)
+e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11, e12, e13 = EXP_COEFFS
+inv_ln2, ln2_hi, ln2_lo, underflow = INV_LN2, LN2_HI, LN2_LO, EXP_UNDERFLOW
+#: Particles per tile of the multi-pass loops (every row of a tile stays in L1).
+TILE = 1024
+
+
+@intrinsic
+def _as_double(typingctx, bits):  # reinterpret int64 bits as float64
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+    return types.float64(types.int64), codegen
+
+
+@jit(inline="always")
+def exp(x):
+    """``exp(x)`` for ``x <= 0``, the steps of :func:`.particle_numpy.poly_exp`: ``0`` below ``EXP_UNDERFLOW``
+    (and for ``-inf``), NaN for NaN."""
+    y = max(x, underflow)
+    n = round(y * inv_ln2)
+    r = (y - n * ln2_hi) - n * ln2_lo
+    p = ((((((((((((e0 * r + e1) * r + e2) * r + e3) * r + e4) * r + e5) * r + e6) * r + e7) * r + e8) * r + e9)
+             * r + e10) * r + e11) * r + e12) * r + e13
+    v = p * _as_double((np.int64(n) + 1023) << 52)
+    return v if x >= underflow else (0.0 if x < underflow else x)
+
+
+@jit(inline="always")
+def _term(o, c, s, first):
+    """``o = c s`` (``first``) or ``o += c s`` over 1-D views."""
+    if first:
+        for t in range(o.shape[0]):
+            o[t] = c * s[t]
+    else:
+        for t in range(o.shape[0]):
+            o[t] += c * s[t]
+
+
+@jit(inline="always")
+def _combine_tile(out, x, e, lo, hi, src, coef, ptr):
+    """:func:`combine` on the particles ``lo:hi``, their noise rows being ``e[0 : hi - lo]``."""
+    n = x.shape[0]
+    for i in range(out.shape[0]):
+        o = out[i, lo:hi]
+        if ptr[i] == ptr[i + 1]:
+            o[:] = 0.0
+            continue
+        for q in range(ptr[i], ptr[i + 1]):
+            j = src[q]
+            if j < n:
+                _term(o, coef[q], x[j, lo:hi], q == ptr[i])
+            else:
+                _term(o, coef[q], e[: hi - lo, j - n], q == ptr[i])
+
+
+@jit
+def combine(out, x, e, src, coef, ptr):
+    """``out[i] = sum_t coef[t] s_{src[t]}`` over the terms ``t`` of row ``i`` (``ptr[i]:ptr[i+1]``), in order.
+
+    ``s_j`` is ``x[j]`` for ``j < n`` and ``e[:, j - n]`` beyond: the product ``[F | G] [x; e]`` with only the
+    non-zero coefficients of each row, in the order of :func:`workbench.particle_core.combine_columns` (a
+    coefficient one multiplies exactly, so the result is that function's bit for bit).  A row without terms is
+    zero.
+
+    Shapes: ``out (r, L)``, ``x (n, L)``, ``e (L, k)``, ``src, coef (T,)``, ``ptr (r + 1,)``.
+    """
+    L = out.shape[1]
+    for lo in range(0, L, TILE):
+        hi = min(lo + TILE, L)
+        _combine_tile(out, x, e[lo:hi], lo, hi, src, coef, ptr)
+    return out
+
+
+@jit
+def propagate(out, x, rng, k, src, coef, ptr):
+    """:func:`combine` with ``e`` drawn here: ``e = rng.standard_normal((L, k))``, the same numbers in the same
+    order, one tile at a time (no ``(L, k)`` array).
+
+    Shapes: ``out (r, L)``, ``x (n, L)``; ``k`` noise columns.
+    """
+    L = out.shape[1]
+    buf = np.empty((TILE, max(k, 1)))
+    for lo in range(0, L, TILE):
+        hi = min(lo + TILE, L)
+        for t in range(hi - lo):
+            for j in range(k):
+                buf[t, j] = rng.standard_normal()
+        _combine_tile(out, x, buf, lo, hi, src, coef, ptr)
+    return out
+
+
+@jit
+def fill_normals(rng, out):
+    """``out[...] = rng.standard_normal(out.shape)``: the draw loop of :func:`propagate` alone (the numbers NumPy
+    would draw, in C order), for the benchmark's floor.  Shapes: ``out (L, k)``."""
+    for t in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[t, j] = rng.standard_normal()
+    return out
+
+
+@jit(inline="always")
+def atan2(y, x):
+    """``atan2(y, x)`` by range reduction and Cephes' rational approximation (about 1 ulp), with selects only
+    (a library ``atan2`` per particle does not vectorise; this does)."""
+    ax = abs(x)
+    ay = abs(y)
+    swap = ay > ax
+    mx = ay if swap else ax
+    mn = ax if swap else ay
+    a = mn / (mx if mx > 0.0 else 1.0)
+    big = a > tan_pi_8
+    t = (a - 1.0 if big else a) / (a + 1.0 if big else 1.0)
+    z = t * t
+    r = t + t * z * ((((p0 * z + p1) * z + p2) * z + p3) * z + p4) / (((((z + q0) * z + q1) * z + q2) * z + q3)
+                                                                        * z + q4)
+    r = r + (0.25 * pi if big else 0.0)
+    r = 0.5 * pi - r if swap else r
+    r = pi - r if math.copysign(1.0, x) < 0.0 else r  # the sign bit: atan2(+-0, -0) = +-pi
+    return math.copysign(r, y)
+
+
+@jit
+def range_bearing_log_weights(px, py, z, sensor, linv, prev, out):
+    """``out = -1/2 |L^-1 nu|^2 + prev`` with ``nu = [z_r - |p - s|, wrap(z_b - atan2(p - s))]`` per particle.
+
+    The log-likelihood of :func:`workbench.particle_core.log_likelihood` for a range-bearing model, plus the
+    previous log-weights, in one pass: ``R = L L^T`` with ``linv = L^-1`` lower triangular (a zero entry is
+    skipped, as the twin skips it, so that an infinite residual makes no NaN); the bearing residual wrapped to
+    ``(-pi, pi]`` as :func:`workbench.linalg.wrap_angle` does.
+
+    Shapes: ``px, py (B, N)`` positions, ``z (B, 2)`` ``[range, bearing]``, ``sensor (2,)``, ``linv (2, 2)``,
+    ``prev, out (B, N)``.
+    """
+    B = out.shape[0]
+    sx, sy = sensor[0], sensor[1]
+    l00, l10, l11 = linv[0, 0], linv[1, 0], linv[1, 1]
+    cross = l10 != 0.0
+    for b in range(B):
+        zr, zb = z[b, 0], z[b, 1]
+        xb, yb, wb, ob = px[b], py[b], prev[b], out[b]
+        for i in range(ob.shape[0]):
+            dx = xb[i] - sx
+            dy = yb[i] - sy
+            nr = zr - math.sqrt(dx * dx + dy * dy)
+            a = zb - atan2(dy, dx)
+            # wrap to (-pi, pi]: a - 2 pi ceil((a - pi) / 2 pi)
+            nb = a - two_pi * math.ceil((a - pi) * inv_two_pi)
+            # white = L^-1 nu;  -1/2 nu^T R^-1 nu = -1/2 |white|^2
+            w0 = l00 * nr
+            w1 = l10 * nr + l11 * nb if cross else l11 * nb
+            ob[i] = -0.5 * (w0 * w0 + w1 * w1) + wb[i]
+    return out
+
+
+@reduce_jit
+def _sum_exp(row, shift, scale):
+    """``sum_i exp(scale row_i - shift)``."""
+    s = 0.0
+    for i in range(row.shape[0]):
+        s += exp(scale * row[i] - shift)
+    return s
+
+
+@jit(inline="always")
+def _copy(out, row):
+    for i in range(out.shape[0]):
+        out[i] = row[i]
+
+
+@reduce_jit
+def normalise(log_w, top, present, fallback, out, dead):
+    """Rows ``b`` with ``present[b]``: ``out = log_w - log sum_i exp(log_w_i)``; a present row whose largest entry
+    ``top[b]`` is not finite (all ``-inf``, a NaN or ``+inf``) gets ``fallback`` and ``dead[b] = True``.  Rows
+    without ``present``: ``fallback``.
+
+    Shapes: ``log_w, fallback, out (B, N)``; ``top (B,)`` (``np.max(log_w, axis=1)``); ``present, dead (B,)``.
+    """
+    B = log_w.shape[0]
+    for b in range(B):
+        dead[b] = False
+        row = log_w[b]
+        dst = out[b]
+        if present[b]:
+            m = top[b]
+            if math.isfinite(m):
+                # log sum_i exp(l_i) = m + log sum_i exp(l_i - m)
+                total = m + math.log(_sum_exp(row, m, 1.0))
+                for i in range(dst.shape[0]):
+                    dst[i] = row[i] - total
+                continue
+            dead[b] = True
+        _copy(dst, fallback[b])
+    return out
+
+
+@reduce_jit
+def effective_sample_size(log_w, top, out):
+    """``N_eff = 1 / sum_i w_i^2 = exp(-log sum_i exp(2 log w_i))`` per row of normalised log-weights.
+
+    Shapes: ``log_w (B, N)``, ``top (B,)`` (``np.max(log_w, axis=1)``) -> ``out (B,)``.
+    """
+    B = log_w.shape[0]
+    for b in range(B):
+        m = 2.0 * top[b]
+        shift = m if math.isfinite(m) else 0.0
+        s = _sum_exp(log_w[b], shift, 2.0)
+        out[b] = math.exp(-(shift + math.log(s))) if s > 0.0 else np.inf
+    return out
+
+
+@reduce_jit
+def _exp_shifted(row, top, out):
+    for i in range(out.shape[0]):
+        out[i] = exp(row[i] - top)
+
+
+@jit
+def _take_rows(dst, src, parent):
+    """``dst[c, j] = src[c, parent[j]]`` for every row ``c``: one pass over the parents."""
+    n = dst.shape[0]
+    if n == 4:  # the common planar state, unrolled
+        d0, d1, d2, d3 = dst[0], dst[1], dst[2], dst[3]
+        s0, s1, s2, s3 = src[0], src[1], src[2], src[3]
+        for j in range(parent.shape[0]):
+            p = parent[j]
+            d0[j] = s0[p]
+            d1[j] = s1[p]
+            d2[j] = s2[p]
+            d3[j] = s3[p]
+        return
+    for c in range(n):
+        d = dst[c]
+        s = src[c]
+        for j in range(parent.shape[0]):
+            d[j] = s[parent[j]]
+
+
+@jit
+def systematic_gather(log_w, top, rows, u0, x, out, cdf, parent):
+    """Systematic resampling of the items ``rows``, gathered into ``out``; other items copied unchanged.
+
+    For item ``b = rows[r]``: ``c_i = sum_{k<=i} w_k / sum_k w_k`` with ``w = exp(log_w - top_b)`` (uniform where
+    ``top_b``, the row's max, is not finite), ``edge_i = ceil(N c_i - u0_r)`` clipped to ``[0, N]``, and draw ``j``
+    is particle ``i`` for ``edge_{i-1} <= j < edge_i``: the steps of :func:`workbench.resampling.systematic_counts`
+    and its ``repeat``, in the same order (the cumulative sum in index order, as ``np.cumsum``).
+
+    Shapes: ``log_w (B, N)``; ``top (B,)``; ``rows (R,)`` int, ascending; ``u0 (R,)``; ``x, out (n, B, N)``;
+    ``cdf (N,)`` and ``parent (N + 1,)`` int64 scratch.
+    """
+    n, B, N = x.shape
+    r = 0
+    for b in range(B):
+        if r < rows.shape[0] and rows[r] == b:
+            m = top[b]
+            if math.isfinite(m):
+                _exp_shifted(log_w[b], m, cdf)
+            else:
+                cdf[:] = 1.0
+            # c_i = sum_{k <= i} w_k in index order, then / c_{N-1}
+            acc = 0.0
+            for i in range(N):
+                acc += cdf[i]
+                cdf[i] = acc
+            last = cdf[N - 1]
+            u = u0[r]
+            # #{j : (u0 + j) / N < c_i} = ceil(N c_i - u0), clipped to [0, N]
+            for i in range(N):
+                cdf[i] = min(max(math.ceil((cdf[i] / last) * N - u), 0.0), float(N))
+            # parent[edge_{i-1}] = i for every i in order: the last writer of a slot is the particle whose draws
+            # start there (those with no draw share the slot with it and come before); then a running max fills
+            # the slots of repeated draws.  No branch on the counts.
+            parent[:] = 0
+            start = 0
+            for i in range(N):
+                parent[start] = i
+                start = int(cdf[i])
+            top_i = 0
+            for j in range(N):
+                top_i = max(top_i, parent[j])
+                parent[j] = top_i
+            _take_rows(out[:, b], x[:, b], parent[:N])
+            r += 1
+        else:
+            for c in range(n):
+                _copy(out[c, b], x[c, b])
+    return out
+
+
+@reduce_jit(inline="always")
+def _dot(a, b):
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i] * b[i]
+    return s
+
+
+@reduce_jit(inline="always")
+def _dot3(w, a, b):
+    s = 0.0
+    for i in range(w.shape[0]):
+        s += w[i] * a[i] * b[i]
+    return s
+
+
+@reduce_jit
+def moments(x, log_w, mean, cov, w):
+    """Weighted mean and covariance of each item's particles: ``mean = sum_i w_i x_i``,
+    ``cov = sum_i w_i (x_i - mean)(x_i - mean)^T`` with ``w = exp(log_w)`` (``Particles.to_gaussian``).
+
+    Shapes: ``x (n, B, N)``, ``log_w (B, N)``, ``mean (B, n)``, ``cov (B, n, n)``, ``w (N,)`` scratch.
+    """
+    n, B, N = x.shape
+    d = np.empty((n, TILE))
+    for b in range(B):
+        row = log_w[b]
+        for i in range(N):
+            w[i] = exp(row[i])
+        for c in range(n):
+            # mean_c = sum_i w_i x_ic
+            mean[b, c] = _dot(w, x[c, b])
+        cov[b] = 0.0
+        for lo in range(0, N, TILE):
+            hi = min(lo + TILE, N)
+            wt = w[lo:hi]
+            for c in range(n):
+                m = mean[b, c]
+                dc = d[c, : hi - lo]
+                xc = x[c, b, lo:hi]
+                for i in range(dc.shape[0]):
+                    dc[i] = xc[i] - m
+            for c in range(n):
+                for k in range(c, n):
+                    # cov_ck = sum_i w_i d_ic d_ik
+                    cov[b, c, k] += _dot3(wt, d[c, : hi - lo], d[k, : hi - lo])
+        for c in range(n):
+            for k in range(c + 1, n):
+                cov[b, k, c] = cov[b, c, k]
+    return mean
