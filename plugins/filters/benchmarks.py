@@ -306,6 +306,83 @@ def filterpy_ukf_time(host, runs: int = 10, steps: int = 50, repeats: int = 5, s
     return median_time(run, repeat=repeats, warmup=1) / (runs * steps) * 1e9
 
 
+#: Single-track latency targets (one predict + update, B = 1) against FilterPy in the same run.
+EKF_ONE_TARGET, UKF_ONE_TARGET = 1.0, 0.25
+
+
+def one_track_runners(host, steps: int = 400, seed: int = 0):
+    """One track (B = 1) step by step on the range-bearing problem: our EKF and UKF (each predict + update
+    through the filter's four functions, as a user writes it) and FilterPy's EKF and UKF on the same measurements.
+    Returns ``{name: run}``, each ``run()`` doing ``steps`` steps (FilterPy runs missing without FilterPy)."""
+    truth, scans, prior, motion, model = problem(1, steps, seed)
+    rng = np.random.default_rng(seed)
+    one = [scans.scan(k).for_filter() for k in range(steps)]
+
+    def ours(name):
+        spec = host.filter(name)
+
+        def run():
+            state = spec.init(prior, rng)
+            for scan in one:
+                state = spec.update(spec.predict(state, motion, rng), scan, model, rng)
+            return spec.estimate(state)
+        return run
+
+    runners = {"ekf": ours("ekf"), "ukf": ours("ukf")}
+    try:
+        from filterpy.kalman import ExtendedKalmanFilter
+    except ImportError:
+        return runners
+    z = scans.z[0, :, 0, :]
+    params = host.filter("ukf").params
+    jac = lambda x: model.jacobian(x[None])[0]  # noqa: E731
+    hx = lambda x: model.h(x)  # noqa: E731
+    res = lambda a, b: model.residual(a, b)  # noqa: E731
+
+    def fp_ekf():
+        ekf = ExtendedKalmanFilter(4, 2)
+        ekf.x, ekf.P = prior.mean[0].copy(), prior.cov[0].copy()
+        ekf.F, ekf.Q, ekf.R = motion.F, motion.Q, model.R
+        for k in range(steps):
+            ekf.predict()
+            ekf.update(z[k], jac, hx, residual=res)
+        return ekf.x
+
+    def fp_ukf():
+        ukf = _filterpy_ukf(prior, motion, model, params["alpha"], params["beta"], params["kappa"])
+        for k in range(steps):
+            ukf.predict()
+            ukf.update(z[k])
+        return ukf.x
+
+    runners.update({"filterpy_ekf": fp_ekf, "filterpy_ukf": fp_ukf})
+    return runners
+
+
+def one_track_latency(host, repeats: int, steps: int = 400) -> dict:
+    """Microseconds per step (predict + update) at B = 1, ours against FilterPy's timed alternately, and the
+    targets ``ekf <= 1.0 x FilterPy's EKF`` and ``ukf <= 0.25 x FilterPy's UKF`` (warmed up: each runner once
+    before the clock)."""
+    runs = one_track_runners(host, steps)
+    out: dict = {}
+    for name, target in (("ekf", EKF_ONE_TARGET), ("ukf", UKF_ONE_TARGET)):
+        peer = runs.get(f"filterpy_{name}")
+        if peer is None:
+            out[f"{name}_one_track_us_per_step"] = median_time(runs[name], repeat=repeats, warmup=1) / steps * 1e6
+            out[f"filterpy_{name}_us_per_step"] = NOT_INSTALLED
+            continue
+        t_ours, t_peer, ratio = paired_times(runs[name], peer, repeats)
+        out[f"{name}_one_track_us_per_step"] = t_ours / steps * 1e6
+        out[f"filterpy_{name}_us_per_step"] = t_peer / steps * 1e6
+        out[f"target_{name}_one_track_over_filterpy"] = f"<= {target:g}"
+        out[f"measured_{name}_one_track_over_filterpy"] = ratio
+        out[f"met_{name}_one_track_over_filterpy"] = bool(ratio <= target)
+        out[f"note_{name}_one_track_over_filterpy"] = (
+            f"one track (B = 1), {steps} predict + update steps through the filter's functions, timed alternately "
+            f"with FilterPy's {name.upper()} on the same measurements, median of {repeats} pairs")
+    return out
+
+
 def curves(out: dict, size: str) -> list[dict]:
     """The scaling figures of this group (:mod:`workbench.bench.plots`) from its figures ``out``."""
     def num(key):
@@ -413,6 +490,8 @@ def bench(quick: bool = False) -> dict:
         out[f"ukf_ns_per_run_step_B{b}"] = time_ukf(host, b, repeats) if ukf else "ukf not installed"
     out["filterpy_ukf_ns_per_run_step"] = (filterpy_ukf_time(host, runs=3 if quick else 10, repeats=repeats)
                                            if ukf else "ukf not installed")
+    if ukf:
+        out.update(one_track_latency(host, repeats, steps=100 if quick else 400))
     loads.append(os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan"))
     out["load_avg_1min"] = max(loads)
     out["load_avg_1min_start_pf_end"] = loads

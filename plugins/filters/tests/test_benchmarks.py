@@ -41,6 +41,15 @@ def _expected_fields(stonesoup: bool, ukf: bool, filterpy: bool) -> dict:
     for b in bench_core.UKF_BATCHES["quick"]:
         fields[f"ukf_ns_per_run_step_B{b}"] = "number" if ukf else "ukf not installed"
     fields["filterpy_ukf_ns_per_run_step"] = ("number" if filterpy else "not installed") if ukf else "ukf not installed"
+    if ukf:
+        for name in ("ekf", "ukf"):
+            fields[f"{name}_one_track_us_per_step"] = "number"
+            fields[f"filterpy_{name}_us_per_step"] = "number" if filterpy else "not installed"
+            if filterpy:
+                fields[f"target_{name}_one_track_over_filterpy"] = "string"
+                fields[f"measured_{name}_one_track_over_filterpy"] = "number"
+                fields[f"met_{name}_one_track_over_filterpy"] = "bool"
+                fields[f"note_{name}_one_track_over_filterpy"] = "string"
     return fields
 
 
@@ -94,8 +103,10 @@ def test_bench_quick_core_reports_every_figure_and_its_targets(tmp_path):
     # the printed table: one line per target, indicative in quick mode
     table = proc.stdout[proc.stdout.index("targets (quick"):].splitlines()
     lines = [line.split() for line in table[2:] if line.startswith("core ")]
-    assert [(line[1], line[-1]) for line in lines] == [(f"pf_over_floor_N{n}", "indicative"),
-                                                       (f"pf_speedup_vs_stonesoup_N{n}", "indicative")]
+    expected_targets = [(f"pf_over_floor_N{n}", "indicative"), (f"pf_speedup_vs_stonesoup_N{n}", "indicative")]
+    if filterpy and ukf:
+        expected_targets += [("ekf_one_track_over_filterpy", "indicative"), ("ukf_one_track_over_filterpy", "indicative")]
+    assert sorted((line[1], line[-1]) for line in lines) == sorted(expected_targets)
     assert "GPU figures need" in proc.stdout
     # the scaling figures: the PF against N beside Stone Soup and the floor, the UKF against B beside FilterPy
     figs = {c["id"]: c for c in core["curves"]}
@@ -217,3 +228,11 @@ def test_filterpy_ukf_of_the_benchmark_tracks_as_our_ukf_does():
             ukf.update(scans.z[r, k, 0])
             theirs.append(ukf.x.copy())
         np.testing.assert_allclose(np.array(theirs), np.stack(ours, axis=1)[r], rtol=1e-6, atol=1e-6)
+
+
+def test_the_one_track_runners_compute_the_same_track_as_filterpy():
+    # the latency target compares like with like: our EKF and UKF, step by step at B = 1, end where FilterPy's do
+    pytest.importorskip("filterpy", reason="FilterPy (the bench extra) is not installed")
+    runs = bench_core.one_track_runners(load_host(), steps=60)
+    np.testing.assert_allclose(runs["ekf"]().mean[0], runs["filterpy_ekf"](), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(runs["ukf"]().mean[0], runs["filterpy_ukf"](), rtol=1e-6, atol=1e-6)
