@@ -3,14 +3,15 @@
 Pipeline (detection level, every Monte Carlo run at once)::
 
     drone truth (ENU) --dtv-pbr--> target candidate [R, Rdot] with P_D
-                      --pbr-false-alarms--> zero-Doppler residue + false alarms
+                      --pbr-false-alarms--> zero-Doppler residue + CFAR false alarms (density from the Pfa)
                       --pbr-zero-doppler--> drop |f_D| < 1 bin
                       --NN tracker + filter ("kf" by default) on [R, Rdot]--> track
 
 and the ablation: the same candidates read as a monostatic radial velocity ``v = lambda f_D / 2`` in a
-range-velocity model.  One signal-level frame (reference + surveillance samples, ECA, CAF, CA-CFAR)
-gives the cross-ambiguity map; the full size also tracks through a whole signal-level series.
-Choices where the paper is silent are in :data:`NOTES` (and ``docs/paper002.md``).
+range-velocity model.  The signal level (reference + surveillance samples, ECA, CAF, CA-CFAR) runs two scenes:
+the brief's benign one (the paper's row) and a demanding one (ATSC 8-VSB illuminator, direct path +60 dB,
+clutter to the edge of the map).  Choices where the paper is silent are in :data:`NOTES` and
+``docs/paper002.md``; the criteria, their statistics and the tuning rule are fixed there before the results.
 """
 
 from __future__ import annotations
@@ -20,15 +21,17 @@ from typing import Mapping
 
 import numpy as np
 
-from workbench.sensing.bistatic import monostatic_velocity, range_and_rate, range_rate_to_doppler
-from workbench.models import MeasurementModel, constant_velocity, linear_measurement, range_rate_model
+from workbench.criteria import Criterion, criterion_from_runs, replication_rate
 from workbench.metrics import association_log
-from workbench.sensing.bistatic import wavelength
-from workbench.tracking import GATE_99, NearestNeighbour, Track, run, strongest_candidate_prior
-from .signal import PCLConfig, SignalScene, caf_batches, cfar_candidates, eca, frame_signals, simulate_scans
+from workbench.models import MeasurementModel, constant_velocity, linear_measurement, range_rate_model
 from workbench.rng import generator
-from workbench.specs import Criterion, FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
+from workbench.sensing.bistatic import monostatic_velocity, range_and_rate, range_rate_to_doppler, wavelength
+from workbench.specs import FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
+from workbench.tracking import GATE_99, NearestNeighbour, Track, run, strongest_candidate_prior
 from workbench.types import InputError, Scans, Truth
+
+from .signal import (BENIGN_SCENE, DEMANDING_SCENE, PCLConfig, caf_batches, cfar_candidates, demanding_config, eca,
+                     frame_signals, process_frame, simulate_scans_multi)
 
 PAPER = "002"
 FRAME_DT = 0.5  # s between frames [S]
@@ -42,11 +45,25 @@ SECTOR_RANGES = (150.0, 700.0)  # horizontal distance from Rx of the drone's way
 LEG_SECONDS = (10.0, 15.0)  # [U]
 LEG_SPEEDS = (4.0, 10.0)  # m/s [U]
 MAX_ACCEL = 1.0  # m/s^2: the drone turns onto a new leg at no more than this acceleration [U]
-DOPPLER_BIN_DETECTION = 2.0  # Hz = 1 / CPI at the detection level (CPI 0.5 s, as the brief's R_cov)
-REINIT_AFTER = 6  # gated tracker: restart on the strongest candidate after 6 frames (3 s) with no update [U]
-ON_TRACK_M = 100.0  # |R_hat - R| within this counts as "on the target" (about 3 range bins)
+CPI_DETECTION = 0.5  # s: the detection level's coherent interval (the brief's R_cov: half a bin at CPI 0.5 s)
+DOPPLER_BIN_DETECTION = 1.0 / CPI_DETECTION  # Hz
+PFA = 1e-4  # the CA-CFAR's false-alarm probability (signal level and detection level alike)
+MAP_RANGE_MAX = 3000.0  # m
+MAP_RANGE_RATE_MAX = 50.0  # m/s
+ON_TARGET_SIGMAS = 3.0  # the chosen candidate is "on target" within 3 sigma of the truth in R and in Rdot
 NIS_95 = 5.991  # chi-square(2) 0.95 quantile
 VARIANTS = ("rr-nogate", "rr-gate", "rv-nogate", "rv-gate")
+ABLATION_VARIANTS = ("rr-nogate", "rr-gate")
+MIN_RUNS = 200  # the fewest Monte Carlo runs from which a criterion may be decided
+#: Criterion 4 is decided only when the range / range-rate model's NIS tail (5 % expected) lies in this range.
+CONSISTENT_TAIL = (0.025, 0.10)
+REPLICATIONS = 500  # single-run replications of the paper's protocol (one ~1-minute flight)
+#: The tuned setting and its rule (docs/paper002.md, "Tuning"): the restart delay of the gated tracker.
+RESTART_CANDIDATES = (4, 6, 8, 12)  # frames without an update before a restart
+TUNING_SEED = 7002  # with the stream key "tuning": never a stream of a reported run, whatever --seed is
+TUNING_RUNS = {"quick": 200, "full": 500}
+TUNING_TIE = 0.001  # on-target rates within 0.1 percentage point tie; a tie goes to the shorter delay
+ECA_TAPS_BRIEF = 16  # the benign scene's ECA span (0-450 m), also run on the demanding scene to show its failure
 
 
 # -- scenario ---------------------------------------------------------------------------------------------
@@ -115,12 +132,48 @@ def drone_truth(rng: np.random.Generator, runs: int, frames: int, dt: float = FR
     return Truth(states, dt * np.arange(frames))
 
 
-def detection_scans(host, truth: Truth, seed: int) -> Scans:
-    """Target candidates + map clutter with the zero-Doppler bins removed (common random numbers)."""
-    target = host.sensor("dtv-pbr").simulate(truth, generator(seed, "paper002", "sensor"))
-    clutter = host.clutter_generator("pbr-false-alarms").generate(truth, generator(seed, "paper002", "clutter"))
-    return host.clutter_remover("pbr-zero-doppler").remove(target.merge(clutter),
-                                                           doppler_bin_hz=DOPPLER_BIN_DETECTION)
+def cfar_false_alarms(pfa: float = PFA, cpi: float = CPI_DETECTION, range_max: float = MAP_RANGE_MAX,
+                      range_rate_max: float = MAP_RANGE_RATE_MAX, frequency_hz: float = 701e6,
+                      sample_rate: float = 10e6) -> tuple[float, int]:
+    """False alarms per frame a CA-CFAR with false-alarm probability ``pfa`` gives on the range-Doppler map.
+
+    The map has ``L = ceil(range_max / (c / f_s)) + 1`` range bins and ``2K + 1`` Doppler bins of ``1 / CPI``
+    covering ``+-range_rate_max`` (``K = ceil(range_rate_max / (lambda / CPI))``); the expected number of
+    noise cells over the threshold is ``Pfa * L * (2K + 1)`` (those in the zero-Doppler bin are removed later,
+    with the rest of that bin).  At the detection level (CPI 0.5 s): 102 x 119 cells, 1.21 per frame.
+
+    Returns ``(rate per frame, cells)``.
+    """
+    cfg = PCLConfig(sample_rate=sample_rate, cpi=cpi, frequency_hz=frequency_hz, range_max=range_max,
+                    range_rate_max=range_rate_max, pfa=pfa)
+    cells = cfg.lags * (2 * cfg.doppler_half + 1)
+    # E[false alarms] = Pfa x cells
+    return pfa * cells, cells
+
+
+FA_RATE, FA_CELLS = cfar_false_alarms()
+#: The map's false alarms, consistent with the CFAR's Pfa (the primary rows).
+CLUTTER_PFA = {"false_alarm_rate": FA_RATE, "false_alarm_range_rate_max": MAP_RANGE_RATE_MAX,
+               "false_alarm_pfa": PFA}
+#: The brief's false alarms, Poisson(4) per frame on +-20 m/s (an ablation): a density 8.2 times ours.
+CLUTTER_BRIEF = {"false_alarm_rate": 4.0, "false_alarm_range_rate_max": 20.0, "false_alarm_pfa": PFA}
+
+
+def false_alarm_density(params: Mapping[str, float], range_max: float = MAP_RANGE_MAX) -> float:
+    """False alarms per frame per unit of ``R x Rdot`` (1 / (m m/s)): rate / (range_max x 2 Rdot_max)."""
+    return params["false_alarm_rate"] / (range_max * 2.0 * params["false_alarm_range_rate_max"])
+
+
+def detection_scans(host, truth: Truth, seed: int, clutter=CLUTTER_PFA, stream: tuple = ()) -> Scans:
+    """Target candidates + map clutter with the zero-Doppler bins removed (common random numbers).
+
+    ``clutter``: parameters of the ``pbr-false-alarms`` generator; ``stream``: extra key parts (the tuning
+    runs use ``("tuning",)``).
+    """
+    target = host.sensor("dtv-pbr").simulate(truth, generator(seed, "paper002", *stream, "sensor"))
+    noise = host.clutter_generator("pbr-false-alarms").generate(truth, generator(seed, "paper002", *stream,
+                                                                                 "clutter"), **clutter)
+    return host.clutter_remover("pbr-zero-doppler").remove(target.merge(noise), doppler_bin_hz=DOPPLER_BIN_DETECTION)
 
 
 def as_monostatic_velocity(scans: Scans, wavelength_m: float) -> Scans:
@@ -147,25 +200,27 @@ def track_nearest_neighbour(spec, prior, motion, model, scans: Scans, rng, *, ga
 
 
 def run_variants(spec, scans: Scans, model: MeasurementModel, dt: float, sigma_a: float, seed: int,
-                 variants=VARIANTS, wavelength_m: float = 0.0) -> dict[str, tuple[Track, Scans]]:
+                 variants=VARIANTS, wavelength_m: float = 0.0, restart_after: int = 6,
+                 stream: tuple = ()) -> dict[str, tuple[Track, Scans]]:
     """NN tracks of one filter for each variant (model x gate) on the same candidates.
 
     ``rr``: state ``[R, Rdot]``, :func:`~workbench.models.range_rate_model`, the sensor's model.
     ``rv``: state ``[R, v]``, a constant-velocity model with the same ``sigma_a``, candidates read as
-    ``v = -lambda f_D / 2``.  ``gate``: ``d2 <= 9.21`` with coasting and a restart after
-    :data:`REINIT_AFTER` frames without an update; ``nogate``: always the nearest candidate.
+    ``v = -lambda f_D / 2``.  ``gate``: ``d2 <= 9.21`` with coasting and a restart after ``restart_after``
+    frames without an update (the tuned setting); ``nogate``: always the nearest candidate.
     """
-    scans_rv = as_monostatic_velocity(scans, wavelength_m)
-    setups = {"rr": (scans, range_rate_model(dt, sigma_a), model, np.diag(np.square(P0))),
-              "rv": (scans_rv, constant_velocity(1, dt, sigma_a), mismatched_model(model),
-                     np.diag(np.square([P0[0], P0[1] / 2.0])))}
+    setups = {"rr": (scans, range_rate_model(dt, sigma_a), model, np.diag(np.square(P0)))}
+    if any(v.startswith("rv") for v in variants):
+        setups["rv"] = (as_monostatic_velocity(scans, wavelength_m), constant_velocity(1, dt, sigma_a),
+                        mismatched_model(model), np.diag(np.square([P0[0], P0[1] / 2.0])))
     out = {}
     for name in variants:
         kind, gated = name.split("-")
         sc, motion, meas, cov0 = setups[kind]
         prior, index = strongest_candidate_prior(sc.scan(0), cov0, FALLBACK)
-        gate, reinit = (GATE_99, REINIT_AFTER) if gated == "gate" else (None, None)
-        out[name] = (track_nearest_neighbour(spec, prior, motion, meas, sc, generator(seed, "paper002", "filter", name),
+        gate, reinit = (GATE_99, int(restart_after)) if gated == "gate" else (None, None)
+        out[name] = (track_nearest_neighbour(spec, prior, motion, meas, sc,
+                                             generator(seed, "paper002", *stream, "filter", name),
                                              gate=gate, prior_index=index, reinit_after=reinit), sc)
     return out
 
@@ -181,16 +236,23 @@ def whitened_innovations(track: Track) -> np.ndarray:
     return np.where(rec["updated"][..., None], e, np.nan)
 
 
+def on_target(chosen: np.ndarray, truth: np.ndarray, sigma) -> np.ndarray:
+    """``(B, T)``: the chosen measurement lies within :data:`ON_TARGET_SIGMAS` sigma of the truth in every
+    component (``|z_i - x_i| <= 3 sigma_i``; False where nothing was chosen).  Shapes: ``(B, T, 2)`` twice."""
+    with np.errstate(invalid="ignore"):
+        return np.all(np.abs(np.asarray(chosen, float) - truth) <= ON_TARGET_SIGMAS * np.asarray(sigma), axis=-1)
+
+
 def write_synthetic_candidates(path, host, seed: int = 2002, frames: int = 120):
     """Write the shipped example ``examples/data/pcl_candidates_synthetic.csv``: one detection-level run.
 
-    The candidates are those the tracker sees (target, residue and false alarms after the zero-Doppler
-    notch), labelled SYNTHETIC in the header comments.
+    The candidates are those the tracker sees (target, residue and the brief's Poisson(4) false alarms after the
+    zero-Doppler notch), labelled SYNTHETIC in the header comments.
     """
     from workbench.recorded.pcl import write_pcl_candidates
 
     truth = drone_truth(generator(seed, "paper002", "truth"), 1, frames, FRAME_DT)
-    scans = detection_scans(host, truth, seed)
+    scans = detection_scans(host, truth, seed, CLUTTER_BRIEF)
     freq = host.sensor("dtv-pbr").params["frequency_hz"]
     return write_pcl_candidates(path, scans, comments=(
         "SYNTHETIC: not measured data. Detection-level simulation of the paper-002 scenario (DTV passive radar,",
@@ -201,56 +263,284 @@ def write_synthetic_candidates(path, host, seed: int = 2002, frames: int = 120):
     ), frequency_hz=freq)
 
 
+# -- per-run statistics -------------------------------------------------------------------------------------
+
+
+def run_sums(truth: np.ndarray, est: np.ndarray, chosen: np.ndarray, present: np.ndarray, white: np.ndarray,
+             sigma) -> dict[str, np.ndarray]:
+    """Per-run sums behind every criterion (frames ``k >= 1``; frame 0 holds the prior).
+
+    ``on = present & on_target(chosen)``: the target's candidate exists and the chosen one lies within 3 sigma
+    of the truth.  Returned, each ``(runs,)``:
+
+    - ``present``, ``on``: frame counts (criterion 1);
+    - ``track_se_r``, ``track_se_rd``, ``frames``: squared track errors over all frames (track RMSE);
+    - ``kf_se_r``, ``meas_se_r``, ``kf_se_rd``, ``meas_se_rd``: squared errors of the estimate and of the chosen
+      measurement over the ``on`` frames (criterion 2);
+    - ``d_n, d_est, d_est2, d_meas, d_meas2``: count, sum and sum of squares of the first differences of
+      ``R_hat`` and of the chosen ``R`` over consecutive ``on`` frames (criterion 3);
+    - ``nis_n``, ``nis_over``: on-target updates and those with NIS > 5.99; ``lag_ab, lag_aa, lag_bb``: sums
+      of products of the whitened range innovations of consecutive on-target updates (criterion 4).
+
+    Shapes: ``truth, est, chosen, white (B, T, 2)``; ``present (B, T)``.
+    """
+    truth = np.asarray(truth, float)
+    est = np.asarray(est, float)
+    chosen = np.asarray(chosen, float)
+    white = np.asarray(white, float)
+    later = np.zeros(present.shape, dtype=bool)
+    later[:, 1:] = True
+    on = np.asarray(present, bool) & on_target(chosen, truth, sigma) & later
+    err, merr = est - truth, chosen - truth
+    err_on = np.where(on[..., None], err, 0.0)
+    merr_on = np.where(on[..., None], np.nan_to_num(merr), 0.0)
+    pair = on[:, 1:] & on[:, :-1]
+    d_est = np.where(pair, np.diff(est[..., 0], axis=1), 0.0)
+    d_meas = np.where(pair, np.diff(np.nan_to_num(chosen[..., 0]), axis=1), 0.0)
+    nis = np.sum(white ** 2, axis=-1)
+    good = on & np.isfinite(nis)
+    lag = good[:, 1:] & good[:, :-1]
+    a = np.where(lag, np.nan_to_num(white[:, 1:, 0]), 0.0)
+    b = np.where(lag, np.nan_to_num(white[:, :-1, 0]), 0.0)
+    return {
+        "present": np.sum(present & later, axis=1), "on": np.sum(on, axis=1),
+        "track_se_r": np.sum(err[:, 1:, 0] ** 2, axis=1), "track_se_rd": np.sum(err[:, 1:, 1] ** 2, axis=1),
+        "frames": np.full(est.shape[0], est.shape[1] - 1),
+        "kf_se_r": np.sum(err_on[..., 0] ** 2, axis=1), "meas_se_r": np.sum(merr_on[..., 0] ** 2, axis=1),
+        "kf_se_rd": np.sum(err_on[..., 1] ** 2, axis=1), "meas_se_rd": np.sum(merr_on[..., 1] ** 2, axis=1),
+        "d_n": np.sum(pair, axis=1), "d_est": d_est.sum(axis=1), "d_est2": np.sum(d_est ** 2, axis=1),
+        "d_meas": d_meas.sum(axis=1), "d_meas2": np.sum(d_meas ** 2, axis=1),
+        "nis_n": np.sum(good, axis=1), "nis_over": np.sum(good & (nis > NIS_95), axis=1),
+        "nis_sum": np.sum(np.where(good, nis, 0.0), axis=1),
+        "lag_ab": np.sum(a * b, axis=1), "lag_aa": np.sum(a * a, axis=1), "lag_bb": np.sum(b * b, axis=1),
+    }
+
+
+def _ratio(num, den) -> float:
+    den = float(np.sum(den))
+    return float(np.sum(num)) / den if den > 0 else float("nan")
+
+
+# The pooled statistics of the criteria, each a function of per-run sums (resampled together by the bootstrap).
+def stat_on_target(on, present) -> float:
+    """Criterion 1: on-target frames / frames with a target candidate."""
+    return _ratio(on, present)
+
+
+def stat_rmse(se, n) -> float:
+    """``sqrt(sum se / sum n)``."""
+    return float(np.sqrt(_ratio(se, n)))
+
+
+def stat_rmse_ratio(se_kf, se_meas) -> float:
+    """Criterion 2: ``RMSE(estimate) / RMSE(chosen measurement)`` over the same frames."""
+    return float(np.sqrt(_ratio(se_kf, se_meas)))
+
+
+def stat_smoothness(n, s_e, ss_e, s_m, ss_m) -> float:
+    """Criterion 3: ``std(dR_hat) / std(dR_meas)`` over consecutive on-target frames."""
+    n = float(np.sum(n))
+    if n < 2:
+        return float("nan")
+    var_e = np.sum(ss_e) / n - (np.sum(s_e) / n) ** 2
+    var_m = np.sum(ss_m) / n - (np.sum(s_m) / n) ** 2
+    return float(np.sqrt(var_e / var_m)) if var_m > 0 else float("nan")
+
+
+def _tail(over, n) -> float:
+    return _ratio(over, n)
+
+
+def _lag1(ab, aa, bb) -> float:
+    den = float(np.sqrt(np.sum(aa) * np.sum(bb)))
+    return float(np.sum(ab)) / den if den > 0 else float("nan")
+
+
+def stat_ablation(over_rr, n_rr, ab_rr, aa_rr, bb_rr, over_rv, n_rv, ab_rv, aa_rv, bb_rv) -> float:
+    """Criterion 4: ``min(|tail_rv - 5 %| - |tail_rr - 5 %|, |lag1_rv| - |lag1_rr|)``, > 0 when the monostatic
+    reading is further from chi-square consistency on both counts."""
+    d_tail = abs(_tail(over_rv, n_rv) - 0.05) - abs(_tail(over_rr, n_rr) - 0.05)
+    d_lag = abs(_lag1(ab_rv, aa_rv, bb_rv)) - abs(_lag1(ab_rr, aa_rr, bb_rr))
+    return float(min(d_tail, d_lag))
+
+
+def _sigma(res) -> np.ndarray:
+    return np.asarray(res["model_std"], dtype=float)
+
+
+def variant_sums(res: Mapping[str, np.ndarray], variant: str) -> dict[str, np.ndarray]:
+    """:func:`run_sums` of one saved variant of a detection task (``variant`` may carry a prefix such as
+    ``"brief/"``)."""
+    return run_sums(res["truth_rr"], res[f"{variant}/est"], res[f"{variant}/chosen"], res[f"{variant}/target_present"],
+                    res[f"{variant}/white"], _sigma(res))
+
+
+def metrics_from_sums(s: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """The pooled quantities of the table from :func:`run_sums`."""
+    return {
+        "on_target": stat_on_target(s["on"], s["present"]),
+        "track_rmse_r": stat_rmse(s["track_se_r"], s["frames"]),
+        "track_rmse_rd": stat_rmse(s["track_se_rd"], s["frames"]),
+        "rmse_r_kf": stat_rmse(s["kf_se_r"], s["on"]), "rmse_r_meas": stat_rmse(s["meas_se_r"], s["on"]),
+        "rmse_rd_kf": stat_rmse(s["kf_se_rd"], s["on"]), "rmse_rd_meas": stat_rmse(s["meas_se_rd"], s["on"]),
+        "smooth_ratio": stat_smoothness(s["d_n"], s["d_est"], s["d_est2"], s["d_meas"], s["d_meas2"]),
+        "nis_mean": _ratio(s["nis_sum"], s["nis_n"]), "nis_over_95": _tail(s["nis_over"], s["nis_n"]),
+        "nis_samples": float(np.sum(s["nis_n"])), "lag1_r": _lag1(s["lag_ab"], s["lag_aa"], s["lag_bb"]),
+    }
+
+
+def variant_metrics(res: Mapping[str, np.ndarray], variant: str) -> dict[str, float]:
+    """The table's quantities of one variant of one detection task: :func:`metrics_from_sums` plus the
+    association log's rates (NN chose the target's own candidate, coasts, jumps, restarts, final frame)."""
+    m = metrics_from_sums(variant_sums(res, variant))
+    correct = np.asarray(res[f"{variant}/correct"], bool)
+    present = np.asarray(res[f"{variant}/target_present"], bool)
+    truth, est = np.asarray(res["truth_rr"], float), np.asarray(res[f"{variant}/est"], float)
+    m.update({
+        "nn_correct": float(correct[present].mean()) if present.any() else float("nan"),
+        "track_on": float(np.mean(np.abs(est[:, 1:, 0] - truth[:, 1:, 0]) <= ON_TARGET_SIGMAS * _sigma(res)[0])),
+        "final_on_track": float(np.mean(np.abs(est[:, -1, 0] - truth[:, -1, 0]) <= ON_TARGET_SIGMAS * _sigma(res)[0])),
+        "coast_rate": float(np.mean(res[f"{variant}/coasted"][:, 1:])) if f"{variant}/coasted" in res else float("nan"),
+        "jump_rate": float(np.mean(res[f"{variant}/jump"][:, 1:])) if f"{variant}/jump" in res else float("nan"),
+        "restarts_per_run": float(np.mean(np.sum(res[f"{variant}/restarted"], axis=1))),
+    })
+    return m
+
+
+# -- tuning (docs/paper002.md, "Tuning": the rule was written before the result) ---------------------------------
+
+
+def tune_restart(host, filter_name: str, runs: int, frames: int, sigma_a: float = SIGMA_A
+                 ) -> tuple[int, np.ndarray]:
+    """The restart delay of the gated tracker, chosen by the documented rule on tuning runs only.
+
+    Rule: over ``runs`` runs drawn from seed :data:`TUNING_SEED` under the stream key ``"tuning"`` (no reported
+    run uses that key, whatever the report's seed), run the gated range / range-rate tracker with each delay of
+    :data:`RESTART_CANDIDATES`; take the delay with the highest on-target rate (criterion 1's statistic); rates
+    within :data:`TUNING_TIE` of the best tie, and a tie goes to the shortest delay.
+
+    Returns the chosen delay, the on-target rate of every candidate ``(len(RESTART_CANDIDATES),)`` and, for
+    information only (the rule does not read it), each candidate's track range RMSE over all frames.
+    """
+    sensor = host.sensor("dtv-pbr")
+    tx, rx = sensor.params["tx"], sensor.params["rx"]
+    truth = drone_truth(generator(TUNING_SEED, "paper002", "tuning", "truth"), runs, frames, FRAME_DT)
+    scans = detection_scans(host, truth, TUNING_SEED, CLUTTER_PFA, stream=("tuning",))
+    truth_rr = range_and_rate(truth.states, tx, rx)
+    model = sensor.measurement_model()
+    rates, rmse = [], []
+    for delay in RESTART_CANDIDATES:
+        (track, sc), = run_variants(host.filter(filter_name), scans, model, FRAME_DT, sigma_a, TUNING_SEED,
+                                    variants=("rr-gate",), restart_after=delay, stream=("tuning",)).values()
+        log = association_log(track, sc)
+        on = log.target_present & on_target(track.records["chosen_z"], truth_rr, model.stated_std)
+        rates.append(stat_on_target(on.sum(axis=1), log.target_present.sum(axis=1)))
+        rmse.append(float(np.sqrt(np.mean((track.mean[:, 1:, 0] - truth_rr[:, 1:, 0]) ** 2))))
+    rates = np.asarray(rates)
+    best = np.nanmax(rates)
+    chosen = next(d for d, r in zip(RESTART_CANDIDATES, rates) if r >= best - TUNING_TIE)
+    return int(chosen), rates, np.asarray(rmse)
+
+
 # -- tasks ------------------------------------------------------------------------------------------------
 
 
+def _save_variant(res: dict, name: str, track: Track, sc: Scans, full: bool = True) -> None:
+    log = association_log(track, sc)
+    scale = np.array([1.0, 2.0]) if name.split("/")[-1].startswith("rv") else np.ones(2)  # rv: report 2 v = Rdot
+    res[f"{name}/est"] = (track.mean * scale).astype(np.float32)
+    res[f"{name}/chosen"] = (track.records["chosen_z"] * scale).astype(np.float32)
+    res[f"{name}/white"] = whitened_innovations(track).astype(np.float32)
+    res[f"{name}/restarted"] = track.records["restarted"]
+    flags = ("correct", "target_present", "jump", "coasted") if full else ("correct", "target_present")
+    for flag in flags:
+        res[f"{name}/{flag}"] = getattr(log, flag)
+    if full:
+        res[f"{name}/pred"] = track.records["predicted_z"][0] * scale  # run 0 only, for the figure
+
+
 def _detection_task(ctx: TaskContext) -> dict[str, np.ndarray]:
+    """The Monte Carlo runs of one filter: the four variants on the Pfa-consistent map, the two range / range-rate
+    variants on the brief's denser false alarms, and the restart delay tuned on tuning runs."""
     prm = ctx.params
     host = ctx.host
     sensor = host.sensor("dtv-pbr")
     tx, rx = np.asarray(sensor.params["tx"], dtype=float), np.asarray(sensor.params["rx"], dtype=float)
+    spec = host.filter(prm["filter"])
+    restart, tuning_rates, tuning_rmse = tune_restart(host, prm["filter"], int(prm["tuning_runs"]), int(prm["frames"]),
+                                         float(prm["sigma_a"]))
     truth = drone_truth(generator(ctx.seed, "paper002", "truth"), int(prm["runs"]), int(prm["frames"]), FRAME_DT)
-    scans = detection_scans(host, truth, ctx.seed)
     model = sensor.measurement_model()
     lam = wavelength(sensor.params["frequency_hz"])
-    tracks = run_variants(host.filter(prm["filter"]), scans, model, FRAME_DT, float(prm["sigma_a"]), ctx.seed,
-                          wavelength_m=lam)
     res: dict[str, np.ndarray] = {"truth_rr": range_and_rate(truth.states, tx, rx), "times": truth.times,
-                                  "tx": tx, "rx": rx, "wavelength": np.array(lam)}
-    for name, (track, sc) in tracks.items():
-        log = association_log(track, sc)
-        scale = np.array([1.0, 2.0]) if name.startswith("rv") else np.ones(2)  # rv: report v as 2 v = Rdot
-        res[f"{name}/est"] = (track.mean * scale).astype(np.float32)
-        res[f"{name}/chosen"] = (track.records["chosen_z"] * scale).astype(np.float32)
-        res[f"{name}/pred"] = (track.records["predicted_z"][0] * scale)  # run 0 only, for the figure
-        res[f"{name}/white"] = whitened_innovations(track).astype(np.float32)
-        for flag in ("correct", "target_present", "jump", "coasted"):
-            res[f"{name}/{flag}"] = getattr(log, flag)
-        res[f"{name}/restarted"] = track.records["restarted"]
+                                  "tx": tx, "rx": rx, "wavelength": np.array(lam),
+                                  "model_std": np.asarray(model.stated_std, dtype=float),
+                                  "tuning/candidates": np.asarray(RESTART_CANDIDATES),
+                                  "tuning/on_target": tuning_rates, "tuning/track_rmse": tuning_rmse,
+                                  "tuning/chosen": np.array(restart),
+                                  "tuning/runs": np.array(int(prm["tuning_runs"])),
+                                  "fa/rate": np.array([CLUTTER_PFA["false_alarm_rate"], CLUTTER_BRIEF["false_alarm_rate"]]),
+                                  "fa/density": np.array([false_alarm_density(CLUTTER_PFA),
+                                                          false_alarm_density(CLUTTER_BRIEF)])}
+    scans = detection_scans(host, truth, ctx.seed, CLUTTER_PFA)
+    for name, (track, sc) in run_variants(spec, scans, model, FRAME_DT, float(prm["sigma_a"]), ctx.seed,
+                                          wavelength_m=lam, restart_after=restart).items():
+        _save_variant(res, name, track, sc)
     res["run0/cand_z"] = np.where(scans.valid[0, ..., None], scans.z[0], np.nan)
     res["run0/cand_origin"] = scans.origin[0]
     res["run0/xyz"] = truth.states[0, :, :3]
+    res["candidates_per_frame"] = np.array(scans.valid[:, 1:].sum(axis=2).mean())
+    brief = detection_scans(host, truth, ctx.seed, CLUTTER_BRIEF)
+    for name, (track, sc) in run_variants(spec, brief, model, FRAME_DT, float(prm["sigma_a"]), ctx.seed,
+                                          variants=ABLATION_VARIANTS, wavelength_m=lam, restart_after=restart).items():
+        _save_variant(res, f"brief/{name}", track, sc, full=False)
+    res["brief/candidates_per_frame"] = np.array(brief.valid[:, 1:].sum(axis=2).mean())
     return res
 
 
+def _floor(caf, config: PCLConfig) -> float:
+    """Mean noise power of a map away from zero Doppler: median / ln 2 (exponential cells)."""
+    k = np.arange(caf.doppler_hz.size) - caf.doppler_hz.size // 2
+    return float(np.median(caf.power[:, np.abs(k) >= config.zero_doppler_bins]) / np.log(2.0))
+
+
+def _near(cands, true_range: float, true_doppler: float, config: PCLConfig) -> bool:
+    """A candidate within 1.5 range and 1.5 Doppler bins of the truth (the target is detected)."""
+    return bool(np.any((np.abs(cands.range_m - true_range) <= 1.5 * config.range_bin) &
+                       (np.abs(cands.doppler_hz - true_doppler) <= 1.5 * config.doppler_bin)))
+
+
+def _series(res: dict, prefix: str, host, prm, ctx, scans: Scans, truth_rr: np.ndarray, restart: int) -> None:
+    """NN tracks (no gate and gate) through a signal-level series; saves the per-frame flags and estimates."""
+    sensor = host.sensor("dtv-pbr")
+    tracks = run_variants(host.filter(prm["filter"]), scans, sensor.measurement_model(), FRAME_DT, SIGMA_A,
+                          ctx.seed, variants=("rr-nogate", "rr-gate"),
+                          wavelength_m=wavelength(sensor.params["frequency_hz"]), restart_after=restart)
+    sigma = np.asarray(sensor.measurement_model().stated_std, float)
+    res[f"{prefix}/candidates"] = scans.valid[0].sum(axis=1)
+    for name, (track, sc) in tracks.items():
+        log = association_log(track, sc)
+        res[f"{prefix}/{name}/est"] = track.mean[0]
+        res[f"{prefix}/{name}/correct"] = log.correct[0]
+        res[f"{prefix}/{name}/target_present"] = log.target_present[0]
+        res[f"{prefix}/{name}/on"] = (log.target_present & on_target(track.records["chosen_z"], truth_rr, sigma))[0]
+
+
 def _signal_task(ctx: TaskContext) -> dict[str, np.ndarray]:
-    """One signal-level frame (CAF before/after ECA, CFAR); with ``frames > 1`` an NN track through a series."""
+    """The benign scene (the paper's row): one frame's CAF before and after ECA with its candidates; with
+    ``frames > 1`` a signal-level series tracked by NN."""
     prm = ctx.params
     host = ctx.host
     sensor = host.sensor("dtv-pbr")
     tx, rx = sensor.params["tx"], sensor.params["rx"]
-    config, scene = PCLConfig(), SignalScene()
+    config, scene = PCLConfig(pfa=PFA), BENIGN_SCENE
     frames = int(prm["frames"])
     truth = drone_truth(generator(ctx.seed, "paper002", "truth"), 1, max(frames, 2), FRAME_DT)
     x_true = range_and_rate(truth.states, tx, rx)[:, :frames]
     ref, surv = frame_signals(x_true[0, 0][None], generator(ctx.seed, "paper002", "signal"), config, scene)
-    raw = caf_batches(surv, ref, config)
-    clean, _ = eca(surv, ref, config.eca_taps)
-    caf = caf_batches(clean, ref, config)
-    cands, _ = cfar_candidates(caf, config)
-    k = np.arange(caf.doppler_hz.size) - caf.doppler_hz.size // 2
-    # mean noise power away from zero Doppler: median / ln 2 for exponential cells
-    floor = np.median(caf.power[:, np.abs(k) >= config.zero_doppler_bins]) / np.log(2.0)
+    raw = process_frame(ref, surv, config, cancel=False)[0]
+    caf, cands, _ = process_frame(ref, surv, config)
+    floor = _floor(caf, config)
     res = {
         "caf_db": (10 * np.log10(caf.power / floor)).astype(np.float32),
         "caf_raw_db": (10 * np.log10(raw.power / floor)).astype(np.float32),
@@ -261,152 +551,224 @@ def _signal_task(ctx: TaskContext) -> dict[str, np.ndarray]:
         "wavelength": np.array(config.wavelength),
     }
     if frames > 1:
-        scans = simulate_scans(x_true, truth.times[:frames], generator(ctx.seed, "paper002", "signal-series"),
-                               config, scene)
-        tracks = run_variants(host.filter(prm["filter"]), scans, sensor.measurement_model(), FRAME_DT, SIGMA_A,
-                              ctx.seed, variants=("rr-nogate", "rr-gate"),
-                              wavelength_m=wavelength(sensor.params["frequency_hz"]))
+        scans, = simulate_scans_multi(x_true, truth.times[:frames], generator(ctx.seed, "paper002", "signal-series"),
+                                      [config], scene)
         res["series/truth_rr"] = x_true[0]
-        res["series/candidates"] = scans.valid[0].sum(axis=1)
-        for name, (track, sc) in tracks.items():
-            log = association_log(track, sc)
-            res[f"series/{name}/est"] = track.mean[0]
-            res[f"series/{name}/correct"] = log.correct[0]
-            res[f"series/{name}/target_present"] = log.target_present[0]
+        _series(res, "series", host, prm, ctx, scans, x_true, int(prm["restart"]))
+    return res
+
+
+def _demanding_task(ctx: TaskContext) -> dict[str, np.ndarray]:
+    """The demanding scene: one frame processed without ECA, with the brief's 16 taps and with taps over the whole
+    map (``K = L``); the folded single-precision chain checked against the float64 reference on that frame; the
+    8-VSB pilot's ridge without pilot removal; with ``frames > 1`` a series (detections with 16 and L taps, NN
+    tracks on the L-tap candidates)."""
+    prm = ctx.params
+    host = ctx.host
+    sensor = host.sensor("dtv-pbr")
+    tx, rx = sensor.params["tx"], sensor.params["rx"]
+    full = demanding_config(PCLConfig(pfa=PFA))
+    brief = replace(full, eca_taps=ECA_TAPS_BRIEF)
+    scene = DEMANDING_SCENE
+    frames = int(prm["frames"])
+    truth = drone_truth(generator(ctx.seed, "paper002", "truth"), 1, max(frames, 2), FRAME_DT)
+    x_true = range_and_rate(truth.states, tx, rx)[:, :frames]
+    true_range, true_doppler = x_true[0, 0, 0], float(range_rate_to_doppler(x_true[0, 0, 1], full.wavelength))
+    ref, surv = frame_signals(x_true[0, 0][None], generator(ctx.seed, "paper002", "demanding"), full, scene)
+    raw = process_frame(ref, surv, full, cancel=False)[0]
+    caf_b, cands_b, _ = process_frame(ref, surv, brief)
+    caf_f, cands_f, _ = process_frame(ref, surv, full)
+    nopilot = process_frame(ref, surv, replace(full, pilot_hz=None))[1]
+    # the NumPy twin in double precision: ECA on the whole CPI, then the batches CAF
+    clean, _ = eca(surv.astype(np.complex128), ref.astype(np.complex128), full.eca_taps, full.eca_loading)
+    ref_caf = caf_batches(clean, ref.astype(np.complex128), full)
+    ref_cands, _ = cfar_candidates(ref_caf, full)
+    floor = _floor(caf_f, full)
+    same = len(ref_cands.range_m) == len(cands_f.range_m) and np.allclose(
+        np.c_[ref_cands.range_m, ref_cands.doppler_hz], np.c_[cands_f.range_m, cands_f.doppler_hz], atol=1e-2)
+    res = {
+        "range_m": caf_f.range_m, "doppler_hz": caf_f.doppler_hz, "wavelength": np.array(full.wavelength),
+        "true_range": np.array(true_range), "true_doppler": np.array(true_doppler),
+        "taps": np.array([0, brief.eca_taps, full.eca_taps]),
+        "caf_raw_db": (10 * np.log10(raw.power / floor)).astype(np.float32),
+        "caf_brief_db": (10 * np.log10(caf_b.power / floor)).astype(np.float32),
+        "caf_full_db": (10 * np.log10(caf_f.power / floor)).astype(np.float32),
+        "brief/det_range": cands_b.range_m, "brief/det_doppler": cands_b.doppler_hz,
+        "full/det_range": cands_f.range_m, "full/det_doppler": cands_f.doppler_hz,
+        "full/det_strength": cands_f.strength_db,
+        "detected": np.array([_near(cands_b, true_range, true_doppler, full),
+                              _near(cands_f, true_range, true_doppler, full)]),
+        "floor_rise_brief_db": np.array(10 * np.log10(_floor(caf_b, full) / floor)),
+        "nopilot/candidates": np.array(len(nopilot.range_m)),
+        "nopilot/on_target_row": np.array(int(np.sum(np.abs(nopilot.doppler_hz - true_doppler) <= 1.5 * full.doppler_bin))),
+        # |chi_folded - chi_reference|^2 over the noise floor (dB), worst cell; the same candidates?
+        "accuracy/max_err_db": np.array(10 * np.log10(np.max(np.abs(caf_f.chi - ref_caf.chi) ** 2) / floor)),
+        "accuracy/same_candidates": np.array(bool(same)),
+        "accuracy/max_strength_diff_db": np.array(float(np.max(np.abs(ref_cands.strength_db - cands_f.strength_db)))
+                                                  if same and len(cands_f.range_m) else 0.0),
+    }
+    if frames > 1:
+        scans_b, scans_f = simulate_scans_multi(x_true, truth.times[:frames],
+                                                generator(ctx.seed, "paper002", "demanding-series"), [full, brief],
+                                                scene)[::-1]
+        res["series/truth_rr"] = x_true[0]
+        for tag, sc in (("brief", scans_b), ("full", scans_f)):
+            res[f"series/{tag}/detected"] = ((sc.origin == 0) & sc.valid)[0].any(axis=1)
+            res[f"series/{tag}/candidates"] = sc.valid[0].sum(axis=1)
+        _series(res, "series/track", host, prm, ctx, scans_f, x_true, int(prm["restart"]))
     return res
 
 
 def tasks(options: RecipeOptions) -> list[Task]:
     v = options.values
     filters = tuple(options.filters) or ("kf",)
+    tuning_runs = int(v.get("tuning_runs", TUNING_RUNS["quick"]))
     out = [Task(f"detection-{name}", {"runs": int(v["runs"]), "frames": int(v["frames"]), "filter": name,
-                                      "sigma_a": SIGMA_A}, _detection_task) for name in filters]
-    out.append(Task("signal", {"frames": int(v["signal_frames"]), "filter": filters[0]}, _signal_task))
+                                      "sigma_a": SIGMA_A, "tuning_runs": tuning_runs}, _detection_task)
+           for name in filters]
+    # the signal-level series use the gated tracker's restart delay tuned for the first filter (the same rule)
+    restart = {"restart_rule": "tuned on the detection-level tuning runs", "tuning_runs": tuning_runs}
+    out.append(Task("signal", {"frames": int(v["signal_frames"]), "filter": filters[0], **restart},
+                    _with_restart(_signal_task)))
+    out.append(Task("signal-demanding", {"frames": int(v["signal_frames"]), "filter": filters[0], **restart},
+                    _with_restart(_demanding_task)))
     return out
 
 
-# -- metrics ---------------------------------------------------------------------------------------------
+def _with_restart(task):
+    """Run ``task`` with ``params["restart"]`` set by :func:`tune_restart` (cheap next to a signal series)."""
+    def run_it(ctx: TaskContext):
+        prm = dict(ctx.params)
+        if int(prm["frames"]) > 1:
+            prm["restart"] = tune_restart(ctx.host, prm["filter"], int(prm["tuning_runs"]), 120, SIGMA_A)[0]
+        else:
+            prm["restart"] = RESTART_CANDIDATES[0]  # no series: the delay is never used
+        return task(replace(ctx, params=prm))
+    return run_it
 
 
-def _lag1(e: np.ndarray, pair: np.ndarray) -> float:
-    """Lag-1 correlation of a whitened innovation component over the consecutive frame pairs ``pair``."""
-    a, b = e[:, 1:][pair], e[:, :-1][pair]
-    return float(np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b))) if a.size else float("nan")
-
-
-def variant_metrics(res: Mapping[str, np.ndarray], variant: str) -> dict[str, float]:
-    """The brief's 'reproduced if' quantities for one variant of one detection task (frames k >= 1)."""
-    truth = np.asarray(res["truth_rr"], dtype=float)
-    est = np.asarray(res[f"{variant}/est"], dtype=float)
-    chosen = np.asarray(res[f"{variant}/chosen"], dtype=float)
-    correct = np.asarray(res[f"{variant}/correct"], dtype=bool)
-    present = np.asarray(res[f"{variant}/target_present"], dtype=bool)
-    white = np.asarray(res[f"{variant}/white"], dtype=float)
-    nis = np.sum(white ** 2, axis=-1)
-    err, merr = est - truth, chosen - truth
-    later = np.zeros(correct.shape, dtype=bool)
-    later[:, 1:] = True
-    on = np.abs(err[..., 0]) <= ON_TRACK_M
-    picked = np.isfinite(chosen[..., 0]) & later & ~np.asarray(res[f"{variant}/restarted"], dtype=bool)
-    # consistency is judged where the filter tracks the target: NN chose the target and the track is on it
-    good = correct & on
-    pair = good[:, 1:] & good[:, :-1]
-    # smoothness: consecutive frames whose NN choices were both the target candidate
-    both = correct[:, 1:] & correct[:, :-1]
-    return {
-        "nn_correct": float(correct[present].mean()) if present.any() else float("nan"),
-        "on_track": float(on[:, 1:].mean()),
-        "final_on_track": float(on[:, -1].mean()),
-        "coast_rate": float(np.mean(res[f"{variant}/coasted"][:, 1:])),
-        "jump_rate": float(np.mean(res[f"{variant}/jump"][:, 1:])),
-        "restarts_per_run": float(np.mean(np.sum(res[f"{variant}/restarted"], axis=1))),
-        # RMSE on the frames where NN picked the target: KF estimate vs that (selected) measurement
-        "rmse_r_kf": float(np.sqrt(np.mean(err[..., 0][correct] ** 2))),
-        "rmse_r_meas": float(np.sqrt(np.mean(merr[..., 0][correct] ** 2))),
-        "rmse_rdot_kf": float(np.sqrt(np.mean(err[..., 1][correct] ** 2))),
-        "rmse_rdot_meas": float(np.sqrt(np.mean(merr[..., 1][correct] ** 2))),
-        # the same over every frame with a selected measurement (clutter picks included)
-        "rmse_r_kf_all": float(np.sqrt(np.mean(err[..., 0][picked] ** 2))),
-        "rmse_r_meas_all": float(np.sqrt(np.mean(merr[..., 0][picked] ** 2))),
-        "smooth_ratio": float(np.std(np.diff(est[..., 0], axis=1)[both]) /
-                              np.std(np.diff(chosen[..., 0], axis=1)[both])),
-        "nis_mean": float(np.mean(nis[good])),
-        "nis_over_95": float(np.mean(nis[good] > NIS_95)),
-        "nis_samples": int(good.sum()),
-        "lag1_r": _lag1(white[..., 0], pair),
-        "lag1_rdot": _lag1(white[..., 1], pair),
-    }
+# -- criteria ----------------------------------------------------------------------------------------------
 
 
 def _detection_results(results) -> list[tuple[str, Mapping[str, np.ndarray]]]:
     return [(k[len("detection-"):], r) for k, r in results.items() if k.startswith("detection-")]
 
 
+def _replicate(samples: tuple, statistic, holds) -> tuple[int, int]:
+    """In how many single runs (the paper's protocol: one flight of ~1 minute) the criterion holds."""
+    def one(*arrays) -> bool:
+        value = statistic(*arrays)
+        return bool(np.isfinite(value) and holds(value))
+    return replication_rate(samples, 1, one, replications=REPLICATIONS, seed=0)
+
+
+def _criterion(cid, text, samples, statistic, threshold, direction, holds, detail_extra="", **kw) -> Criterion:
+    crit = criterion_from_runs(cid, text, samples, statistic, threshold, direction, min_n=MIN_RUNS,
+                               replication=_replicate(samples, statistic, holds), **kw)
+    if detail_extra:
+        crit = replace(crit, detail=f"{crit.detail}. {detail_extra}")
+    return crit
+
+
 def criteria(results) -> list[Criterion]:
+    """The brief's 'reproduced if' criteria (docs/paper002.md, "Criteria"), each with n, a 95 % bootstrap
+    interval over runs, a three-way verdict and its replication over single runs (the paper's one flight)."""
     out = []
     for filt, res in _detection_results(results):
-        runs = res["truth_rr"].shape[0]
+        restart = int(res["tuning/chosen"])
         for gated in ("nogate", "gate"):
-            tag = f"{filt}, {'gate d2<=9.21' if gated == 'gate' else 'no gate, as the paper'}"
+            tag = f"{filt}, " + ("gate d2<=9.21, restart " + str(restart) if gated == "gate" else "no gate, as the paper")
+            s = variant_sums(res, f"rr-{gated}")
+            sv = variant_sums(res, f"rv-{gated}")
             m = variant_metrics(res, f"rr-{gated}")
-            mv = variant_metrics(res, f"rv-{gated}")
-            out.append(Criterion(
-                f"C1 persistence ({tag})",
-                "The track persists over all frames without locking onto clutter: NN picks the true-target "
-                "candidate in >= 90 % of the frames where it exists",
-                m["nn_correct"] >= 0.9,
-                f"NN correct {100 * m['nn_correct']:.1f} % ({runs} runs x {res['truth_rr'].shape[1]} frames); "
-                f"track on the target (|dR| <= {ON_TRACK_M:.0f} m) in {100 * m['on_track']:.1f} % of frames and "
-                f"{100 * m['final_on_track']:.1f} % of runs at the last frame; coasting {100 * m['coast_rate']:.1f} %, "
-                f"range jumps > 3 sigma {100 * m['jump_rate']:.1f} % of frames, {m['restarts_per_run']:.2f} restarts/run"))
-            out.append(Criterion(
-                f"C2 RMSE ({tag})",
-                "RMSE(R_hat) < RMSE(R_meas) and RMSE(Rdot_hat) < RMSE(Rdot_meas) against truth",
-                m["rmse_r_kf"] < m["rmse_r_meas"] and m["rmse_rdot_kf"] < m["rmse_rdot_meas"],
-                f"frames where NN picked the target: R {m['rmse_r_kf']:.2f} m vs {m['rmse_r_meas']:.2f} m, "
-                f"Rdot {m['rmse_rdot_kf']:.3f} vs {m['rmse_rdot_meas']:.3f} m/s; all frames with a selection: "
-                f"R {m['rmse_r_kf_all']:.1f} m vs {m['rmse_r_meas_all']:.1f} m"))
-            out.append(Criterion(
+            mv = metrics_from_sums(sv)
+            sigma = _sigma(res)
+            out.append(_criterion(
+                f"C1 on target ({tag})",
+                "The track persists over all frames without locking onto clutter: the chosen candidate lies within "
+                "3 sigma of the truth (|dR| <= 45 m and |dRdot| <= 1.5 m/s) in >= 90 % of the frames where the "
+                "target's candidate exists",
+                (s["on"], s["present"]), stat_on_target, 0.9, ">=", lambda v: v >= 0.9,
+                f"NN chose the target's own candidate in {100 * m['nn_correct']:.1f} %; track within 3 sigma at the "
+                f"last frame in {100 * m['final_on_track']:.1f} % of runs; coasting {100 * m['coast_rate']:.1f} %, "
+                f"range jumps > 3 sigma {100 * m['jump_rate']:.1f} % of frames, {m['restarts_per_run']:.2f} restarts/run",
+                published="no numbers; claims a continuous track"))
+            out.append(_criterion(
+                f"C1 track RMSE ({tag})",
+                f"The track stays on the target: range RMSE of the estimate over all frames <= {sigma[0]:g} m "
+                "(one measurement's sigma)",
+                (s["track_se_r"], s["frames"]), stat_rmse, float(sigma[0]), "<=", lambda v: v <= sigma[0],
+                f"range-rate RMSE over all frames {m['track_rmse_rd']:.3f} m/s",
+                published="no numbers"))
+            for comp, key, unit in (("R", "r", "m"), ("Rdot", "rd", "m/s")):
+                out.append(_criterion(
+                    f"C2 RMSE {comp} ({tag})",
+                    f"RMSE({comp}_hat) < RMSE({comp}_meas) against truth (frames where the chosen candidate is on "
+                    "target): the ratio < 1",
+                    (s[f"kf_se_{key}"], s[f"meas_se_{key}"]), stat_rmse_ratio, 1.0, "<", lambda v: v < 1.0,
+                    f"RMSE {comp}: KF {m[f'rmse_{key}_kf']:.3g} {unit} vs chosen measurement "
+                    f"{m[f'rmse_{key}_meas']:.3g} {unit}",
+                    published="claims a temporally smoothed trajectory"))
+            out.append(_criterion(
                 f"C3 smoothness ({tag})",
-                "std of the first difference of R_hat <= 0.5 x that of the selected measurements",
-                m["smooth_ratio"] <= 0.5,
-                f"ratio {m['smooth_ratio']:.3f} (consecutive frames whose NN choices were the target)"))
-            out.append(Criterion(
+                "std of the first difference of R_hat <= 0.5 x that of the selected measurements (consecutive "
+                "on-target frames)",
+                (s["d_n"], s["d_est"], s["d_est2"], s["d_meas"], s["d_meas2"]), stat_smoothness, 0.5, "<=",
+                lambda v: v <= 0.5, published="claims a continuous, smoothed trajectory"))
+            c4 = _criterion(
                 f"C4 ablation NIS ({tag})",
-                "Doppler read as a monostatic radial velocity (v = lambda f_D / 2) in a range-velocity model gives "
-                "a worse innovation consistency than the range / range-rate model",
-                (abs(mv["nis_over_95"] - 0.05) > abs(m["nis_over_95"] - 0.05)) and
-                (abs(mv["lag1_r"]) > abs(m["lag1_r"])),
+                "Doppler read as a monostatic radial velocity (v = lambda f_D / 2) in a range-velocity model gives a "
+                "worse innovation consistency: min(|tail_mono - 5 %| - |tail_rr - 5 %|, |lag1_mono| - |lag1_rr|) > 0",
+                (s["nis_over"], s["nis_n"], s["lag_ab"], s["lag_aa"], s["lag_bb"],
+                 sv["nis_over"], sv["nis_n"], sv["lag_ab"], sv["lag_aa"], sv["lag_bb"]),
+                stat_ablation, 0.0, ">", lambda v: v > 0.0,
                 f"on-target updates: NIS > 5.99 in {100 * m['nis_over_95']:.1f} % (range-rate) vs "
                 f"{100 * mv['nis_over_95']:.1f} % (monostatic), 5 % expected; mean NIS {m['nis_mean']:.2f} vs "
-                f"{mv['nis_mean']:.2f} (2 expected); lag-1 correlation of the range innovations "
-                f"{m['lag1_r']:.2f} vs {mv['lag1_r']:.2f} (0 expected); RMSE R {m['rmse_r_kf']:.1f} vs "
-                f"{mv['rmse_r_kf']:.1f} m"))
+                f"{mv['nis_mean']:.2f} (2 expected); lag-1 correlation of the whitened range innovations "
+                f"{m['lag1_r']:.2f} vs {mv['lag1_r']:.2f} (0 expected)",
+                published="claims the range-rate state keeps the model physically consistent")
+            lo, hi = CONSISTENT_TAIL
+            if not lo <= m["nis_over_95"] <= hi:
+                # precondition (docs/paper002.md): the comparison needs a consistent reference model
+                c4 = replace(c4, verdict="inconclusive", detail=(
+                    f"not decided: the range / range-rate model is itself inconsistent here (NIS > 5.99 in "
+                    f"{100 * m['nis_over_95']:.1f} % of on-target updates, outside [{100 * lo:g}, {100 * hi:g}] %), "
+                    f"so which of two inconsistent models is 'worse' says nothing about the state choice; "
+                    f"statistically: {c4.detail}"))
+            out.append(c4)
     return out
 
 
-# -- table -----------------------------------------------------------------------------------------------
+# -- tables ----------------------------------------------------------------------------------------------
 
 
 _ROWS = (
-    ("NN picks the target candidate (% of frames where it exists)", "nn_correct", 100.0, ">= 90"),
-    ("track on the target, |dR| <= 100 m (% of frames)", "on_track", 100.0, "all frames"),
+    ("chosen candidate on target, within 3 sigma (% of frames with a target candidate)", "on_target", 100.0, ">= 90"),
+    ("track range RMSE over all frames (m)", "track_rmse_r", 1.0, "<= 15"),
+    ("track range-rate RMSE over all frames (m/s)", "track_rmse_rd", 1.0, "-"),
+    ("track estimate within 3 sigma (45 m) of the truth (% of frames)", "track_on", 100.0, "-"),
+    ("NN chose the target's own candidate (%)", "nn_correct", 100.0, "-"),
+    ("track within 3 sigma at the last frame (% of runs)", "final_on_track", 100.0, "-"),
     ("frames coasted (%)", "coast_rate", 100.0, "-"),
     ("frames with a range jump > 3 sigma (%)", "jump_rate", 100.0, "-"),
     ("restarts per run", "restarts_per_run", 1.0, "-"),
-    ("RMSE R, KF (m)", "rmse_r_kf", 1.0, "< selected measurement"),
-    ("RMSE R, selected measurement (m)", "rmse_r_meas", 1.0, "-"),
-    ("RMSE Rdot, KF (m/s)", "rmse_rdot_kf", 1.0, "< selected measurement"),
-    ("RMSE Rdot, selected measurement (m/s)", "rmse_rdot_meas", 1.0, "-"),
+    ("RMSE R on target, KF (m)", "rmse_r_kf", 1.0, "< selected measurement"),
+    ("RMSE R on target, selected measurement (m)", "rmse_r_meas", 1.0, "-"),
+    ("RMSE Rdot on target, KF (m/s)", "rmse_rd_kf", 1.0, "< selected measurement"),
+    ("RMSE Rdot on target, selected measurement (m/s)", "rmse_rd_meas", 1.0, "-"),
     ("std dR_hat / std dR_meas", "smooth_ratio", 1.0, "<= 0.5"),
     ("mean NIS (on-target updates)", "nis_mean", 1.0, "2"),
     ("NIS > 5.99 (%)", "nis_over_95", 100.0, "5"),
     ("lag-1 correlation of range innovations", "lag1_r", 1.0, "0"),
 )
+_ABLATION_ROWS = ("on_target", "track_rmse_r", "track_on", "nn_correct", "final_on_track", "restarts_per_run")
 
 
 def make_table(results) -> Table:
-    cols = ("quantity", "filter", "model", "no gate", "gate d2 <= 9.21", "required", "published")
+    """Table 1: the detection level, without and with the gate, for the range-rate model and the ablation, on the
+    Pfa-consistent map and (range-rate only) on the brief's denser false alarms."""
+    cols = ("quantity", "filter", "model / false alarms", "no gate (paper)", "gate d2 <= 9.21", "required",
+            "published")
     rows = []
     for filt, res in _detection_results(results):
         for kind, label in (("rr", "range / range-rate"), ("rv", "monostatic range-velocity (ablation)")):
@@ -416,24 +778,95 @@ def make_table(results) -> Table:
                              req if kind == "rr" else "-",
                              "no numbers; claims a continuous, smoothed R / Rdot track" if kind == "rr" else
                              "claims the range-rate state keeps the model physically consistent"))
-    sig = results.get("signal")
-    if sig is not None and "series/truth_rr" in sig:
-        truth = sig["series/truth_rr"]
-        vals = {}
-        for g in ("nogate", "gate"):
-            present = sig[f"series/rr-{g}/target_present"].astype(bool)
-            err = sig[f"series/rr-{g}/est"][1:] - truth[1:]
-            vals[g] = (float(100 * sig[f"series/rr-{g}/correct"][present].mean()),
-                       float(np.sqrt(np.mean(err[:, 0] ** 2))), float(np.sqrt(np.mean(err[:, 1] ** 2))))
-        frames = truth.shape[0]
-        rows.append((f"signal level, 1 run x {frames} frames: NN picks the target (%)", "", "range / range-rate",
-                     round(vals["nogate"][0], 1), round(vals["gate"][0], 1), ">= 90", "-"))
-        rows.append(("signal level: RMSE R (m) / Rdot (m/s)", "", "range / range-rate",
-                     f"{vals['nogate'][1]:.2f} / {vals['nogate'][2]:.3f}", f"{vals['gate'][1]:.2f} / {vals['gate'][2]:.3f}",
-                     "-", "-"))
-        rows.append(("signal level: candidates per frame (mean)", "", "", round(float(np.mean(sig["series/candidates"])), 2),
-                     "", "-", "-"))
+        mb = {g: variant_metrics(res, f"brief/rr-{g}") for g in ("nogate", "gate")}
+        label = f"range / range-rate, brief's false alarms ({float(res['fa/rate'][1]):g}/frame on +-20 m/s)"
+        for name, key, scale, req in _ROWS:
+            if key in _ABLATION_ROWS:
+                rows.append((name, filt, label, round(scale * mb["nogate"][key], 3), round(scale * mb["gate"][key], 3),
+                             "-", "-"))
     return Table(cols, tuple(rows))
+
+
+def make_scene_table(results) -> Table:
+    """Table 2: the false-alarm models, the tuning of the restart delay, and the signal level (both scenes)."""
+    cols = ("quantity", "value", "note")
+    rows = []
+    found = _detection_results(results)
+    if found:
+        filt, res = found[0]
+        rate, density = res["fa/rate"], res["fa/density"]
+        rows.append(("false alarms per frame: from the CFAR's Pfa (primary) / the brief's (ablation)",
+                     f"{rate[0]:.3f} / {rate[1]:g}",
+                     f"Pfa {PFA:g} x {FA_CELLS} cells (102 range x 119 Doppler bins, CPI 0.5 s); the brief's count is "
+                     f"{rate[1] / rate[0]:.1f} x ours"))
+        rows.append(("false-alarm density near the target (1 / (m m/s)): ours / the brief's",
+                     f"{density[0]:.3g} / {density[1]:.3g}",
+                     f"the brief's is {density[1] / density[0]:.1f} x ours (uniform on +-20 m/s, not +-50 m/s)"))
+        rows.append(("candidates per frame after the zero-Doppler notch: ours / the brief's",
+                     f"{float(res['candidates_per_frame']):.2f} / {float(res['brief/candidates_per_frame']):.2f}",
+                     "target (P_D 0.9) + false alarms + residue leaking through the notch"))
+        for name, _ in found:
+            r = dict(found)[name]
+            rows.append((f"tuning ({name}): restart delay chosen (frames)", int(r["tuning/chosen"]),
+                         f"rule in docs/paper002.md; {int(r['tuning/runs'])} tuning runs (seed {TUNING_SEED}, key "
+                         f"'tuning'); per candidate delay: on-target rate (the rule's score) and, not read by the "
+                         f"rule, track RMSE: " + ", ".join(
+                             f"{d}: {100 * v:.2f} %, {e:.0f} m" for d, v, e in
+                             zip(r["tuning/candidates"], r["tuning/on_target"], r["tuning/track_rmse"]))))
+    sig = results.get("signal")
+    if sig is not None:
+        rows.append(("benign scene, one frame: candidates / target detected", f"{len(sig['det_range'])} / "
+                     f"{_near_arrays(sig['det_range'], sig['det_doppler'], sig)}", "noise-like reference, direct path "
+                     "+30 dB, clutter within 390 m, ECA 16 taps"))
+        _series_rows(rows, sig, "series", "benign scene")
+    dem = results.get("signal-demanding")
+    if dem is not None:
+        taps = dem["taps"]
+        rows.append((f"demanding scene, one frame: target detected with {taps[1]} / {taps[2]} ECA taps",
+                     f"{bool(dem['detected'][0])} / {bool(dem['detected'][1])}",
+                     f"{taps[1]} taps leave the clutter beyond 450 m: the noise floor rises by "
+                     f"{float(dem['floor_rise_brief_db']):.1f} dB"))
+        rows.append((f"demanding scene, one frame: candidates with {taps[2]} taps", len(dem["full/det_range"]),
+                     "ATSC 8-VSB, direct path +60 dB, clutter 30 m - 2.95 km at +50..+30 dB"))
+        rows.append(("demanding scene: candidates without the pilot removal (on the target's Doppler)",
+                     f"{int(dem['nopilot/candidates'])} ({int(dem['nopilot/on_target_row'])})",
+                     "the 8-VSB pilot carrier makes a ridge over every range at the target's Doppler"))
+        rows.append(("folded single-precision ECA + CAF vs the float64 reference: worst cell error over the noise "
+                     "floor (dB); same candidates", f"{float(dem['accuracy/max_err_db']):.1f}; "
+                     f"{bool(dem['accuracy/same_candidates'])}",
+                     f"candidate strengths within {float(dem['accuracy/max_strength_diff_db']):.1e} dB"))
+        if "series/truth_rr" in dem:
+            n = dem["series/truth_rr"].shape[0]
+            for tag, k in (("brief", taps[1]), ("full", taps[2])):
+                rows.append((f"demanding scene, {n} frames: target detected with {k} taps (% of frames)",
+                             round(100 * float(np.mean(dem[f"series/{tag}/detected"])), 1),
+                             f"{float(np.mean(dem[f'series/{tag}/candidates'])):.2f} candidates per frame"))
+            _series_rows(rows, dem, "series/track", f"demanding scene ({taps[2]} taps)")
+    return Table(cols, tuple(rows))
+
+
+def _near_arrays(ranges, dopplers, sig) -> bool:
+    """A candidate within 1.5 bins of the true cell of a saved signal frame."""
+    dr = abs(sig["range_m"][1] - sig["range_m"][0])
+    dd = abs(sig["doppler_hz"][1] - sig["doppler_hz"][0])
+    return bool(np.any((np.abs(ranges - sig["true_range"]) <= 1.5 * dr) &
+                       (np.abs(dopplers - sig["true_doppler"]) <= 1.5 * dd)))
+
+
+def _series_rows(rows: list, sig, prefix: str, label: str) -> None:
+    if f"{prefix}/candidates" not in sig:
+        return
+    truth = sig["series/truth_rr"]
+    n = truth.shape[0]
+    for g, gl in (("nogate", "no gate"), ("gate", "gate")):
+        present = sig[f"{prefix}/rr-{g}/target_present"].astype(bool)
+        on = sig[f"{prefix}/rr-{g}/on"].astype(bool)
+        err = sig[f"{prefix}/rr-{g}/est"][1:] - truth[1:]
+        rows.append((f"{label}, 1 run x {n} frames, {gl}: on target (%) / track RMSE R (m) / Rdot (m/s)",
+                     f"{100 * on.sum() / max(present.sum(), 1):.1f} / {np.sqrt(np.mean(err[:, 0] ** 2)):.2f} / "
+                     f"{np.sqrt(np.mean(err[:, 1] ** 2)):.3f}",
+                     f"target candidate in {100 * present[1:].mean():.1f} % of frames; "
+                     f"{float(np.mean(sig[f'{prefix}/candidates'])):.2f} candidates per frame"))
 
 
 # -- figures ---------------------------------------------------------------------------------------------
@@ -566,12 +999,14 @@ def fig_nis_data(results) -> dict[str, np.ndarray]:
     _, res = _first(results)
     edges = np.linspace(0.0, 20.0, 41)
     out = {"edges": edges}
+    sigma = _sigma(res)
     for v in VARIANTS:
         white = np.asarray(res[f"{v}/white"], dtype=float)
-        good = np.asarray(res[f"{v}/correct"], dtype=bool) & \
-            (np.abs(np.asarray(res[f"{v}/est"], dtype=float)[..., 0] - res["truth_rr"][..., 0]) <= ON_TRACK_M)
-        nis = np.sum(white ** 2, axis=-1)[good]
+        # on-target updates: the target's candidate exists and the chosen one is within 3 sigma of the truth
+        good = np.asarray(res[f"{v}/target_present"], bool) & on_target(res[f"{v}/chosen"], res["truth_rr"], sigma)
+        nis = np.sum(white ** 2, axis=-1)[good & np.isfinite(white[..., 0])]
         out[f"{v}/density"] = np.histogram(np.minimum(nis, edges[-1] - 1e-9), edges, density=True)[0]
+        out[f"{v}/samples"] = np.array(nis.size)
     return out
 
 
@@ -585,42 +1020,84 @@ def draw_nis(data, fig) -> None:
         ax.plot(mid, 0.5 * np.exp(-mid / 2), color="k", lw=0.8, label="chi-square, 2 dof")
         ax.set_yscale("log")
         ax.set_xlabel("NIS (on-target updates; last bin: >= 19.5)")
-        ax.set_ylabel("density")
+        ax.set_ylabel("probability density")
         ax.set_title("no gate (paper)" if g == "nogate" else "gate d2 <= 9.21", fontsize=9)
         ax.legend(fontsize=6)
+
+
+def fig_demanding_data(results) -> dict[str, np.ndarray]:
+    dem = results["signal-demanding"]
+    keys = ("caf_raw_db", "caf_brief_db", "caf_full_db", "range_m", "doppler_hz", "wavelength", "true_range",
+            "true_doppler", "taps", "brief/det_range", "brief/det_doppler", "full/det_range", "full/det_doppler",
+            "detected")
+    return {k: dem[k] for k in keys}
+
+
+def draw_demanding(data, fig) -> None:
+    r, f = data["range_m"], data["doppler_hz"]
+    lam = float(data["wavelength"])
+    taps = data["taps"]
+    panels = (("caf_raw_db", None, "no ECA"), ("caf_brief_db", "brief", f"ECA {taps[1]} taps (0-450 m)"),
+              ("caf_full_db", "full", f"ECA {taps[2]} taps (the whole map)"))
+    dr, df = r[1] - r[0], f[1] - f[0]
+    for i, (key, det, title) in enumerate(panels):
+        ax = fig.add_subplot(1, 3, i + 1)
+        img = data[key]
+        floor = float(np.median(img[:, np.abs(f) > df]))  # this panel's floor over the 102-tap floor
+        im = ax.imshow(img.T, origin="lower", aspect="auto", cmap="viridis", vmin=floor - 5, vmax=floor + 50,
+                       extent=(r[0] - dr / 2, r[-1] + dr / 2, f[0] - df / 2, f[-1] + df / 2), interpolation="nearest")
+        if det is not None:
+            ax.plot(data[f"{det}/det_range"], data[f"{det}/det_doppler"], "o", mfc="none", mec="w", ms=8,
+                    label="CFAR candidates")
+            found = bool(data["detected"][i - 1])
+            title += f"; target {'detected' if found else 'lost'}"
+        title += f"\nnoise floor {floor:+.0f} dB (colour scale: floor -5 to +50 dB)"
+        ax.plot(data["true_range"], data["true_doppler"], "x", color="tab:red", ms=7, label="true target")
+        ax.set_xlabel("bistatic range (m)")
+        ax.set_ylabel("Doppler (Hz)")
+        sec = ax.secondary_yaxis("right", functions=(lambda x: -x * lam, lambda v: -v / lam))
+        sec.set_ylabel("range-rate (m/s)")
+        ax.set_title(title, fontsize=7)
+        fig.colorbar(im, ax=ax, pad=0.18, label="|chi|^2 (dB over the 102-tap noise floor)")
+        if i == 2:
+            ax.legend(fontsize=6, loc="lower right")
 
 
 # -- recipe ----------------------------------------------------------------------------------------------
 
 
-NOTES = """\
+NOTES = f"""\
 Synthetic substitute for the measured PNU / Hwangryeongsan data (not available). Geometry: Tx (0, -8400, 420) m,
 Rx (0, 0, 60) m, local ENU, 701 MHz (lambda = 0.42766 m). Sign convention everywhere: f_D = -Rdot / lambda
 (positive Doppler = approaching); bistatic range = excess path |p-Tx| + |p-Rx| - |Tx-Rx| in truth, CAF and KF.
 Drone: starts at (250, 150, 60) m already flying its first leg; legs of U(10, 15) s towards random waypoints in a
-60 deg sector centred on east (150-700 m from Rx) at 4-10 m/s; velocity changes between legs at <= 1 m/s^2 (the
-brief's "piecewise-constant" legs with a finite turn; sigma_a = 1 m/s^2 matches this level).
+60 deg sector centred on east (150-700 m from Rx) at 4-10 m/s; velocity changes between legs at <= 1 m/s^2.
 Detection level: target candidate with P_D = 0.9, noise N(0, 15^2) m and N(0, 0.4^2) m/s, strength N(18, 2^2) dB;
-zero-Doppler residue Poisson(3) (Rdot ~ N(0, 0.3^2), ~25 dB) and false alarms Poisson(4) per frame uniform on
-[0, 3000] m x [-20, 20] m/s with strength 10 log10(ln(1/Pfa) + Exp(1)) dB (an exponential cell above the CFAR
-threshold, Pfa = 1e-4); candidates with |f_D| < 1 bin (2 Hz for the 0.5 s CPI) are removed before association.
+zero-Doppler residue Poisson(3) per frame; false alarms consistent with the CA-CFAR: Poisson(Pfa x cells) =
+Poisson({FA_RATE:.2f}) per frame (Pfa 1e-4, {FA_CELLS} cells of the 0-3 km, +-50 m/s map at CPI 0.5 s), uniform on the
+map, strength 10 log10(ln(1/Pfa) + Exp(1)) dB. The brief's Poisson(4) on +-20 m/s ({false_alarm_density(CLUTTER_BRIEF) / false_alarm_density(CLUTTER_PFA):.1f} x our density) is an
+ablation. Candidates with |f_D| < 1 bin (2 Hz) are removed before association.
 KF: x = [R, Rdot], F = [[1, 0.5], [0, 1]], Q white-noise acceleration sigma_a = 1 m/s^2, H = I, R = diag(15^2, 0.5^2),
-P0 = diag(50^2, 5^2) at the strongest non-zero-Doppler candidate of frame 0 (mid-map if frame 0 is empty).
+P0 = diag(50^2, 5^2) at the strongest candidate of frame 0 (mid-map if frame 0 is empty).
 NN: Mahalanobis d2 with S = H P- H^T + R. Variants: no gate (the paper: always the nearest candidate) and gate
-d2 <= 9.21 with coasting; the gated tracker restarts on the strongest candidate after 6 frames (3 s) without an
-update (otherwise a track started on a false alarm coasts for ever).
-Ablation: the same candidates read as v = -lambda f_D / 2 (the monostatic two-way formula, sign kept so that only the
-factor 1/2 differs) in a [R, v] constant-velocity model with sigma_v = 0.25 m/s; its velocity is reported as 2 v.
-Metrics (frames k >= 1; frame 0 holds the prior): NN correct = chosen candidate is the target's / frames where a
-target candidate exists after the notch; RMSE on the frames where NN chose the target (KF estimate vs that
-measurement); smoothness over consecutive frames with target choices; NIS, its 95 % tail and the lag-1
-correlation of the whitened range innovations over on-target updates (NN chose the target, |dR| <= 100 m).
-Signal level: f_s = 10 MHz, 6 MHz noise-like DTV surrogate, CPI 0.25 s (2.5 M samples), direct path +30 dB,
-5 static clutter patches (5-20 dB) and the echo at -20 dB relative to the surveillance noise; ECA with 16 taps
-(least squares, FFT correlations); CAF by the batches algorithm (250 batches of 10,000 samples, Hamming across
-batches), 0-3 km (102 range bins of 29.98 m), +-30 Doppler bins of 4 Hz (+-51 m/s); CA-CFAR guard 2 x 2 and
-training 8 x 8 cells on each side, Pfa = 1e-4, training cells taken outside the zero-Doppler bin, 3 x 3 local maxima,
-parabolic refinement of range and Doppler."""
+d2 <= 9.21 with coasting and a restart on the strongest candidate after a delay tuned by a fixed rule on tuning
+runs only (candidates {', '.join(map(str, RESTART_CANDIDATES))} frames; the highest on-target rate over the tuning runs of
+seed {TUNING_SEED}, key 'tuning'; ties within 0.1 point go to the shortest).
+Ablation: the same candidates read as v = -lambda f_D / 2 in a [R, v] constant-velocity model, sigma_v = 0.25 m/s;
+its velocity is reported as 2 v.
+Criteria (frames k >= 1): C1 on target = the chosen candidate within 3 sigma of the truth (45 m, 1.5 m/s) in >= 90 %
+of the frames with a target candidate; C1 track RMSE = range RMSE of the estimate over all frames <= 15 m; C2 / C3 /
+C4 on the on-target frames. Every criterion: n = Monte Carlo runs, a 95 % percentile bootstrap over runs, a
+three-way verdict (>= {MIN_RUNS} runs to decide), and how many of {REPLICATIONS} single runs (the paper's protocol: one
+flight) it holds in.
+Signal level, benign scene (the paper's row): f_s = 10 MHz, noise-like 6 MHz reference, CPI 0.25 s, direct path +30 dB,
+5 clutter patches within 390 m, echo -20 dB; ECA 16 taps. Demanding scene: ATSC 8-VSB reference (pilot, segment
+and field syncs; Korea's terrestrial HD standard), direct path +60 dB, 14 clutter patches 30 m - 2.95 km at +50 to
++30 dB, reference SNR 70 dB; ECA over every range bin of the map (102 taps: the rule 'cancel every zero-Doppler lag
+the map shows'); the pilot carrier is removed from the reference batches (frequency refined per CPI). ECA is folded
+into the batches CAF in single precision (checked against the float64 reference on the demanding frame). CAF: 250
+batches of 10,000 samples, Hamming across batches, 0-3 km x +-30 Doppler bins of 4 Hz; CA-CFAR guard 2 x 2, training
+8 x 8, Pfa 1e-4, zero-Doppler bin excluded, 3 x 3 local maxima, parabolic refinement."""
 
 PUBLISHED = {
     "numbers": "none (2-page conference paper on measured data)",
@@ -634,8 +1111,8 @@ PUBLISHED = {
 RECIPE = RecipeSpec(
     paper=PAPER,
     title="Bistatic range / range-rate Kalman filter tracking, DTV passive radar (synthetic substitute)",
-    sizes={"quick": {"runs": 500, "frames": 120, "signal_frames": 1},
-           "full": {"runs": 3000, "frames": 120, "signal_frames": 120}},
+    sizes={"quick": {"runs": 500, "frames": 120, "signal_frames": 1, "tuning_runs": TUNING_RUNS["quick"]},
+           "full": {"runs": 3000, "frames": 120, "signal_frames": 120, "tuning_runs": TUNING_RUNS["full"]}},
     tasks=tasks,
     figures=(
         FigureSpec("fig1", "Experiment layout (local ENU): Tx, Rx, baseline, reference and surveillance antenna "
@@ -647,15 +1124,24 @@ RECIPE = RecipeSpec(
                    draw_trajectory, size=(10.0, 4.6)),
         FigureSpec("fig2b", "Bistatic range R(t) and range-rate Rdot(t) of run 0 against truth (grey).",
                    fig_trajectory_data, draw_time, size=(7.0, 5.5)),
-        FigureSpec("fig3", "Cross-ambiguity map of one signal-level frame (|chi|^2 in dB over the noise floor) "
-                   "before and after ECA, with the CA-CFAR candidates (zero-Doppler bin excluded) and the true "
-                   "target.", fig_caf_data, draw_caf, size=(10.0, 4.2)),
+        FigureSpec("fig3", "Benign scene (the paper's row): cross-ambiguity map of one signal-level frame "
+                   "(|chi|^2 in dB over the noise floor) before and after ECA, with the CA-CFAR candidates "
+                   "(zero-Doppler bin excluded) and the true target.", fig_caf_data, draw_caf, size=(10.0, 4.2)),
         FigureSpec("fig4", "Ablation: NIS histograms of the range / range-rate model and of the monostatic "
                    "range-velocity model on on-target updates, against the chi-square(2) density.",
                    fig_nis_data, draw_nis, size=(9.0, 3.8)),
+        FigureSpec("fig5", "Demanding scene (ATSC 8-VSB, direct path +60 dB, clutter to 2.95 km): one frame without "
+                   "ECA, with the brief's 16 taps (the clutter beyond 450 m buries the target) and with taps over "
+                   "the whole map (the target is back), with the CA-CFAR candidates and the true target.",
+                   fig_demanding_data, draw_demanding, size=(15.0, 4.4)),
     ),
-    tables=(TableSpec("table1", "Reproduced-if quantities over the Monte Carlo runs, without and with the gate "
-                      "(the paper publishes no numbers).", make_table),),
+    tables=(TableSpec("table1", "Reproduced-if quantities over the Monte Carlo runs, without and with the gate, on "
+                      "the Pfa-consistent map and on the brief's denser false alarms (the paper publishes no "
+                      "numbers).", make_table),
+            TableSpec("table2", "False-alarm models, the tuning of the restart delay (on tuning runs only), and the "
+                      "signal level: the benign scene (the paper's row) and the demanding scene (16 vs 102 ECA "
+                      "taps, the 8-VSB pilot, the folded single-precision chain against the float64 reference).",
+                      make_scene_table)),
     criteria=criteria,
     default_filters=("kf",),
     published=PUBLISHED,

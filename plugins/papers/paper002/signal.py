@@ -1,27 +1,40 @@
-"""Signal-level passive coherent location (PCL): DTV-like signals, ECA, the cross-ambiguity function, CA-CFAR.
+"""Signal-level passive coherent location (PCL): DTV signals, ECA, the cross-ambiguity function, CA-CFAR.
 
 Pipeline of one frame (one coherent processing interval, CPI)::
 
-    reference r[n]     band-limited complex noise (a 6 MHz 8-VSB-like DTV channel surrogate) + receiver noise
+    reference r[n]     the illuminator: band-limited complex noise (the benign scene) or an ATSC 8-VSB
+                       channel with pilot, segment and field syncs (the demanding scene, :mod:`.atsc`)
     surveillance s[n]  direct path + static clutter + a delayed, Doppler-shifted target echo + noise
     ECA                s <- s - sum_l w_l r[n - l],  w = argmin ||s - X w||^2 (least squares, l = 0..K-1)
+    pilot removal      r <- r - a_b exp(j w_p m) per batch (8-VSB: the pilot carrier would otherwise give a
+                       ridge over every range at the target's Doppler)
     CAF                chi(l, f_D) = sum_n s[n] conj(r[n - l]) exp(-j 2 pi f_D n / f_s)   (batches algorithm)
     CA-CFAR            |chi|^2 > (Pfa^(-1/N) - 1) * sum(training cells), zero-Doppler bins excluded
     candidates         CFAR cells that are 3x3 local maxima -> (bistatic range, Doppler, strength)
 
-Conventions (as everywhere in the workbench, :mod:`workbench.bistatic`): lag ``l`` is the *excess*
+Two implementations of ECA + CAF compute the same map:
+
+- **folded** (:func:`batch_spectra`, :func:`eca_weights`, :func:`caf_folded`; what :func:`process_frame` runs):
+  single precision, everything on the per-batch spectra of the batches algorithm.  The ECA normal equations
+  come from the same batch spectra (``X^H s`` and the reference autocorrelation are sums over batches of
+  per-batch correlations), and the fit is subtracted from each batch's surveillance spectrum before the
+  correlation (``(S_b - W E_b) conj(R_b)``, ``E_b`` the spectrum of the reference segment reaching ``K - 1``
+  samples back).  Four FFTs of ``B x F`` points (``F = 10240``, a fast length) instead of full-length FFTs of
+  2.5 M points;
+- **reference** (:func:`eca`, :func:`remove_pilot`, :func:`caf_batches`): the NumPy twin, in whatever precision
+  its input has (complex128 in the tests and the benchmark's accuracy check): ECA on the whole CPI with
+  full-length FFTs, then the batches CAF.
+
+Conventions (as everywhere in the workbench, :mod:`workbench.sensing.bistatic`): lag ``l`` is the *excess*
 path delay, ``R = c l / f_s`` (the direct path sits at ``l = 0``); an echo ``r[n - l] exp(+j 2 pi f_D n / f_s)``
 peaks at ``+f_D``, and ``Rdot = -lambda f_D`` (positive Doppler = approaching).
-
-All heavy steps are whole-array FFTs (``scipy.fft`` with ``workers``); there is no Python loop over
-range or Doppler bins.  The per-frame loop of :func:`simulate_scans` is over frames only (each frame
-is a 2.5 M-sample computation at the default 10 MHz, 0.25 s).
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 from scipy import fft as sfft
@@ -31,25 +44,54 @@ from scipy import ndimage
 from workbench.sensing.bistatic import SPEED_OF_LIGHT, doppler_to_range_rate, range_rate_to_doppler, wavelength
 from workbench.types import CLUTTER, InputError, Scans
 
+from . import atsc
+from .fold import clean_product, normal_sums
+
 __all__ = [
     "PCLConfig",
     "SignalScene",
+    "BENIGN_SCENE",
+    "DEMANDING_SCENE",
+    "demanding_config",
     "CAFMap",
     "Candidates",
+    "BatchSpectra",
+    "fast_length",
     "dtv_reference_spectrum",
     "frame_signals",
     "eca",
+    "remove_pilot",
+    "pilot_spectral",
     "caf_batches",
+    "batch_spectra",
+    "eca_weights",
+    "caf_folded",
     "box_sum",
     "ca_cfar",
     "cfar_candidates",
     "process_frame",
     "simulate_scans",
+    "simulate_scans_multi",
 ]
 
 
 def _workers() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
+
+
+def fast_length(n: int) -> int:
+    """The smallest ``2^a * c >= n`` with ``c`` in {1, 3, 5, 9, 15, 25}: the lengths pocketfft transforms fastest.
+
+    (``scipy.fft.next_fast_len`` also accepts 7- and 11-smooth lengths such as 10125, which take 1.7 times as
+    long as 10240 here.)
+    """
+    best = None
+    for c in (1, 3, 5, 9, 15, 25):
+        m = c
+        while m < n:
+            m *= 2
+        best = m if best is None else min(best, m)
+    return int(best)
 
 
 @dataclass(frozen=True)
@@ -58,7 +100,12 @@ class PCLConfig:
 
     ``batch_length`` is the batch length ``M`` of the batches algorithm: the Doppler grid spacing is
     ``f_s / (M B) = 1 / CPI`` and the unambiguous span ``+-f_s / (2 M)`` (500 Hz at the defaults, far
-    beyond the +-117 Hz of +-50 m/s).
+    beyond the +-117 Hz of +-50 m/s).  ``eca_taps`` (``K``, at most the number of range bins) zero-Doppler
+    taps are cancelled; ``eca_loading`` is the diagonal loading of the ECA normal equations relative to their
+    mean diagonal (the single-precision Gram matrix cannot resolve eigenvalues below about 1e-7 of the largest;
+    the reference channel's out-of-band noise sits there).  ``pilot_hz``: the frequency of a pilot carrier of
+    the illuminator (8-VSB: ``-R_s / 4`` from the channel centre), removed from the reference batches before
+    the correlation; ``None`` for a waveform without one.
     """
 
     sample_rate: float = 10e6
@@ -70,6 +117,8 @@ class PCLConfig:
     range_rate_max: float = 50.0
     batch_length: int = 10_000
     eca_taps: int = 16
+    eca_loading: float = 1e-6
+    pilot_hz: float | None = None
     pfa: float = 1e-4
     guard: tuple[int, int] = (2, 2)  # (range, Doppler) guard cells on each side of the cell under test
     train: tuple[int, int] = (8, 8)  # training cells beyond the guard cells, on each side
@@ -86,6 +135,11 @@ class PCLConfig:
                              f"{self.batch_length}")
         if self.doppler_window not in ("hamming", "none"):
             raise InputError(f"PCLConfig: doppler_window must be 'hamming' or 'none', got {self.doppler_window!r}")
+        if not 0 <= self.eca_taps <= self.lags:
+            raise InputError(f"PCLConfig: eca_taps must be in 0..{self.lags} (the range bins of the map), "
+                             f"got {self.eca_taps}")
+        if self.eca_loading < 0:
+            raise InputError(f"PCLConfig: eca_loading must be >= 0, got {self.eca_loading}")
 
     @property
     def samples(self) -> int:
@@ -128,12 +182,26 @@ class PCLConfig:
     def doppler_axis(self) -> np.ndarray:
         return self.doppler_bin * np.arange(-self.doppler_half, self.doppler_half + 1)
 
+    def fft_length(self, taps: int | None = None) -> int:
+        """Per-batch FFT length of the folded chain: :func:`fast_length` of ``M + L + K - 2`` (10240 at the
+        defaults for any ``K <= L``)."""
+        k = self.eca_taps if taps is None else taps
+        return fast_length(self.batch_length + self.lags + max(k, 1) - 2)
+
+    @property
+    def cells(self) -> int:
+        """Cells the CFAR searches: range bins x Doppler bins outside the zero-Doppler notch."""
+        return self.lags * (2 * self.doppler_half + 1 - (2 * self.zero_doppler_bins - 1))
+
 
 @dataclass(frozen=True)
 class SignalScene:
     """What the surveillance channel sees, in dB relative to its receiver noise (unit power).
 
-    The static clutter patches are zero-Doppler reflectors at the given bistatic ranges.
+    The static clutter patches are zero-Doppler reflectors at the given bistatic ranges.  ``waveform`` is the
+    illuminator: ``"noise"`` (band-limited complex Gaussian, the brief's surrogate) or ``"atsc"`` (ATSC 8-VSB,
+    :mod:`.atsc`, at ``symbol_rate``: A/53's by default, a scaled one for small test configurations);
+    ``reference_snr_db`` is the reference channel's signal-to-noise ratio.
     """
 
     target_db: float = -20.0
@@ -141,10 +209,37 @@ class SignalScene:
     clutter_ranges: tuple[float, ...] = (30.0, 75.0, 150.0, 240.0, 390.0)
     clutter_db: tuple[float, ...] = (20.0, 15.0, 12.0, 8.0, 5.0)
     reference_snr_db: float = 40.0
+    waveform: str = "noise"
+    symbol_rate: float = atsc.SYMBOL_RATE
 
     def __post_init__(self) -> None:
         if len(self.clutter_ranges) != len(self.clutter_db):
             raise InputError("SignalScene: clutter_ranges and clutter_db must have the same length")
+        if self.waveform not in ("noise", "atsc"):
+            raise InputError(f"SignalScene: waveform must be 'noise' or 'atsc', got {self.waveform!r}")
+
+
+#: The brief's signal-level scene (the paper's row): noise-like reference, direct path +30 dB, clutter within 390 m.
+BENIGN_SCENE = SignalScene()
+
+_DEMANDING_RANGES = (30.0, 90.0, 180.0, 300.0, 450.0, 650.0, 900.0, 1200.0, 1500.0, 1800.0, 2100.0, 2400.0, 2700.0,
+                     2950.0)
+#: A demanding scene: ATSC 8-VSB illuminator, direct path +60 dB, 14 clutter patches from 30 m to 2.95 km whose
+#: clutter-to-noise ratio falls linearly from +50 dB to +30 dB, a reference channel at 70 dB SNR.
+DEMANDING_SCENE = SignalScene(
+    direct_path_db=60.0,
+    clutter_ranges=_DEMANDING_RANGES,
+    clutter_db=tuple(round(50.0 - 20.0 * (r - 30.0) / (2950.0 - 30.0), 2) for r in _DEMANDING_RANGES),
+    reference_snr_db=70.0,
+    waveform="atsc",
+)
+
+
+def demanding_config(base: PCLConfig = PCLConfig(), scene: SignalScene = DEMANDING_SCENE) -> PCLConfig:
+    """The processing for :data:`DEMANDING_SCENE`: as ``base``, with ECA taps over every range bin of the map
+    (the rule: clutter may sit anywhere on the map, so cancel every zero-Doppler lag the map shows, ``K = L``)
+    and the 8-VSB pilot (nominally ``-R_s / 4`` from the channel centre) removed from the reference."""
+    return replace(base, eca_taps=base.lags, pilot_hz=atsc.pilot_offset_hz(scene.symbol_rate))
 
 
 @dataclass(frozen=True)
@@ -160,7 +255,7 @@ class CAFMap:
 
     @property
     def power(self) -> np.ndarray:
-        return (self.chi.real ** 2 + self.chi.imag ** 2).astype(float)
+        return (self.chi.real.astype(float) ** 2 + self.chi.imag.astype(float) ** 2)
 
 
 @dataclass(frozen=True)
@@ -210,8 +305,37 @@ def _amp(db: float) -> float:
     return 10.0 ** (db / 20.0)
 
 
+@lru_cache(maxsize=4)
+def _two_pi_f(total: int, sample_rate: float) -> np.ndarray:
+    """``2 pi f`` of the FFT bins (rad/s), float32, read-only."""
+    out = (2.0 * np.pi * sfft.fftfreq(total, 1.0 / sample_rate)).astype(np.float32)
+    out.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=4)
+def _static_gain(total: int, sample_rate: float, direct_db: float, ranges: tuple, dbs: tuple) -> np.ndarray:
+    """Transfer function of the static part of the surveillance channel, ``a_dp + sum_c a_c exp(-j 2 pi f tau_c)``.
+
+    Stationary, so the same for every frame of a scene (cached).  Shapes: ``(total,)`` complex64, read-only.
+    """
+    two_pi_f = _two_pi_f(total, sample_rate)
+    gain = np.full(total, _amp(direct_db), dtype=np.complex64)
+    for R, db in zip(ranges, dbs):  # a handful of patches, each a whole-array term
+        gain += np.float32(_amp(db)) * _cis(-two_pi_f * np.float32(R / SPEED_OF_LIGHT))
+    gain.setflags(write=False)
+    return gain
+
+
+@lru_cache(maxsize=4)
+def _two_pi_t(n: int, sample_rate: float) -> np.ndarray:
+    out = (2.0 * np.pi * np.arange(n) / sample_rate).astype(np.float32)
+    out.setflags(write=False)
+    return out
+
+
 def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConfig(),
-                  scene: SignalScene = SignalScene()) -> tuple[np.ndarray, np.ndarray]:
+                  scene: SignalScene = BENIGN_SCENE) -> tuple[np.ndarray, np.ndarray]:
     """Reference and surveillance samples of one CPI.
 
     ``targets (K, 2)`` holds ``[R, Rdot]`` (m, m/s) of each moving echo.  Each echo is the reference
@@ -229,9 +353,16 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
     if np.any(delays < 0):
         raise InputError("frame_signals: bistatic ranges must be >= 0")
     pad = int(np.ceil(delays.max(initial=0.0) * fs)) + 64  # history so that delayed copies are causal
-    total = sfft.next_fast_len(n + pad)
-    spec = dtv_reference_spectrum(total, fs, config.bandwidth, rng, config.rolloff)
-    two_pi_f = 2.0 * np.pi * sfft.fftfreq(total, 1.0 / fs)
+    if scene.waveform == "atsc":
+        if scene.symbol_rate * (1.0 + atsc.ROLLOFF) / 2.0 >= fs:
+            raise InputError(f"frame_signals: an 8-VSB channel at {scene.symbol_rate:g} Bd does not fit in "
+                             f"{fs:g} Hz of complex bandwidth")
+        total, n_sym, _ = atsc.vsb_lengths(n + pad, fs, scene.symbol_rate)
+        spec = atsc.vsb_spectrum(total, fs, rng, n_sym)
+    else:
+        total = sfft.next_fast_len(n + pad)
+        spec = dtv_reference_spectrum(total, fs, config.bandwidth, rng, config.rolloff)
+    two_pi_f = _two_pi_f(total, fs)
     w = _workers()
 
     def delayed(gain: np.ndarray) -> np.ndarray:
@@ -239,31 +370,33 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
 
     r = sfft.ifft(spec, workers=w)[pad:pad + n]
     # static part: direct path (delay 0) + zero-Doppler clutter, a_dp + sum_c a_c exp(-j 2 pi f tau_c)
-    static_gain = np.full(total, _amp(scene.direct_path_db), dtype=np.complex64)
-    for tau, db in zip(clutter_tau, scene.clutter_db):  # a handful of patches, each a whole-array term
-        static_gain += np.float32(_amp(db)) * _cis(-two_pi_f * tau)
-    surv = delayed(static_gain)
-    two_pi_t = 2.0 * np.pi * np.arange(n) / fs
+    surv = delayed(_static_gain(total, fs, float(scene.direct_path_db), tuple(map(float, scene.clutter_ranges)),
+                                tuple(map(float, scene.clutter_db))))
+    two_pi_t = _two_pi_t(n, fs)
     for R, rdot in targets:
         f_d = range_rate_to_doppler(rdot, config.wavelength)
         # echo: a_t r(t - R/c) exp(+j 2 pi f_D t)
-        echo = delayed(np.float32(_amp(scene.target_db)) * _cis(-two_pi_f * (R / SPEED_OF_LIGHT)))
-        surv += echo * _cis(two_pi_t * f_d)
-    noise = rng.standard_normal((4, n), dtype=np.float32) * np.float32(np.sqrt(0.5))
-    surv += noise[0] + 1j * noise[1]
-    ref = r + (noise[2] + 1j * noise[3]) * np.float32(1.0 / _amp(scene.reference_snr_db))
-    return ref.astype(np.complex64), surv.astype(np.complex64)
+        echo = delayed(np.float32(_amp(scene.target_db)) * _cis(-two_pi_f * np.float32(R / SPEED_OF_LIGHT)))
+        surv += echo * _cis(two_pi_t * np.float32(f_d))
+    # circular complex Gaussian noise, unit power in the surveillance channel: real and imaginary parts N(0, 1/2)
+    noise = rng.standard_normal(4 * n, dtype=np.float32).view(np.complex64).reshape(2, n)
+    noise *= np.float32(np.sqrt(0.5))
+    surv += noise[0]
+    noise[1] *= np.float32(1.0 / _amp(scene.reference_snr_db))
+    ref = r + noise[1]
+    return ref.astype(np.complex64, copy=False), surv.astype(np.complex64, copy=False)
 
 
-# -- cancellation ---------------------------------------------------------------------------------------
+# -- reference implementation (the NumPy twin): ECA on the whole CPI, pilot removal, batches CAF -------------
 
 
-def eca(surv: np.ndarray, ref: np.ndarray, taps: int) -> tuple[np.ndarray, np.ndarray]:
+def eca(surv: np.ndarray, ref: np.ndarray, taps: int, loading: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Extensive cancellation algorithm: remove ``taps`` zero-Doppler delayed copies of the reference.
 
     ``w = argmin_w ||s - X w||^2`` with ``X[n, l] = r[n - l]`` (``r[n < 0] = 0``), ``l = 0 .. taps-1``;
-    the normal equations ``(X^H X) w = X^H s`` are formed with FFT correlations (``X^H X`` as the
-    Hermitian Toeplitz matrix of the reference autocorrelation) and solved by Cholesky.
+    the normal equations ``(X^H X + delta I) w = X^H s`` are formed with FFT correlations (``X^H X`` as the
+    Hermitian Toeplitz matrix of the reference autocorrelation, ``delta = loading * c[0]``) and solved by
+    Cholesky.  Full-length FFTs in the input's precision: the reference the folded chain is held to.
 
     Returns the cleaned surveillance ``(N,)`` and the weights ``(taps,)``.
     """
@@ -278,31 +411,91 @@ def eca(surv: np.ndarray, ref: np.ndarray, taps: int) -> tuple[np.ndarray, np.nd
     c = sfft.ifft(np.conj(Rf) * Rf, workers=w)[:taps].astype(complex)
     b = sfft.ifft(np.conj(Rf) * Sf, workers=w)[:taps].astype(complex)
     # (X^H X)[i, j] = c[i - j]  (Toeplitz, Hermitian)
-    gram = slinalg.toeplitz(c, np.conj(c))
-    weights = slinalg.solve(gram, b, assume_a="pos")
+    gram = slinalg.toeplitz(c, np.conj(c)) + loading * c[0].real * np.eye(taps)
+    weights = slinalg.cho_solve(slinalg.cho_factor(gram), b)
     # s_clean[n] = s[n] - sum_l w_l r[n - l]
     fit = sfft.ifft(Rf * sfft.fft(weights, nfft), workers=w)[:n]
     return (surv - fit).astype(surv.dtype), weights
 
 
-# -- cross-ambiguity function ----------------------------------------------------------------------------
+def pilot_spectral(R: np.ndarray, batch_length: int, pilot_hz: float, sample_rate: float, half: int = 16
+                   ) -> tuple[np.ndarray, float, np.ndarray]:
+    """The amplitude of a carrier in every reference batch, from the batch spectra, with its frequency refined.
+
+    With ``p[m] = exp(j w m)``, ``m < M``, and ``P`` its spectrum zero-padded to ``F`` (its energy lies within a
+    few bins of the carrier: 99 % inside +-16 bins), ``a_b = sum_w R_b conj(P) / sum_w |P|^2`` over the
+    ``2 half + 1`` bins around the carrier: the least-squares fit of ``a_b P`` to the batch's spectrum there
+    (a carrier ``A exp(j w_t n)`` gives ``a_b ~ A exp(j w_t b M)``; restricting the fit to the carrier's bins
+    keeps the rest of the band's data out of it, and costs ``B (2 half + 1)`` operations).  The nominal
+    ``w_0 = 2 pi pilot_hz / f_s`` is refined once from the phase advance between batches beyond the nominal
+    one, ``w = w_0 + arg(exp(-j w_0 M) sum_b a_{b+1} conj(a_b)) / M`` (unambiguous for offsets under
+    ``f_s / (2M)``, 500 Hz at the defaults): a receiver's oscillator is never exactly on the nominal frequency.
+
+    Shapes: ``R (B, F)`` -> ``a (B,)`` complex128, ``w`` (rad/sample), ``P (F,)`` complex64.
+    """
+    B, F = R.shape
+    m = np.arange(batch_length)
+
+    def fit(omega: float) -> tuple[np.ndarray, np.ndarray]:
+        P = sfft.fft(np.exp(1j * omega * m), F)
+        k = int(round(omega * F / (2.0 * np.pi)))
+        win = (k + np.arange(-half, half + 1)) % F
+        Pw = P[win]
+        # a_b = sum_w R_b conj(P) / sum_w |P|^2
+        a = np.sum(R[:, win] * np.conj(Pw), axis=1) / np.sum(np.abs(Pw) ** 2)
+        return a, P
+
+    omega0 = 2.0 * np.pi * pilot_hz / sample_rate
+    a0, _ = fit(omega0)
+    # the advance beyond the nominal exp(j w_0 M) per batch
+    omega = omega0 + float(np.angle(np.vdot(a0[:-1], a0[1:]) * np.exp(-1j * omega0 * batch_length))) / batch_length
+    a, P = fit(omega)
+    return a, omega, P.astype(np.complex64)
+
+
+def remove_pilot(ref: np.ndarray, config: PCLConfig) -> np.ndarray:
+    """The reference with its pilot carrier removed batch by batch (``r_b - a_b exp(j w m)``), time domain.
+
+    The amplitudes and the refined frequency come from :func:`pilot_spectral` on the batches' own FFTs, computed
+    here in the input's precision.  Shapes: ``ref (N,)`` -> ``(N,)``.  Without ``config.pilot_hz`` the input is
+    returned.
+    """
+    if config.pilot_hz is None:
+        return ref
+    B, M = config.batches, config.batch_length
+    batches = ref.reshape(B, M)
+    a, omega, _ = pilot_spectral(sfft.fft(batches, config.fft_length(), axis=1, workers=_workers()), M,
+                                 config.pilot_hz, config.sample_rate)
+    p = np.exp(1j * omega * np.arange(M)).astype(ref.dtype)
+    return (batches - a[:, None].astype(ref.dtype) * p[None, :]).reshape(-1)
+
+
+def _doppler(corr: np.ndarray, config: PCLConfig) -> np.ndarray:
+    """``chi(l, k) = sum_b win_b c_b[l] exp(-j 2 pi k b / B)`` for ``k = -K..K``: ``(B, L)`` -> ``(L, 2K + 1)``."""
+    B, K = config.batches, config.doppler_half
+    if config.doppler_window == "hamming":
+        corr = corr * np.hamming(B).astype(corr.real.dtype)[:, None]
+    dop = sfft.fft(corr, axis=0, workers=_workers())
+    keep = np.r_[B - K:B, 0:K + 1]
+    return np.ascontiguousarray(dop[keep].T)
 
 
 def caf_batches(surv: np.ndarray, ref: np.ndarray, config: PCLConfig = PCLConfig()) -> CAFMap:
-    """Cross-ambiguity function on the range-Doppler grid of ``config`` by the batches algorithm.
+    """Cross-ambiguity function on the range-Doppler grid of ``config`` by the batches algorithm (reference form).
 
     Split the CPI into ``B`` batches of ``M`` samples; per batch, the correlation over lags
-    ``l = 0..L-1`` by FFT, ``c_b[l] = sum_m s[bM + m + l] conj(r[bM + m])``; then an FFT across batches
-    (optionally Hamming-windowed) gives ``chi(l, k) = sum_b c_b[l] exp(-j 2 pi k b / B)`` at
-    ``f_D = k / CPI``, ``k = -K..K``.
+    ``l = 0..L-1`` by FFT, ``c_b[l] = sum_m s[bM + m + l] conj(r'[bM + m])`` (``r'``: the reference with its
+    pilot removed, :func:`remove_pilot`); then an FFT across batches (optionally Hamming-windowed) gives
+    ``chi(l, k) = sum_b c_b[l] exp(-j 2 pi k b / B)`` at ``f_D = k / CPI``, ``k = -K..K``.
 
     Shapes: ``surv, ref (N,)`` with ``N = config.samples``; result ``chi (L, 2K + 1)``.
     """
-    n, M, B, L, K = config.samples, config.batch_length, config.batches, config.lags, config.doppler_half
+    n, M, B, L = config.samples, config.batch_length, config.batches, config.lags
     if surv.shape != (n,) or ref.shape != (n,):
         raise InputError(f"caf_batches: expected signals of {n} samples, got {surv.shape} and {ref.shape}")
     w = _workers()
     nfft = sfft.next_fast_len(M + L - 1)
+    ref = remove_pilot(ref, config)
     # surveillance segments of length M + L - 1 starting at b M (zero-padded past the end)
     s_pad = np.concatenate([surv, np.zeros(L - 1, dtype=surv.dtype)])
     segments = np.lib.stride_tricks.sliding_window_view(s_pad, M + L - 1)[::M][:B]
@@ -310,12 +503,149 @@ def caf_batches(surv: np.ndarray, ref: np.ndarray, config: PCLConfig = PCLConfig
     Rb = sfft.fft(ref.reshape(B, M), nfft, axis=1, workers=w)
     # c_b[l] = sum_m s[bM + m + l] conj(r[bM + m])
     corr = sfft.ifft(S * np.conj(Rb), axis=1, workers=w)[:, :L]
-    if config.doppler_window == "hamming":
-        corr = corr * np.hamming(B).astype(corr.real.dtype)[:, None]
-    # chi(l, k) = sum_b c_b[l] exp(-j 2 pi k b / B)
-    dop = sfft.fft(corr, axis=0, workers=w)
-    keep = np.r_[B - K:B, 0:K + 1]
-    return CAFMap(np.ascontiguousarray(dop[keep].T), config.range_axis, config.doppler_axis)
+    return CAFMap(_doppler(corr, config), config.range_axis, config.doppler_axis)
+
+
+# -- folded form: ECA on the batch spectra, single precision -------------------------------------------------
+
+
+@dataclass
+class BatchSpectra:
+    """The per-batch spectra of one CPI (length-``F`` FFTs, ``F = config.fft_length(taps)``).
+
+    Shapes: ``surv (B, F)``: FFT of ``s[bM .. bM + M + L - 1)`` (zero past ``N``); ``ref (B, F)``: FFT of
+    ``r[bM .. bM + M)``; ``ref_ext (B, F)`` or None: FFT of ``r[bM - K + 1 .. bM + M + L - 1)`` (zero outside
+    ``[0, N)``); ``ref_tail (K - 1,)``: ``r[N - K + 1 .. N)``; ``pilot (B,)`` or None: the pilot amplitude of
+    every reference batch, ``pilot_omega`` its refined frequency (rad/sample), ``pilot_spectrum (F,)`` the
+    spectrum of ``exp(j pilot_omega m)``, ``m < M`` (:func:`pilot_spectral`).  :func:`caf_folded` overwrites
+    ``surv`` and ``ref_ext``.
+    """
+
+    surv: np.ndarray
+    ref: np.ndarray
+    ref_ext: np.ndarray | None
+    ref_tail: np.ndarray
+    taps: int
+    pilot: np.ndarray | None = None
+    pilot_omega: float = 0.0
+    pilot_spectrum: np.ndarray | None = None
+
+    @property
+    def nfft(self) -> int:
+        return self.surv.shape[1]
+
+
+def _segments(x: np.ndarray, B: int, M: int, length: int, back: int, nfft: int) -> np.ndarray:
+    """``(B, nfft)`` complex64: row ``b`` holds ``x[bM - back .. bM - back + length)`` (zero outside ``[0, N)``),
+    then zeros.  One strided copy: the rows entirely inside the signal come from a sliding-window view."""
+    n = x.shape[0]
+    out = np.empty((B, nfft), dtype=np.complex64)  # (cheaper than np.zeros: every element is written once)
+    out[:, length:] = 0
+    first = -(-back // M)  # the first row that starts at or after 0
+    last = min(B - 1, (n - length + back) // M)  # the last row that ends at or before N
+    if last >= first:
+        view = np.lib.stride_tricks.sliding_window_view(x, length)[first * M - back:last * M - back + 1:M]
+        out[first:last + 1, :length] = view
+    for b in list(range(0, min(first, B))) + list(range(max(last + 1, first), B)):  # a row or two at the edges
+        lo, hi = b * M - back, b * M - back + length
+        a, z = max(lo, 0), min(hi, n)
+        out[b, :length] = 0
+        if a < z:
+            out[b, a - lo:z - lo] = x[a:z]
+    return out
+
+
+def batch_spectra(surv: np.ndarray, ref: np.ndarray, config: PCLConfig = PCLConfig(), taps: int | None = None
+                  ) -> BatchSpectra:
+    """Stage 1 of the folded chain: the FFTs of the surveillance segments, reference batches and extended
+    reference segments, and the pilot amplitudes (:func:`pilot_spectral`; see :class:`BatchSpectra`).  Single
+    precision."""
+    n, M, B, L = config.samples, config.batch_length, config.batches, config.lags
+    K = config.eca_taps if taps is None else int(taps)
+    if surv.shape != (n,) or ref.shape != (n,):
+        raise InputError(f"batch_spectra: expected signals of {n} samples, got {surv.shape} and {ref.shape}")
+    if not 0 <= K <= L:
+        raise InputError(f"batch_spectra: taps must be in 0..{L}, got {K}")
+    surv = np.asarray(surv, dtype=np.complex64)
+    ref = np.asarray(ref, dtype=np.complex64)
+    nfft = config.fft_length(K)
+    w = _workers()
+    # surveillance segments s[bM .. bM + M + L - 1) (zero past N), zero-padded to F, transformed in place
+    S = _segments(surv, B, M, M + L - 1, 0, nfft)
+    S = sfft.fft(S, axis=1, workers=w, overwrite_x=True)  # in place
+    batches = ref.reshape(B, M)
+    R = np.empty((B, nfft), dtype=np.complex64)
+    R[:, :M] = batches
+    R[:, M:] = 0
+    R = sfft.fft(R, axis=1, workers=w, overwrite_x=True)
+    E = None
+    if K > 0:
+        # extended reference segments r[bM - K + 1 .. bM + M + L - 1) (zero outside [0, N))
+        E = _segments(ref, B, M, M + L + K - 2, K - 1, nfft)
+        E = sfft.fft(E, axis=1, workers=w, overwrite_x=True)
+    pilot, omega, P = (None, 0.0, None)
+    if config.pilot_hz is not None:
+        pilot, omega, P = pilot_spectral(R, M, config.pilot_hz, config.sample_rate)
+    return BatchSpectra(S, R, E, ref[n - K + 1:].copy() if K > 1 else np.zeros(0, np.complex64), K,
+                        pilot, omega, P)
+
+
+def eca_weights(spec: BatchSpectra, loading: float = 1e-6, backend: str = "auto") -> np.ndarray:
+    """Stage 2: the ECA weights from the batch spectra (the normal equations of :func:`eca`, exactly).
+
+    ``b[i] = sum_n s[n + i] conj(r[n]) = sum_b IFFT(S_b conj R_b)[i]`` and the reference autocorrelation
+    ``c[d] = sum_n r[n + d] conj(r[n]) = sum_b IFFT(E_b conj R_b)[K - 1 + d]``; then
+    ``(toeplitz(c) + delta I) w = b`` with ``delta = loading * c[0]``, solved in double precision by the Levinson
+    recursion (``scipy.linalg.solve_toeplitz``: O(K^2) and no BLAS call, whose thread pool would contend with
+    the FFT and Numba threads for a 100 x 100 system).
+
+    Shapes: ``(K,)`` complex128.
+    """
+    K = spec.taps
+    if K < 1:
+        return np.zeros(0, dtype=complex)
+    bs, ae = normal_sums(spec.surv, spec.ref, spec.ref_ext, backend)
+    b = sfft.ifft(bs)[:K]
+    c = sfft.ifft(ae)[K - 1:2 * K - 1]
+    column = c.copy()
+    column[0] = c[0].real * (1.0 + loading)
+    # (X^H X)[i, j] = c[i - j]: first column c, first row conj(c)
+    return slinalg.solve_toeplitz((column, np.conj(column)), b)
+
+
+def caf_folded(spec: BatchSpectra, weights: np.ndarray, config: PCLConfig = PCLConfig(), backend: str = "auto"
+               ) -> CAFMap:
+    """Stage 3: the CAF of the cancelled surveillance, computed from the batch spectra (overwrites ``spec.surv``).
+
+    The fit ``f[n] = sum_j w_j r[n - j]`` over a surveillance segment is the circular convolution of the
+    extended reference segment with ``g`` (``g[(j - K + 1) mod F] = w_j``), exact on the ``M + L - 1`` samples
+    the correlation reads, so the cancelled correlation spectrum is ``(S_b - G E_b) conj(R'_b)``, with ``R'_b =
+    R_b - a_b P`` the pilot-free reference batch.  One correction keeps it equal to the reference form: past the
+    end of the CPI (``n >= N``) the surveillance is zero-padded, so the fit's spill ``f[N + i]``, ``i < K - 1``,
+    is added back to the last batch.  Then ``c_b[l] = IFFT(...)[l]``, ``l < L``, and the Doppler FFT.
+    """
+    M, L = config.batch_length, config.lags
+    K, F = spec.taps, spec.nfft
+    w = _workers()
+    G = None
+    if K > 0:
+        g = np.zeros(F, dtype=np.complex128)
+        g[(np.arange(K) - (K - 1)) % F] = weights
+        G = sfft.fft(g).astype(np.complex64)
+    P = spec.pilot_spectrum
+    X = clean_product(spec.surv, spec.ref, spec.ref_ext, G, None if P is None else spec.pilot.astype(np.complex64),
+                      P, backend)
+    if K > 1:
+        # the fit past the end of the CPI, f[N + i] = sum_{j > i} w_j r[N + i - j], added back to the last batch
+        # (the surveillance there is zero padding)
+        tail = spec.ref_tail.astype(complex)
+        spill = np.array([np.dot(weights[i + 1:], tail[::-1][:K - 1 - i]) for i in range(K - 1)])
+        e = np.zeros(F, dtype=np.complex128)
+        e[M:M + K - 1] = spill
+        ref_last = spec.ref[-1] if P is None else spec.ref[-1] - spec.pilot[-1] * P
+        X[-1] += (sfft.fft(e) * np.conj(ref_last)).astype(np.complex64)
+    corr = sfft.ifft(X, axis=1, workers=w, overwrite_x=True)[:, :L]
+    return CAFMap(_doppler(corr, config), config.range_axis, config.doppler_axis)
 
 
 # -- CFAR -----------------------------------------------------------------------------------------------
@@ -402,41 +732,45 @@ def cfar_candidates(caf: CAFMap, config: PCLConfig = PCLConfig()) -> tuple[Candi
     return cands, mask
 
 
-def process_frame(ref: np.ndarray, surv: np.ndarray, config: PCLConfig = PCLConfig(), cancel: bool = True
-                  ) -> tuple[CAFMap, Candidates, np.ndarray]:
-    """ECA (optional) -> CAF -> CFAR candidates for one CPI."""
-    if cancel:
-        surv, _ = eca(surv, ref, config.eca_taps)
-    caf = caf_batches(surv, ref, config)
+def process_frame(ref: np.ndarray, surv: np.ndarray, config: PCLConfig = PCLConfig(), cancel: bool = True,
+                  method: str = "folded", backend: str = "auto") -> tuple[CAFMap, Candidates, np.ndarray]:
+    """ECA (optional) -> CAF -> CFAR candidates for one CPI.
+
+    ``method="folded"``: :func:`batch_spectra`, :func:`eca_weights`, :func:`caf_folded` (single precision);
+    ``"reference"``: :func:`eca` + :func:`caf_batches` in the input's precision (the twin).
+    """
+    taps = config.eca_taps if cancel else 0
+    if method == "folded":
+        spec = batch_spectra(surv, ref, config, taps)
+        weights = eca_weights(spec, config.eca_loading, backend)
+        caf = caf_folded(spec, weights, config, backend)
+    elif method == "reference":
+        if taps:
+            surv, _ = eca(surv, ref, taps, config.eca_loading)
+        caf = caf_batches(surv, ref, config)
+    else:
+        raise InputError(f"process_frame: method must be 'folded' or 'reference', got {method!r}")
     cands, mask = cfar_candidates(caf, config)
     return caf, cands, mask
 
 
-def simulate_scans(truth_rr: np.ndarray, times: np.ndarray, rng: np.random.Generator,
-                   config: PCLConfig = PCLConfig(), scene: SignalScene = SignalScene()) -> Scans:
-    """Signal-level candidates for target tracks ``truth_rr (B, T, 2)`` of ``[R, Rdot]``: a :class:`Scans`.
+def _label(c: Candidates, true_rr: np.ndarray, config: PCLConfig) -> int:
+    """Row of the candidate within 1.5 range and 1.5 Doppler bins of the true cell (nearest), or -1."""
+    f_true = range_rate_to_doppler(true_rr[1], config.wavelength)
+    dr = np.abs(c.range_m - true_rr[0]) / config.range_bin
+    dd = np.abs(c.doppler_hz - f_true) / config.doppler_bin
+    near = (dr <= 1.5) & (dd <= 1.5)
+    return int(np.argmin(np.where(near, dr * dr + dd * dd, np.inf))) if near.any() else -1
 
-    Same output as the detection-level sensor: ``z = [R, Rdot]``, ``doppler`` (Hz), ``snr`` (strength,
-    dB).  The candidate nearest the true target cell, within 1.5 range and 1.5 Doppler bins, is
-    labelled as the target (origin 0); every other candidate is clutter.
-    """
-    truth_rr = np.asarray(truth_rr, dtype=float)
-    if truth_rr.ndim != 3 or truth_rr.shape[-1] != 2:
-        raise InputError(f"simulate_scans expects truth (B, T, 2), got {truth_rr.shape}")
+
+def _as_scans(frames, truth_rr: np.ndarray, times: np.ndarray, config: PCLConfig) -> Scans:
     B, T, _ = truth_rr.shape
-    frames = [[None] * T for _ in range(B)]
-    for b in range(B):
-        for t in range(T):  # one frame is a whole-array FFT computation of N samples
-            ref, surv = frame_signals(truth_rr[b, t][None], rng, config, scene)
-            _, cands, _ = process_frame(ref, surv, config)
-            frames[b][t] = cands
     M = max([len(c.range_m) for row in frames for c in row], default=0)
     z = np.zeros((B, T, M, 2))
     valid = np.zeros((B, T, M), dtype=bool)
     snr = np.full((B, T, M), np.nan)
     dop = np.full((B, T, M), np.nan)
     origin = np.full((B, T, M), CLUTTER, dtype=int)
-    f_true = range_rate_to_doppler(truth_rr[..., 1], config.wavelength)
     for b in range(B):
         for t in range(T):
             c = frames[b][t]
@@ -444,9 +778,37 @@ def simulate_scans(truth_rr: np.ndarray, times: np.ndarray, rng: np.random.Gener
             z[b, t, :m, 0], z[b, t, :m, 1] = c.range_m, c.range_rate
             valid[b, t, :m] = True
             snr[b, t, :m], dop[b, t, :m] = c.strength_db, c.doppler_hz
-            dr = np.abs(c.range_m - truth_rr[b, t, 0]) / config.range_bin
-            dd = np.abs(c.doppler_hz - f_true[b, t]) / config.doppler_bin
-            near = (dr <= 1.5) & (dd <= 1.5)
-            if near.any():
-                origin[b, t, np.argmin(np.where(near, dr * dr + dd * dd, np.inf))] = 0
+            j = _label(c, truth_rr[b, t], config)
+            if j >= 0:
+                origin[b, t, j] = 0
     return Scans(z, valid, np.asarray(times, dtype=float), snr=snr, doppler=dop, origin=origin)
+
+
+def simulate_scans_multi(truth_rr: np.ndarray, times: np.ndarray, rng: np.random.Generator, configs,
+                         scene: SignalScene = BENIGN_SCENE) -> list[Scans]:
+    """Signal-level candidates of the same frames processed by several receivers (``configs``, one
+    :class:`Scans` each): every frame is synthesised once (with ``configs[0]``'s grid) and processed by each.
+
+    Same output as the detection-level sensor: ``z = [R, Rdot]``, ``doppler`` (Hz), ``snr`` (strength, dB).
+    The candidate nearest the true target cell, within 1.5 range and 1.5 Doppler bins, is labelled as the
+    target (origin 0); every other candidate is clutter.
+    """
+    truth_rr = np.asarray(truth_rr, dtype=float)
+    if truth_rr.ndim != 3 or truth_rr.shape[-1] != 2:
+        raise InputError(f"simulate_scans expects truth (B, T, 2), got {truth_rr.shape}")
+    configs = list(configs)
+    B, T, _ = truth_rr.shape
+    frames = [[[None] * T for _ in range(B)] for _ in configs]
+    for b in range(B):
+        for t in range(T):  # one frame is a whole-array FFT computation of N samples
+            ref, surv = frame_signals(truth_rr[b, t][None], rng, configs[0], scene)
+            for i, cfg in enumerate(configs):
+                frames[i][b][t] = process_frame(ref, surv, cfg)[1]
+    return [_as_scans(f, truth_rr, times, cfg) for f, cfg in zip(frames, configs)]
+
+
+def simulate_scans(truth_rr: np.ndarray, times: np.ndarray, rng: np.random.Generator,
+                   config: PCLConfig = PCLConfig(), scene: SignalScene = BENIGN_SCENE) -> Scans:
+    """Signal-level candidates for target tracks ``truth_rr (B, T, 2)`` of ``[R, Rdot]``: a :class:`Scans`
+    (see :func:`simulate_scans_multi`)."""
+    return simulate_scans_multi(truth_rr, times, rng, [config], scene)[0]
