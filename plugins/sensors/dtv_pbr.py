@@ -1,7 +1,7 @@
 """DTV passive bistatic radar (paper 002), detection level: one target candidate per frame with P_D.
 
 The measurement is ``z = [R, Rdot]``: bistatic range (excess path, m) and bistatic range-rate (m/s),
-with ``Rdot = -lambda f_D`` (positive Doppler = approaching, see :mod:`workbench.bistatic`).  The
+with ``Rdot = -lambda f_D`` (positive Doppler = approaching, see :mod:`workbench.sensing.bistatic`).  The
 scans also carry ``doppler`` (Hz, the same sign convention) and ``snr`` (candidate strength, dB).
 
 Truth states are ``[p, v]`` in local ENU metres (2-D ``[x, y, vx, vy]`` or 3-D ``[x, y, z, vx, vy, vz]``).
