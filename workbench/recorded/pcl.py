@@ -14,16 +14,29 @@ Format (documented in ``docs/recorded-data.md``, section "Passive radar candidat
 - ``bistatic_range_m``: excess path ``|p - Tx| + |p - Rx| - |Tx - Rx|`` (m), >= 0;
 - ``doppler_hz`` and/or ``range_rate_mps``: at least one; ``Rdot = -lambda f_D`` (positive Doppler =
   approaching); with both, they must agree within 0.01 m/s;
-- ``strength_db``: optional candidate strength (dB); NaN when absent.
+- ``strength_db``: optional candidate strength (dB); NaN when absent;
+- ``sigma_range_m`` and ``sigma_range_rate_mps``: optional, together, each candidate's own accuracy (standard
+  deviations); they become the candidates' covariances ``Scans.cov = diag(sigma_R^2, sigma_Rdot^2)``.
+
+Metadata lines (comments that start with ``#!``) declare the geometry and the carrier::
+
+    #! carrier_hz: 701e6
+    #! transmitter_m: 0, -8400, 420
+    #! receiver_m: 0, 0, 60
+
+The carrier converts between Doppler and range-rate (an explicit ``frequency_hz`` argument must agree with it);
+:func:`pcl_metadata` reads the three.
 
 The loader returns :class:`~workbench.types.Scans` with ``z (1, T, M, 2) = [R, Rdot]``, ``doppler`` (Hz),
-``snr`` (strength) and no ``origin`` (recorded data has no truth).  Any malformed row raises
-:class:`~workbench.types.InputError` naming the file, the 1-based line and the column.
+``snr`` (strength), ``cov`` where the file gives accuracies, and no ``origin`` (recorded data has no truth).  Any
+malformed row raises :class:`~workbench.types.InputError` naming the file, the 1-based line and the column.  A
+UTF-8 byte-order mark is accepted.
 """
 
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
@@ -33,13 +46,67 @@ from ..sensing.bistatic import doppler_to_range_rate, range_rate_to_doppler, wav
 from .sonar import finite_number
 from ..types import InputError, Scans
 
-__all__ = ["COLUMNS", "load_pcl_candidates", "write_pcl_candidates"]
+__all__ = ["COLUMNS", "PCLMetadata", "pcl_metadata", "load_pcl_candidates", "write_pcl_candidates"]
 
 #: column -> required?  (doppler_hz / range_rate_mps: at least one of the two)
 COLUMNS = {"frame": True, "time_s": True, "bistatic_range_m": True, "doppler_hz": False, "range_rate_mps": False,
-           "strength_db": False}
-CANDIDATE_FIELDS = ("bistatic_range_m", "doppler_hz", "range_rate_mps", "strength_db")
+           "strength_db": False, "sigma_range_m": False, "sigma_range_rate_mps": False}
+CANDIDATE_FIELDS = ("bistatic_range_m", "doppler_hz", "range_rate_mps", "strength_db", "sigma_range_m",
+                    "sigma_range_rate_mps")
 AGREE_MPS = 0.01
+#: The carrier assumed when neither the file nor the caller gives one (Hz).
+DEFAULT_CARRIER_HZ = 701e6
+
+
+@dataclass(frozen=True)
+class PCLMetadata:
+    """What a candidate file declares about its geometry: the carrier (Hz) and the transmitter's and receiver's
+    positions (m), each ``None`` where the file is silent."""
+
+    carrier_hz: float | None = None
+    transmitter_m: tuple[float, ...] | None = None
+    receiver_m: tuple[float, ...] | None = None
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the candidate file ({exc.strerror or exc})") from None
+
+
+def _metadata(path: Path, text: str) -> PCLMetadata:
+    values: dict = {}
+    for i, line in enumerate(text.splitlines(), 1):
+        stripped = line.strip()
+        if not stripped.startswith("#!"):
+            continue
+        key, sep, raw = stripped[2:].partition(":")
+        key = key.strip().lower()
+        where = f"{path} line {i}"
+        if not sep or key not in ("carrier_hz", "transmitter_m", "receiver_m"):
+            raise InputError(f"{where}: a '#!' line declares 'carrier_hz: ...', 'transmitter_m: x, y, z' or "
+                             f"'receiver_m: x, y, z', got {stripped!r}")
+        if key in values:
+            raise InputError(f"{where}: {key} is declared twice")
+        numbers = [finite_number(v.strip(), f"{where}, {key}") for v in raw.split(",")]
+        if key == "carrier_hz":
+            if len(numbers) != 1 or not numbers[0] > 0:
+                raise InputError(f"{where}: carrier_hz must be one number > 0, got {raw.strip()!r}")
+            values[key] = numbers[0]
+        else:
+            if len(numbers) not in (2, 3):
+                raise InputError(f"{where}: {key} must be 2 or 3 coordinates, got {raw.strip()!r}")
+            values[key] = tuple(numbers)
+    return PCLMetadata(**values)
+
+
+def pcl_metadata(path) -> PCLMetadata:
+    """The carrier and geometry a candidate file declares in its ``#!`` lines."""
+    path = Path(path)
+    return _metadata(path, _read_text(path))
 
 
 def _where(path, line: int, column: str | None = None) -> str:
@@ -50,24 +117,27 @@ def _number(raw: str, path, line: int, column: str) -> float:
     return finite_number(raw, _where(path, line, column))
 
 
-def load_pcl_candidates(path, frequency_hz: float = 701e6) -> Scans:
+def load_pcl_candidates(path, frequency_hz: float | None = None) -> Scans:
     """Read a candidate CSV (format in the module docstring) into one-run :class:`Scans`.
 
     Parameters
     ----------
     path : the CSV file.
-    frequency_hz : carrier frequency used to convert between Doppler and range-rate (default 701 MHz).
+    frequency_hz : carrier frequency used to convert between Doppler and range-rate; default: the file's
+        ``#! carrier_hz`` line, else 701 MHz.  Given both, they must agree.
 
     Shapes
     ------
     z : (1, T, M, 2) with ``[R, Rdot]``; valid, snr, doppler : (1, T, M); times : (T,)
     """
     path = Path(path)
+    text = _read_text(path)
+    meta = _metadata(path, text)
+    if frequency_hz is not None and meta.carrier_hz is not None and abs(frequency_hz - meta.carrier_hz) > 1e-9 * \
+            meta.carrier_hz:
+        raise InputError(f"{path}: the file declares carrier_hz {meta.carrier_hz:g}, but {frequency_hz:g} Hz was asked for")
+    frequency_hz = frequency_hz or meta.carrier_hz or DEFAULT_CARRIER_HZ
     lam = wavelength(frequency_hz)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the candidate file ({exc.strerror or exc})") from None
     rows = [(i + 1, line) for i, line in enumerate(text.splitlines())
             if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
@@ -84,6 +154,9 @@ def load_pcl_candidates(path, frequency_hz: float = 701e6) -> Scans:
         raise InputError(f"{_where(path, head_line)}: missing column(s) {missing}")
     if "doppler_hz" not in header and "range_rate_mps" not in header:
         raise InputError(f"{_where(path, head_line)}: need a 'doppler_hz' or a 'range_rate_mps' column")
+    accuracy = ("sigma_range_m" in header, "sigma_range_rate_mps" in header)
+    if accuracy[0] != accuracy[1]:
+        raise InputError(f"{_where(path, head_line)}: give both 'sigma_range_m' and 'sigma_range_rate_mps', or neither")
     col = {name: i for i, name in enumerate(header)}
 
     frames: dict[int, dict] = {}
@@ -124,7 +197,14 @@ def load_pcl_candidates(path, frequency_hz: float = 701e6) -> Scans:
                                  f"{frequency_hz / 1e6:g} MHz)")
         rdot = value["range_rate_mps"] if "range_rate_mps" in value else float(doppler_to_range_rate(value["doppler_hz"], lam))
         dop = value["doppler_hz"] if "doppler_hz" in value else float(range_rate_to_doppler(rdot, lam))
-        entry["cands"].append((value["bistatic_range_m"], rdot, dop, value.get("strength_db", np.nan)))
+        sig = (np.nan, np.nan)
+        if accuracy[0]:
+            for c in ("sigma_range_m", "sigma_range_rate_mps"):
+                if c not in value or not value[c] > 0:
+                    raise InputError(f"{_where(path, line, c)}: each candidate needs its accuracy, a number > 0, got "
+                                     f"{fields[col[c]]!r}")
+            sig = (value["sigma_range_m"], value["sigma_range_rate_mps"])
+        entry["cands"].append((value["bistatic_range_m"], rdot, dop, value.get("strength_db", np.nan)) + sig)
     if not frames:
         raise InputError(f"{path}: the file has a header but no rows")
     T = max(frames) + 1
@@ -142,21 +222,27 @@ def load_pcl_candidates(path, frequency_hz: float = 701e6) -> Scans:
     valid = np.zeros((1, T, M), dtype=bool)
     snr = np.full((1, T, M), np.nan)
     dop = np.full((1, T, M), np.nan)
+    cov = np.broadcast_to(np.eye(2), (1, T, M, 2, 2)).copy() if accuracy[0] else None
     for k in range(T):
-        c = np.array(frames[k]["cands"], dtype=float).reshape(-1, 4)
+        c = np.array(frames[k]["cands"], dtype=float).reshape(-1, 6)
         m = c.shape[0]
         z[0, k, :m] = c[:, :2]
         dop[0, k, :m], snr[0, k, :m] = c[:, 2], c[:, 3]
         valid[0, k, :m] = True
-    return Scans(z, valid, times, snr=snr, doppler=dop)
+        if cov is not None:
+            cov[0, k, :m, 0, 0], cov[0, k, :m, 1, 1] = c[:, 4] ** 2, c[:, 5] ** 2
+    return Scans(z, valid, times, snr=snr, doppler=dop, cov=cov)
 
 
 def write_pcl_candidates(path, scans: Scans, run: int = 0, *, comments: Iterable[str] = (),
-                         frequency_hz: float = 701e6, columns: str = "doppler") -> Path:
+                         frequency_hz: float = DEFAULT_CARRIER_HZ, columns: str = "doppler",
+                         transmitter_m=None, receiver_m=None) -> Path:
     """Write the valid candidates of one run of ``scans`` (``z = [R, Rdot]``) in the CSV format.
 
     ``columns``: ``"doppler"`` (``doppler_hz``), ``"range_rate"`` (``range_rate_mps``) or ``"both"``.
-    ``comments`` become ``#`` lines at the top (label synthetic data as such).
+    ``comments`` become ``#`` lines at the top (label synthetic data as such); the carrier and, when given, the
+    transmitter's and receiver's positions become ``#!`` metadata lines; candidates' covariances (``scans.cov``)
+    become the accuracy columns.
     """
     if columns not in ("doppler", "range_rate", "both"):
         raise InputError(f"write_pcl_candidates: columns must be 'doppler', 'range_rate' or 'both', got {columns!r}")
@@ -165,9 +251,15 @@ def write_pcl_candidates(path, scans: Scans, run: int = 0, *, comments: Iterable
     head = ["frame", "time_s", "bistatic_range_m"]
     head += {"doppler": ["doppler_hz"], "range_rate": ["range_rate_mps"], "both": ["doppler_hz", "range_rate_mps"]}[columns]
     head += ["strength_db"]
-    with open(path, "w", newline="") as fh:
+    if scans.cov is not None:
+        head += ["sigma_range_m", "sigma_range_rate_mps"]
+    with open(path, "w", newline="", encoding="utf-8") as fh:
         for c in comments:
             fh.write(f"# {c}\n")
+        fh.write(f"#! carrier_hz: {frequency_hz!r}\n")
+        for key, pos in (("transmitter_m", transmitter_m), ("receiver_m", receiver_m)):
+            if pos is not None:
+                fh.write(f"#! {key}: " + ", ".join(repr(float(v)) for v in pos) + "\n")
         writer = csv.writer(fh)
         writer.writerow(head)
         for k in range(scans.steps):
@@ -183,5 +275,7 @@ def write_pcl_candidates(path, scans: Scans, run: int = 0, *, comments: Iterable
                     f"{scans.snr[run, k, j]:.2f}"
                 vals = {"doppler": [f"{fd:.4f}"], "range_rate": [f"{rdot:.4f}"],
                         "both": [f"{fd:.4f}", f"{float(doppler_to_range_rate(round(fd, 4), lam)):.4f}"]}[columns]
-                writer.writerow([k, t, f"{r:.3f}"] + vals + [strength])
+                acc = [] if scans.cov is None else [repr(float(np.sqrt(scans.cov[run, k, j, 0, 0]))),
+                                                    repr(float(np.sqrt(scans.cov[run, k, j, 1, 1])))]
+                writer.writerow([k, t, f"{r:.3f}"] + vals + [strength] + acc)
     return path

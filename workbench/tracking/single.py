@@ -237,15 +237,22 @@ def nearest_candidate(z: np.ndarray, valid: np.ndarray, z_hat: np.ndarray, S: np
     Returns ``index (B,)`` (-1 where no valid candidate, or none with ``d2 <= gate``) and
     ``d2 (B,)`` of the chosen one (inf where none).
 
-    Shapes: ``z (B, M, m)``, ``valid (B, M)``, ``z_hat (B, m)``, ``S (B, m, m)``.
+    Shapes: ``z (B, M, m)``, ``valid (B, M)``, ``z_hat (B, m)``, ``S (B, m, m)`` (one innovation covariance per run)
+    or ``(B, M, m, m)`` (one per candidate, where each candidate has its own measurement covariance).
     """
     B, M = valid.shape
     if M == 0:
         return np.full(B, -1), np.full(B, np.inf)
     nu = model.residual(z, z_hat[:, None, :])  # (B, M, m)
-    # d2_j = nu_j^T S^-1 nu_j = |L^-1 nu_j|^2 with S = L L^T: one factorisation per run, M right-hand sides
-    white = np.linalg.solve(np.linalg.cholesky(S), np.swapaxes(nu, 1, 2))  # (B, m, M)
-    d2 = np.einsum("bim,bim->bm", white, white)
+    if S.ndim == 4:
+        # d2_j = |L_j^-1 nu_j|^2 with S_j = L_j L_j^T, one factorisation per candidate
+        safe = np.where(valid[..., None, None], S, np.eye(S.shape[-1]))
+        white = np.linalg.solve(np.linalg.cholesky(safe), nu[..., None])[..., 0]
+        d2 = np.einsum("bmi,bmi->bm", white, white)
+    else:
+        # d2_j = nu_j^T S^-1 nu_j = |L^-1 nu_j|^2 with S = L L^T: one factorisation per run, M right-hand sides
+        white = np.linalg.solve(np.linalg.cholesky(S), np.swapaxes(nu, 1, 2))  # (B, m, M)
+        d2 = np.einsum("bim,bim->bm", white, white)
     allowed = valid if gate is None else valid & (d2 <= gate)
     d2 = np.where(allowed, d2, np.inf)
     index = np.argmin(d2, axis=1)
@@ -298,9 +305,12 @@ class NearestNeighbour(SingleTarget):
     from (recorded in ``chosen[:, 0]``).  A restart calls ``filter.init`` on every run's current estimate, exact
     for Kalman-type filters and a redraw for a particle filter.
 
-    Records: ``predicted_z (B, T, m)``, ``innovation_cov (B, T, m, m)``, ``chosen (B, T)`` (-1: none),
-    ``chosen_z (B, T, m)`` (NaN where none), ``updated (B, T)``, ``nis (B, T)`` (NaN where not updated),
-    ``restarted (B, T)``.
+    Where the scan carries each candidate's own covariance (``Scan.cov``), the distance of candidate ``j`` uses
+    ``S_j = H P- H^T + R_j`` and the filter is updated with the chosen candidate's ``R_j``.
+
+    Records: ``predicted_z (B, T, m)``, ``innovation_cov (B, T, m, m)`` (with the model's ``R``; the chosen
+    candidate's own where it has one), ``chosen (B, T)`` (-1: none), ``chosen_z (B, T, m)`` (NaN where none),
+    ``updated (B, T)``, ``nis (B, T)`` (NaN where not updated), ``restarted (B, T)``.
     """
 
     def __init__(self, gate: float | None = None, prior_index: np.ndarray | None = None,
@@ -342,13 +352,22 @@ class NearestNeighbour(SingleTarget):
                 if z_k.shape[1]:
                     rec["chosen_z"][:, 0] = np.where((index >= 0)[:, None], z_k[rows, np.maximum(index, 0)], np.nan)
             return None, ctx.model
-        index, d2 = nearest_candidate(z_k, valid_k, carry.extra["z_hat"], carry.extra["S"], ctx.model, self.gate)
+        S = carry.extra["S"]
+        if scan.cov is not None:  # each candidate's own R: S_j = H P- H^T + R_j
+            S = (S - ctx.model.R)[:, None] + scan.cov
+        index, d2 = nearest_candidate(z_k, valid_k, carry.extra["z_hat"], S, ctx.model, self.gate)
         found = index >= 0
         step = None
         if found.any():
-            z = z_k[rows, np.maximum(index, 0)]
-            step = Scan.single(z, found, time=scan.time)
+            pick = np.maximum(index, 0)
+            z = z_k[rows, pick]
+            cov = None if scan.cov is None else np.where(found[:, None, None], scan.cov[rows, pick],
+                                                         np.eye(z.shape[-1]))
+            density = None if scan.clutter_density is None else scan.clutter_density[rows, pick]
+            step = Scan.single(z, found, time=scan.time, cov=cov, clutter_density=density)
             rec["chosen_z"][found, k] = z[found]
+            if scan.cov is not None:
+                rec["innovation_cov"][found, k] = S[rows, pick][found]
         rec["chosen"][:, k] = index
         rec["updated"][:, k] = found
         rec["nis"][:, k] = np.where(found, d2, np.nan)

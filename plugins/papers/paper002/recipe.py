@@ -253,8 +253,9 @@ def write_synthetic_candidates(path, host, seed: int = 2002, frames: int = 120):
 
     truth = drone_truth(generator(seed, "paper002", "truth"), 1, frames, FRAME_DT)
     scans = detection_scans(host, truth, seed, CLUTTER_BRIEF)
-    freq = host.sensor("dtv-pbr").params["frequency_hz"]
-    return write_pcl_candidates(path, scans, comments=(
+    sensor = host.sensor("dtv-pbr").params
+    freq = sensor["frequency_hz"]
+    return write_pcl_candidates(path, scans, transmitter_m=sensor["tx"], receiver_m=sensor["rx"], comments=(
         "SYNTHETIC: not measured data. Detection-level simulation of the paper-002 scenario (DTV passive radar,",
         "701 MHz, Tx (0, -8400, 420) m, Rx (0, 0, 60) m, one drone, P_D 0.9, Poisson(3) zero-Doppler residue and",
         "Poisson(4) false alarms per frame, |f_D| < 2 Hz removed), written by "
