@@ -252,7 +252,9 @@ class ClutterRemoverSpec(_Configurable):
     """Clutter removal: ``remove(scans: Scans, **params) -> Scans`` with a narrower ``valid`` mask.
 
     A remover must be causal (the decision for scan ``k`` uses scans ``<= k`` only) and must not read
-    ``scans.origin``.  ``frames`` lists the measurement frames it works in (empty: any).
+    ``scans.origin``.  It may also replace the detections it keeps (e.g. project them onto a line it found), when
+    a declared parameter asks for it; it never adds rows.  ``frames`` lists the measurement frames it works in
+    (empty: any).
     """
 
     name: str

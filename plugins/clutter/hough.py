@@ -26,35 +26,53 @@ every ping ``k`` the remover decides, from pings ``<= k`` only (causal) and with
    ``|theta_a - theta_b| <= sim_theta`` (tolerances rounded down to whole bins), comparing lines modulo
    ``(rho, theta) == (-rho, theta + pi)``: across the ``theta = 0 / pi`` seam the neighbouring column is
    the far column with ``rho`` negated (the grid is symmetric in ``rho``, so that is a flip).
-6. **Inverse transform:** detection ``z`` of ping ``k`` is kept when, for some similar ``B`` line
-   ``(rho_b, theta_b)``, ``|x cos theta_b + y sin theta_b - rho_b| <= eps`` and ``z`` lies within
-   ``support_reach`` (default ``2 v_max dt``) of a *latest support* of that line: a gated detection of
-   the most recent earlier ping of ``B`` that lies within ``eps`` of the line.  The ``eps`` tests are
-   made on the ``rho`` bins (``|bin(z) - bin_b| <= floor(eps / drho)`` in the line's column).
-7. **Warm-up:** pings ``k < W - 1 + s`` (group ``A`` not yet full) produce no output (``warmup="drop"``,
-   the brief's choice) or pass every detection (``warmup="keep"``).
+6. **Inverse transform:** detection ``z`` of ping ``k`` lies on a similar ``B`` line ``L = (rho_b, theta_b)``
+   when ``|x cos theta_b + y sin theta_b - rho_b| <= eps`` (tested on the ``rho`` bins, ``|bin(z) - bin_b|
+   <= floor(eps / drho)`` in the line's column); it is kept when one such line keeps it by the support rule
+   (``support``):
 
-The remover only narrows ``Scans.valid`` (:meth:`workbench.types.Scans.with_valid`); it never moves a
-detection (the brief's optional "replace each point by its projection on the line" is not done).
+   - ``"local"`` (default): the *latest local support* of ``z`` on ``L`` is the most recent earlier ping of
+     ``B`` holding a gated detection ``s`` on ``L`` within reach of ``z``, the reach scaled by the ping gap
+     ``g``: ``v_max dt max(g, 2)``.  ``z`` is kept when one such ``s`` passes the *velocity-consistency
+     check*: with ``s'`` the latest local support of ``s`` on ``L`` (gap ``g1``; ``g2`` from ``s`` to ``z``)::
+
+         u = (z - s) / (g2 dt),   u' = (s - s') / (g1 dt)
+         |u - u'|^2 <= vel_gate sigma_pos^2 (1/g2^2 + (1/g2 + 1/g1)^2 + 1/g1^2) / dt^2
+
+     (the variance of ``u - u'`` for a straight, constant-speed target with position noise ``sigma_pos``).
+     Where ``s`` has no earlier local support the check passes (``require_chain=True``: fails).
+     ``vel_gate=None``: no check.
+   - ``"latest"`` (the previous rule): ``s`` must be of the latest earlier ping with a gated detection
+     anywhere on ``L``, within ``support_reach`` (default ``2 v_max dt``) of ``z``.
+   - ``"any"``: any gated detection on ``L`` within ``support_reach`` of ``z``.
+7. **New measurements:** the paper's output is the clutter-removed set of ping ``k``'s detections
+   (``new_measurements="detections"``: only ``Scans.valid`` narrows).  ``"projected"`` also moves each kept
+   detection onto the nearest similar line within ``eps`` along its normal (``d = x cos theta + y sin theta -
+   rho``, ``(x, y) <- (x, y) - d (cos theta, sin theta)``).
+8. **Warm-up:** pings ``k < W - 1 + s`` (group ``A`` not yet full) produce no output (``warmup="drop"``,
+   the brief's choice) or pass every detection (``warmup="keep"``).
 
 Cost per ping is ``O(n n_theta)`` for the new votes plus a few ``O(n_rho n_theta)`` grid passes (every
 one a plain slice operation; no float score grid, no 2-D ``nonzero``).  Pairs of nearby points (the gate,
 and (detection, support) pairs of the inverse step) come from neighbouring square cells
 (:func:`_cell_pairs`); when that would give more than ``CELL_PAIRS_PER_POINT`` candidates per point
 (dense clutter) they come from k-d tree queries instead, nearest supports first, so the cost stays
-bounded.  Both routes yield the same pairs, hence the same decisions (tested).  A pair is checked in
-all line columns at once with one table lookup per column (:func:`_window_tables`).  Runs are
+bounded.  Both routes yield the same pairs, hence the same decisions (tested).  The local rule runs in a
+compiled kernel (:mod:`workbench_clutter.hough_numba`) where Numba is installed (``backend="auto"``); the
+vectorised NumPy code here is its twin, and both are held to the brute-force reference of the tests.  Runs are
 processed one after another.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench import hookimpl
+from workbench.kernels.backend import numba_available
 from workbench.params import Param
 from workbench.specs import ClutterRemoverSpec
 from workbench.types import InputError, Scans
@@ -71,9 +89,14 @@ DEFAULTS = {
     "sim_rho": 3.0,
     "sim_theta_deg": 3.0,
     "eps": 4.0,
+    "support": "local",
     "support_reach": None,
-    "support": "latest",
+    "vel_gate": 9.21,
+    "sigma_pos": 2.0,
+    "require_chain": False,
+    "new_measurements": "detections",
     "warmup": "drop",
+    "backend": "auto",
 }
 
 
@@ -321,6 +344,9 @@ class _RunCache:
     counts: dict = field(default_factory=dict)
     peaks: dict = field(default_factory=dict)
     scratch: np.ndarray | None = None
+    stamps: np.ndarray | None = None
+    tag: int = 0
+    kernel: str = "numpy"
 
     def rows(self, p: int) -> np.ndarray:
         """The vote rows of ping ``p`` in every column, ``(n_p, n_theta)`` (computed once while ``p`` is in
@@ -328,7 +354,14 @@ class _RunCache:
         slot = p % self.ring.shape[0]
         n = len(self.pts[p])
         if self.ring_ping[slot] != p:
-            self.grid.rho_index(self.pts[p], out=self.ring[slot, :n])
+            if self.kernel == "numba":
+                from . import hough_numba
+
+                th = self.grid.theta
+                hough_numba.rho_rows(np.ascontiguousarray(self.pts[p], dtype=float), np.cos(th), np.sin(th),
+                                     float(self.grid.d_rho), int(self.grid.off), self.ring[slot, :n])
+            else:
+                self.grid.rho_index(self.pts[p], out=self.ring[slot, :n])
             self.ring_ping[slot] = p
         return self.ring[slot, :n]
 
@@ -340,6 +373,11 @@ class _RunCache:
     def _add_votes(self, counts: np.ndarray, p: int, which: np.ndarray, ufunc) -> None:
         """``counts[cell] (+/-)= 1`` for every vote of the points ``which`` of ping ``p`` (unbuffered)."""
         grid = self.grid
+        if self.kernel == "numba":
+            from . import hough_numba
+
+            hough_numba.add_votes(counts, self.rows(p), np.flatnonzero(which), grid.n_theta, ufunc is np.add)
+            return
         flat = self.rows(p)[which]
         flat *= grid.n_theta
         flat += np.arange(grid.n_theta, dtype=flat.dtype)
@@ -360,6 +398,17 @@ class _RunCache:
                 self._add_votes(counts, p, dropped, np.subtract)
         self.counts[p] = (mask.copy(), counts)
         return counts
+
+    def stamp_buffer(self, grid: "HoughGrid") -> np.ndarray:
+        """The numba kernel's per-cell stamps (kept for the whole run; see ``hough_numba.local_keep``)."""
+        if self.stamps is None:
+            self.stamps = np.full(grid.n_rho * grid.n_theta, -1, dtype=np.int64)
+        return self.stamps
+
+    def next_tag(self, n: int) -> int:
+        """A tag base above every tag handed out before (``n`` tags are taken)."""
+        tag, self.tag = self.tag, self.tag + n + 1
+        return tag
 
     def buffer(self, shape: tuple, dtype) -> np.ndarray:
         """A scratch array of ``shape`` (reused from ping to ping; contents undefined)."""
@@ -407,173 +456,440 @@ def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int, has
     return kept
 
 
-def _window_tables(bits: np.ndarray, e: int, out: np.ndarray) -> np.ndarray:
-    """OR of the line bits over every row window a pair can ask about.
+# -- step 6: the inverse transform and the support rules --------------------------------------------
 
-    ``bits (W, J, H)`` (rows padded with ``e`` empty rows at each end) -> ``out (W, J, 2 e + 2, H)``:
-    level ``a`` holds the OR of rows ``r .. r + 2 e - a`` (window length ``2 e + 1 - a``; rows past the
-    end empty), level ``2 e + 1`` is empty.  A pair whose rows differ by ``a = |r_z - r_s|`` asks for the
-    rows ``max(r_z, r_s) - e .. min(r_z, r_s) + e``: level ``min(a, 2 e + 1)`` at padded row
-    ``max(r_z, r_s)``.  Rows are the last axis so that nearby pairs read nearby bytes.
+
+@dataclass(frozen=True)
+class _Lines:
+    """The similar line cells of one ping, sorted by (column, row), with a count table per column.
+
+    ``cum[j, x]``: the number of lines in column ``used[j]`` whose row is below ``x``, so the lines of that
+    column in rows ``lo .. hi - 1`` are ``start[j] + cum[j, lo] .. start[j] + cum[j, hi] - 1``.
+    Shapes: ``rows, cols (L,)``, ``used, start (J,)``, ``cum (J, n_rho + 1)``.
     """
-    H = bits.shape[-1]
-    out[:, :, 2 * e] = bits
-    out[:, :, 2 * e + 1] = 0
-    for length in range(2, 2 * e + 2):
-        a = 2 * e + 1 - length
-        np.copyto(out[:, :, a], out[:, :, a + 1])
-        np.bitwise_or(out[:, :, a, :H - length + 1], bits[:, :, length - 1:], out=out[:, :, a, :H - length + 1])
-    return out
+
+    rows: np.ndarray
+    cols: np.ndarray
+    used: np.ndarray
+    start: np.ndarray
+    cum: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return int(self.rows.size)
 
 
-def _supported_numpy(zi, si, rows_k, ring, sup_ring, sup_index, sup_word, sup_bit, cols, table, e,
-                     chunk: int = 1024) -> np.ndarray:
-    """Pairs (detection ``zi``, support ``si``) with a line cell of the support's bit within ``e`` rows of
-    both in some column: ``table[word, j, min(|r_z - r_s|, 2 e + 1), max(r_z, r_s)] & bit``, ``chunk``
-    pairs at a time over all line columns.  ``(P,) -> (P,)`` bool."""
-    ok = np.zeros(zi.size, dtype=bool)
-    n_words, J, levels, H = table.shape
-    idx_type = np.int32 if table[0].size < 2 ** 31 else np.int64
-    col_base = np.arange(J, dtype=idx_type) * (levels * H)
-    every_col = J == rows_k.shape[1]
-    for w in range(n_words):
-        flat = table[w].ravel()
-        sel = np.arange(zi.size) if n_words == 1 else np.flatnonzero(sup_word[si] == w)
-        for start in range(0, sel.size, chunk):
-            at = sel[start:start + chunk]
-            z, s = zi[at], si[at]
-            rz = rows_k[z]
-            rs = ring[sup_ring[s], sup_index[s]]
-            if not every_col:
-                rz, rs = rz[:, cols], rs[:, cols]
-            a = rz - rs
-            np.abs(a, out=a)
-            np.minimum(a, 2 * e + 1, out=a)
-            a = a.astype(idx_type, copy=False)
-            # flat index (column, level, padded row): the rows max - e .. min + e
-            a *= H
-            a += np.maximum(rz, rs)
-            a += col_base
-            got = np.take(flat, a)
-            got &= sup_bit[s][:, None]
-            ok[at] = got.any(axis=1)
-    return ok
+def _sorted_unique(a: np.ndarray) -> np.ndarray:
+    """``np.unique(a)`` by a sort (NumPy's hash-based ``unique`` is slow on large integer keys)."""
+    a = np.sort(a)
+    return a[np.concatenate([[True], a[1:] != a[:-1]])] if a.size else a
+
+
+def _in_sorted(a: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """``np.isin(a, table)`` for a sorted ``table``."""
+    if table.size == 0:
+        return np.zeros(a.shape, dtype=bool)
+    at = np.minimum(np.searchsorted(table, a), table.size - 1)
+    return table[at] == a
+
+
+def _lines(flat: np.ndarray, grid: HoughGrid) -> _Lines:
+    rows, cols = np.divmod(np.asarray(flat, dtype=np.intp), grid.n_theta)
+    order = np.lexsort((rows, cols))
+    rows, cols = rows[order], cols[order]
+    used, slot = np.unique(cols, return_inverse=True)
+    count = np.zeros((used.size, grid.n_rho + 1), dtype=np.int32)
+    np.add.at(count, (slot, rows + 1), 1)
+    return _Lines(rows, cols, used, np.searchsorted(cols, used), np.cumsum(count, axis=1, dtype=np.int32))
+
+
+def _lines_near(ra: np.ndarray, rb: np.ndarray, lines: _Lines, e: int) -> tuple[np.ndarray, np.ndarray]:
+    """The line cells within ``e`` rows of both points of each pair, in every column holding a line.
+
+    ``ra, rb (P, J)``: the rows of the two points in the columns ``lines.used`` (pass ``rb = ra`` for the
+    lines near one point).  Returns ``pair (Q,)``, ``line (Q,)``: every (pair, line) combination.
+    """
+    n_rows = lines.cum.shape[1] - 1
+    lo = np.maximum(ra, rb)
+    lo -= e
+    np.maximum(lo, 0, out=lo)
+    hi = np.minimum(ra, rb)
+    hi += e + 1  # exclusive
+    np.clip(hi, lo, n_rows, out=hi)
+    flat = lines.cum.ravel()
+    base = (np.arange(lines.used.size) * (n_rows + 1))[None, :]
+    c_lo = flat[lo + base]
+    n = flat[hi + base] - c_lo
+    pi, jj = np.nonzero(n)
+    n = n[pi, jj].astype(np.intp)
+    first = lines.start[jj] + c_lo[pi, jj]
+    total = int(n.sum())
+    if total == 0:
+        e_ = np.zeros(0, dtype=np.intp)
+        return e_, e_
+    pair = np.repeat(pi, n)
+    line = np.repeat(first - (np.cumsum(n) - n), n) + np.arange(total)
+    return pair, line
+
+
+def _near_pairs(a: np.ndarray, active: np.ndarray, b: np.ndarray, r: float, process) -> None:
+    """Call ``process(i, j)`` with pairs (``a[i]``, ``b[j]``), ``i`` in ``active``, ``dx^2 + dy^2 <= r^2``, until
+    every active ``a`` point is settled (``process`` returns the settled mask over ``a``) or has had every
+    pair.  Sparse points: all pairs at once, from neighbouring cells (:func:`_cell_pairs`).  Dense points:
+    nearest first, in rounds of k-d tree queries (1, 4, 32, then all neighbours), so that points settled
+    by their nearest pairs cost no more."""
+    if active.size == 0 or len(b) == 0:
+        return
+    r2 = r * r
+
+    def exact(i, j):
+        dx, dy = a[i, 0] - b[j, 0], a[i, 1] - b[j, 1]
+        close = dx * dx + dy * dy <= r2
+        return i[close], j[close]
+
+    aa = a[active]
+    pairs = _cell_pairs(aa, b, r, CELL_PAIRS_PER_POINT * (len(aa) + len(b)))
+    if pairs is not None:
+        process(*exact(active[pairs[0]], pairs[1]))
+        return
+    tree = cKDTree(b, balanced_tree=False)
+    bound = r * (1.0 + 1e-9)  # every exact pair is inside; the exact test decides
+    todo, done = active, 0
+    for k_nn in (1, 4, 32, len(b)):
+        k_nn = min(k_nn, len(b))
+        if todo.size == 0 or k_nn <= done:
+            break
+        d, idx = tree.query(a[todo], k=k_nn, distance_upper_bound=bound)
+        d = d.reshape(todo.size, -1)[:, done:]
+        idx = idx.reshape(todo.size, -1)[:, done:]
+        found = np.isfinite(d)
+        i_loc, col = np.nonzero(found)
+        settled = process(*exact(todo[i_loc], idx[i_loc, col]))
+        exhausted = ~found[:, -1]  # every neighbour within reach has been seen
+        todo = todo[~settled[todo] & ~exhausted]
+        done = k_nn
+
+
+def _expand(groups: np.ndarray, n_groups: int, items_of: np.ndarray, sizes: np.ndarray, starts: np.ndarray):
+    """For each entry ``g`` of ``groups``, every item ``items_of[starts[g] .. starts[g] + sizes[g] - 1]``:
+    returns ``(entry, item)`` index arrays."""
+    n = sizes[groups]
+    total = int(n.sum())
+    entry = np.repeat(np.arange(groups.size), n)
+    offset = np.arange(total) - np.repeat(np.cumsum(n) - n, n)
+    return entry, items_of[starts[groups[entry]] + offset]
+
+
+@dataclass
+class _Step6:
+    """What the support rules of one ping ``k`` need (private to :func:`_inverse`)."""
+
+    cache: "_RunCache"
+    grid: HoughGrid
+    k: int
+    earlier: list
+    kept: dict
+    lines: _Lines
+    e: int
+    reach: dict  # gap -> reach
+    vel_gate: float | None
+    sigma_pos: float
+    dt: float
+    require_chain: bool = False
+
+    def rows_in(self, p: int, idx: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Rows of points ``idx`` of ping ``p`` in columns ``cols`` (same shape as ``idx``)."""
+        return self.cache.rows(p)[idx, cols]
+
+    def used_rows(self, p: int, idx: np.ndarray) -> np.ndarray:
+        """Rows of points ``idx`` of ping ``p`` in every column holding a line, ``(len(idx), J)``."""
+        return self.cache.rows(p)[idx[:, None], self.lines.used[None, :]]
+
+    def on_line(self, p: int, idx: np.ndarray, line: np.ndarray) -> np.ndarray:
+        rows = self.rows_in(p, idx, self.lines.cols[line])
+        return np.abs(rows - self.lines.rows[line]) <= self.e
+
+    def triples(self, zi: np.ndarray, p: int, si: np.ndarray, chunk: int = 4096):
+        """(pair, line) for pairs (detection ``zi`` of ping k, point ``si`` of ping ``p``): the lines within
+        ``e`` rows of both."""
+        out_p, out_l = [], []
+        for start in range(0, zi.size, chunk):
+            stop = min(start + chunk, zi.size)
+            pair, line = _lines_near(self.used_rows(self.k, zi[start:stop]), self.used_rows(p, si[start:stop]),
+                                     self.lines, self.e)
+            out_p.append(pair + start)
+            out_l.append(line)
+        if not out_p:
+            e_ = np.zeros(0, dtype=np.intp)
+            return e_, e_
+        return np.concatenate(out_p), np.concatenate(out_l)
+
+    def velocity_ok(self, z_t: np.ndarray, p: int, s_t: np.ndarray, line_t: np.ndarray) -> np.ndarray:
+        """The velocity-consistency check of triples (detection ``z_t`` of ping k, support ``s_t`` of ping
+        ``p``, line ``line_t``): the step support -> detection against the step from the support's latest
+        local support on the same line (the most recent earlier ping of B with a gated point on the line
+        within reach of the support); where the support has none, passes (nothing to compare) or, with
+        ``require_chain``, fails.  ``(Q,) -> (Q,)`` bool."""
+        Q = z_t.size
+        if Q == 0 or (self.vel_gate is None and not self.require_chain):
+            return np.ones(Q, dtype=bool)
+        L = self.lines.size
+        combo_key, t_combo = np.unique(s_t * L + line_t, return_inverse=True)
+        c_s, c_line = np.divmod(combo_key, L)
+        C = combo_key.size
+        resolved = np.zeros(C, dtype=bool)
+        ok = np.zeros(Q, dtype=bool)
+        pts_k, pts_p = self.cache.pts[self.k], self.cache.pts[p]
+        for q in [q for q in reversed(self.earlier) if q < p]:
+            open_c = np.flatnonzero(~resolved)
+            pred = np.flatnonzero(self.kept[q])
+            if open_c.size == 0:
+                break
+            if pred.size == 0:
+                continue
+            # the supports of the open combinations, and their pairs with the gated points of ping q
+            us, us_of = np.unique(c_s[open_c], return_inverse=True)
+            by_s = open_c[np.argsort(us_of, kind="stable")]
+            n_of = np.bincount(us_of, minlength=us.size)
+            start_of = np.cumsum(n_of) - n_of
+            found = {"s": [], "j": []}
+
+            def collect(i, j):
+                found["s"].append(i)
+                found["j"].append(j)
+                return np.zeros(us.size, dtype=bool)
+
+            _near_pairs(pts_p[us], np.arange(us.size), self.cache.pts[q][pred], self.reach[p - q], collect)
+            if not found["s"]:
+                continue
+            i, j = np.concatenate(found["s"]), np.concatenate(found["j"])
+            entry, combo = _expand(i, us.size, by_s, n_of, start_of)
+            cand = pred[j[entry]]
+            on = self.on_line(q, cand, c_line[combo])
+            combo, cand = combo[on], cand[on]
+            if combo.size == 0:
+                continue
+            resolved[combo] = True  # ping q holds their latest local support
+            # every (triple, candidate) of the combinations resolved here
+            order = np.argsort(combo, kind="stable")
+            combo, cand = combo[order], cand[order]
+            n_cand = np.bincount(combo, minlength=C)
+            c_start = np.cumsum(n_cand) - n_cand
+            got = np.zeros(C, dtype=bool)
+            got[combo] = True
+            t_here = np.flatnonzero(got[t_combo])
+            t_entry, s2 = _expand(t_combo[t_here], C, cand, n_cand, c_start)
+            t = t_here[t_entry]
+            g2, g1 = (self.k - p) * self.dt, (p - q) * self.dt
+            z_xy, s_xy, w_xy = pts_k[z_t[t]], pts_p[s_t[t]], self.cache.pts[q][s2]
+            # u = (z - s) / g2, u' = (s - s') / g1;  var(u - u') = sigma^2 (1/g2^2 + (1/g2 + 1/g1)^2 + 1/g1^2)
+            ux, uy = (z_xy[:, 0] - s_xy[:, 0]) / g2, (z_xy[:, 1] - s_xy[:, 1]) / g2
+            wx, wy = (s_xy[:, 0] - w_xy[:, 0]) / g1, (s_xy[:, 1] - w_xy[:, 1]) / g1
+            both = 1.0 / g2 + 1.0 / g1
+            var = self.sigma_pos * self.sigma_pos * (1.0 / (g2 * g2) + both * both + 1.0 / (g1 * g1))
+            dx, dy = ux - wx, uy - wy
+            ok[t if self.vel_gate is None else t[dx * dx + dy * dy <= self.vel_gate * var]] = True
+        if not self.require_chain:
+            ok[~resolved[t_combo]] = True  # no earlier local support: nothing to compare
+        return ok
 
 
 def _inverse(cache: _RunCache, grid: HoughGrid, k: int, group_b: range, kept: dict, counts: dict,
-             sim_rows: np.ndarray, sim_cols: np.ndarray, eps: float, reach: np.ndarray, support: str) -> np.ndarray:
+             sim_flat: np.ndarray, eps: float, reach: dict, support: str, vel_gate: float | None,
+             sigma_pos: float, dt: float, require_chain: bool = False, backend: str = "numpy") -> np.ndarray:
     """Keep mask over the valid detections of ping ``k`` (step 6).
 
-    ``sim_rows, sim_cols``: the similar line cells.  ``reach (len(earlier pings),)``: the distance allowed
-    to a support of each earlier ping of B.  Only the columns holding a similar line are looked at.
+    ``sim_flat``: the similar line cells (flat indices).  ``reach[g]``: the distance allowed between a
+    detection and a support ``g`` pings older.  Triples (detection ``z``, support ``s``, line ``L``) with
+    ``z`` and ``s`` within ``e`` rows of ``L`` and within reach of each other are enumerated earlier ping by
+    earlier ping, the most recent first (pairs from :func:`_near_pairs`, lines from :func:`_lines_near`);
+    a detection leaves the search once kept.  ``support``:
 
-    Each line cell gets one bit: the slot (earlier ping of B, oldest first) of its latest support
-    (``support="latest"``), or bit 0 for every line (``"any"``).  A pair (detection ``z``, support ``s``)
-    is supported when some column holds a line cell with ``s``'s bit within ``e`` rows of both: an OR
-    over the rows ``max(r_z, r_s) - e .. min(r_z, r_s) + e``, one lookup in :func:`_window_tables`.
-    Pairs within reach come from neighbouring cells (:func:`_cell_pairs`), or in dense pings from rounds
-    of k-d tree nearest neighbours (a detection settled in one round skips the rest).
+    - ``"local"``: ``(z, L)`` is decided at the first (most recent) ping holding such a triple (its latest
+      local support); later pings' triples of a decided ``(z, L)`` are ignored.  Kept when one of its
+      triples at that ping passes :meth:`_Step6.velocity_ok`.
+    - ``"latest"``: kept when ``s`` is of the latest earlier ping with a gated point anywhere on ``L``.
+    - ``"any"``: kept on any triple.
     """
     n_k = len(cache.pts[k])
     keep = np.zeros(n_k, dtype=bool)
     earlier = [p for p in group_b if p < k]
-    if n_k == 0 or sim_rows.size == 0 or not earlier:
+    if n_k == 0 or sim_flat.size == 0 or not earlier:
         return keep
     e = int(np.floor(eps / grid.d_rho + 1e-9))
-    used = np.zeros(grid.n_theta, dtype=bool)
-    used[sim_cols] = True
-    cols = np.flatnonzero(used)
-    col_of = (np.cumsum(used) - 1)[sim_cols]
-    J = cols.size
-    every_col = J == grid.n_theta
-
-    n_slots = len(earlier)
-    if support == "latest":
-        # latest earlier ping of B with a gated point within e rows of each line cell: the largest
-        # slot + 1 voted in the cell, dilated over e rows (0: none)
-        latest = np.zeros((grid.n_rho, J), dtype=np.min_scalar_type(n_slots))
-        for slot, p in enumerate(earlier):
-            c = counts[p].reshape(grid.shape)
-            voted = (c if every_col else c[:, cols]) > 0
-            voted = voted.astype(latest.dtype, copy=False) if latest.dtype != np.uint8 else voted.view(np.uint8)
-            voted *= latest.dtype.type(slot + 1)
-            np.maximum(latest, voted, out=latest)
-        latest = _max_rows(latest, e)
-        cell_slot = latest.ravel()[sim_rows * J + col_of].astype(np.intp) - 1
-        has = cell_slot >= 0
-        cell_rows, cell_cols, cell_slot = sim_rows[has], col_of[has], cell_slot[has]
-    else:  # "any": every earlier support of the line counts; one bit serves all slots
-        cell_rows, cell_cols, cell_slot = sim_rows, col_of, np.zeros(sim_rows.size, dtype=np.intp)
-    sup_pts = [cache.pts[p][kept[p]] for p in earlier]
-    sup_xy = np.concatenate(sup_pts, axis=0)
-    if cell_rows.size == 0 or sup_xy.shape[0] == 0:
-        return keep
-    n_words = int(cell_slot.max()) // 8 + 1
-    H = grid.n_rho + 2 * e  # e empty rows above and below: windows never leave the array
-    bits = np.zeros((n_words, J, H), dtype=np.uint8)
-    bits[cell_slot // 8, cell_cols, cell_rows + e] = (1 << (cell_slot % 8)).astype(np.uint8)
-    table = _window_tables(bits, e, cache.buffer((n_words, J, 2 * e + 2, H), np.uint8))
-
-    sup_slot = np.concatenate([np.full(len(sp), i, dtype=np.intp) for i, sp in enumerate(sup_pts)])
-    sup_index = np.concatenate([np.flatnonzero(kept[p]) for p in earlier])
-    sup_ring = np.array([p % cache.ring.shape[0] for p in earlier], dtype=np.intp)[sup_slot]
-    for p in earlier:
+    for p in group_b:
         cache.rows(p)  # in the ring
-    rows_k = cache.rows(k)
-    sup_reach = reach[sup_slot]
-    sup_bitslot = sup_slot if support == "latest" else np.zeros_like(sup_slot)
-    sup_word = sup_bitslot // 8
-    sup_bit = (1 << (sup_bitslot % 8)).astype(np.uint8)
-
-    def supported(zi: np.ndarray, si: np.ndarray) -> np.ndarray:
-        return _supported_numpy(zi, si, rows_k, cache.ring, sup_ring, sup_index, sup_word, sup_bit, cols, table, e)
-
-    z_xy = cache.pts[k]
-    S = sup_xy.shape[0]
-    pairs = _cell_pairs(z_xy, sup_xy, float(reach.max()), CELL_PAIRS_PER_POINT * (n_k + S))
-    if pairs is not None:
-        zi, si = pairs
-        dx, dy = z_xy[zi, 0] - sup_xy[si, 0], z_xy[zi, 1] - sup_xy[si, 1]
-        # Euclidean distance, computed as the k-d tree computes it
-        close = np.sqrt(dx * dx + dy * dy) <= sup_reach[si]
-        zi, si = zi[close], si[close]
-        keep[zi[supported(zi, si)]] = True
-        return keep
-
-    tree = cKDTree(sup_xy, balanced_tree=False)
+    if support == "local" and backend == "numba" and 2 * e + 1 < 64:
+        return _local_numba(cache, grid, k, earlier, kept, sim_flat, e, reach, vel_gate, sigma_pos, dt,
+                            require_chain)
+    lines = _lines(sim_flat, grid)
+    step = _Step6(cache, grid, k, earlier, kept, lines, e, reach, vel_gate, sigma_pos, dt, require_chain)
+    # detections within e rows of some line at all
     todo = np.arange(n_k)
-    done_k = 0
-    for k_nn in (1, 4, 32, S):  # rounds of nearest supports; most detections settle in the first
-        k_nn = min(k_nn, S)
-        if todo.size == 0 or k_nn <= done_k:
+    near = np.zeros(n_k, dtype=bool)
+    for start in range(0, n_k, 4096):
+        idx = todo[start:start + 4096]
+        r = step.used_rows(k, idx)
+        pair, _ = _lines_near(r, r, lines, e)
+        near[idx[pair]] = True
+    todo = np.flatnonzero(near)
+    if support == "latest":
+        # the latest earlier ping of B with a gated point within e rows of each line cell, as p - k (< 0;
+        # the int16 minimum where there is none)
+        latest_map = np.full((grid.n_rho, lines.used.size), np.iinfo(np.int16).min, dtype=np.int16)
+        for p in earlier:
+            c = counts[p].reshape(grid.shape)[:, lines.used] > 0
+            latest_map[c] = p - k  # negative gaps; later pings overwrite
+        latest_map = _max_rows(latest_map, e)
+        col_slot = np.searchsorted(lines.used, lines.cols)
+        line_latest = latest_map[lines.rows, col_slot].astype(np.intp) + k
+    decided = np.zeros(0, dtype=np.int64)  # "local": keys z * L + line decided at a more recent ping
+    L = max(lines.size, 1)
+    for p in reversed(earlier):
+        if todo.size == 0:
             break
-        d, idx = tree.query(z_xy[todo], k=k_nn, distance_upper_bound=np.nextafter(reach.max(), np.inf))
-        d = d.reshape(todo.size, -1)[:, done_k:]
-        idx = idx.reshape(todo.size, -1)[:, done_k:]
-        found = np.isfinite(d)
-        i_loc, col = np.nonzero(found)
-        s_idx = idx[i_loc, col]
-        close = d[i_loc, col] <= sup_reach[s_idx]
-        i_loc, s_idx = i_loc[close], s_idx[close]
-        hit = np.zeros(todo.size, dtype=bool)
-        ok = supported(todo[i_loc], s_idx)
-        hit[i_loc[ok]] = True
-        keep[todo[hit]] = True
-        # a detection whose every support within reach has been checked is finished
-        exhausted = ~found[:, -1]
-        todo = todo[~hit & ~exhausted]
-        done_k = k_nn
+        sup = np.flatnonzero(kept[p])
+        if sup.size == 0:
+            continue
+        seen = []
+
+        def process(zi, si, p=p, sup=sup, seen=seen):
+            pair, line = step.triples(zi, p, sup[si])
+            z_t, s_t = zi[pair], sup[si[pair]]
+            if support == "any":
+                keep[z_t] = True
+            elif support == "latest":
+                keep[z_t[line_latest[line] == p]] = True
+            else:
+                key = z_t.astype(np.int64) * L + line
+                seen.append(key)
+                fresh = ~_in_sorted(key, decided)
+                z_t, s_t, line = z_t[fresh], s_t[fresh], line[fresh]
+                # in chunks, each detection's first triples first, so that kept detections cost no more
+                order = np.argsort(z_t, kind="stable")
+                z_t, s_t, line = z_t[order], s_t[order], line[order]
+                first = np.searchsorted(z_t, z_t)
+                rank_order = np.lexsort((z_t, np.arange(z_t.size) - first))
+                z_t, s_t, line = z_t[rank_order], s_t[rank_order], line[rank_order]
+                for start in range(0, z_t.size, 16384):
+                    sl = slice(start, start + 16384)
+                    live = ~keep[z_t[sl]]
+                    if not live.any():
+                        continue
+                    zz, ss, ll = z_t[sl][live], s_t[sl][live], line[sl][live]
+                    keep[zz[step.velocity_ok(zz, p, ss, ll)]] = True
+            return keep
+
+        _near_pairs(cache.pts[k], todo, cache.pts[p][sup], reach[k - p], process)
+        if support == "local" and seen:
+            decided = _sorted_unique(np.concatenate([decided] + seen))
+        todo = todo[~keep[todo]]
     return keep
+
+
+def _local_numba(cache: _RunCache, grid: HoughGrid, k: int, earlier: list, kept: dict, sim_flat: np.ndarray, e: int,
+                 reach: dict, vel_gate, sigma_pos: float, dt: float, require_chain: bool) -> np.ndarray:
+    """The ``"local"`` rule of :func:`_inverse` by :func:`workbench_clutter.hough_numba.local_keep` (same
+    decisions; the arrays it needs are built here)."""
+    from . import hough_numba
+
+    n_k = len(cache.pts[k])
+    rows, cols = np.divmod(np.asarray(sim_flat, dtype=np.intp), grid.n_theta)
+    used = np.flatnonzero(np.bincount(cols, minlength=grid.n_theta))
+    col_slot = np.full(grid.n_theta, -1, dtype=np.intp)
+    col_slot[used] = np.arange(used.size)
+    # one bit per row of each used column: a similar line cell there (one spare word, see hough_numba)
+    bits = hough_numba.line_bits(rows.astype(np.int64), col_slot[cols].astype(np.int64), used.size,
+                                 grid.n_rho // 64 + 2)
+    # a grid of square cells of side h >= the smallest reach (doubled while it would hold more cells than
+    # 8 per point); a point within reach r lies within ceil(r / h) cells (h carries a 2^-20 margin over the
+    # reaches, all multiples of the smallest, so that the rounding of (x - x0) / h cannot add a cell)
+    parts = [cache.pts[k]] + [cache.pts[p][kept[p]] for p in earlier]
+    n_all = sum(len(a) for a in parts)
+    lo = np.array([min(float(a[:, c].min()) for a in parts if len(a)) for c in (0, 1)])
+    hi = np.array([max(float(a[:, c].max()) for a in parts if len(a)) for c in (0, 1)])
+    h = min(reach.values()) * (1.0 + 2.0 ** -20)
+    while (np.floor((hi[0] - lo[0]) / h) + 1) * (np.floor((hi[1] - lo[1]) / h) + 1) > 8 * n_all + 1024:
+        h *= 2.0
+    nx = int(np.floor((hi[0] - lo[0]) / h)) + 1
+    ny = int(np.floor((hi[1] - lo[1]) / h)) + 1
+    xy, ring_slot, idx, starts = [], [], [], []
+    offset = 0
+    for p in earlier:
+        sel = np.flatnonzero(kept[p])
+        pts = cache.pts[p][sel]
+        cell = np.minimum(np.floor((pts - lo) / h).astype(np.int64), [nx - 1, ny - 1])
+        kk = cell[:, 0] * ny + cell[:, 1]
+        order = np.argsort(kk, kind="stable")
+        xy.append(pts[order])
+        idx.append(sel[order])
+        ring_slot.append(np.full(sel.size, p % cache.ring.shape[0], dtype=np.int64))
+        starts.append(offset + np.concatenate([[0], np.cumsum(np.bincount(kk, minlength=nx * ny))]))
+        offset += sel.size
+    reach_arr = np.zeros(max(reach) + 1)
+    for g, r in reach.items():
+        reach_arr[g] = r
+    return hough_numba.local_keep(
+        np.ascontiguousarray(cache.pts[k], dtype=float), cache.rows(k), np.arange(n_k, dtype=np.int64),
+        np.concatenate(xy).reshape(-1, 2), np.concatenate(ring_slot), np.concatenate(idx).astype(np.int64),
+        np.stack(starts).astype(np.int64), np.array(earlier, dtype=np.int64), k, bits, grid.n_rho,
+        col_slot.astype(np.int64), cache.ring, e,
+        reach_arr, float(lo[0]), float(lo[1]), float(h), nx, ny, -1.0 if vel_gate is None else float(vel_gate),
+        float(sigma_pos), float(dt), bool(require_chain), cache.stamp_buffer(grid), cache.next_tag(n_k),
+        hough_numba.CTZ, float(grid.d_rho), float(grid.d_theta))
+
+
+def _project(cache: _RunCache, grid: HoughGrid, k: int, idx: np.ndarray, sim_flat: np.ndarray, eps: float):
+    """New positions of detections ``idx`` of ping ``k``: each projected onto the nearest similar line within
+    ``e`` rows (ties: lowest column, then lowest rho bin)::
+
+        d = x cos(theta) + y sin(theta) - rho,     (x, y) <- (x - d cos(theta), y - d sin(theta))
+
+    ``(len(idx),) -> (len(idx), 2)``.
+    """
+    pts = cache.pts[k][idx]
+    if idx.size == 0:
+        return pts.copy()
+    e = int(np.floor(eps / grid.d_rho + 1e-9))
+    lines = _lines(sim_flat, grid)
+    rows = cache.rows(k)[idx[:, None], lines.used[None, :]]
+    which, line = _lines_near(rows, rows, lines, e)
+    cos, sin = np.cos(grid.theta), np.sin(grid.theta)
+    c, s = cos[lines.cols[line]], sin[lines.cols[line]]
+    bins = lines.rows[line] - grid.off
+    x, y = pts[which, 0], pts[which, 1]
+    d = x * c + y * s - bins * grid.d_rho
+    best = np.lexsort((bins, lines.cols[line], np.abs(d), which))
+    first = best[np.searchsorted(which[best], np.arange(idx.size))]
+    out = pts.copy()
+    out[:, 0] = x[first] - d[first] * c[first]
+    out[:, 1] = y[first] - d[first] * s[first]
+    return out
+
+
+def support_reaches(window: int, v_max: float, dt: float, support: str, support_reach) -> dict:
+    """The reach of every ping gap ``g = 1 .. window - 1``: ``v_max dt max(g, 2)`` (the default of the
+    ``"local"`` rule: the largest travel in ``g`` pings, at least two), ``2 v_max dt`` (the default of
+    ``"latest"`` and ``"any"``), or ``support_reach`` when given."""
+    out = {}
+    for g in range(1, window):
+        if support_reach is None and support == "local":
+            out[g] = v_max * dt * max(g, 2)
+        elif support_reach is None:
+            out[g] = 2.0 * v_max * dt
+        else:
+            out[g] = float(support_reach)
+    return out
 
 
 def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: int = 5, shift: int = 1,
                      v_max: float = 8.0, dt: float = 1.0, gate_gap: int = 2, v_min: int = 3, sim_rho: float = 3.0,
-                     sim_theta_deg: float = 3.0, eps: float = 4.0, support_reach=None,
-                     support: str = "latest", warmup: str = "drop", trace: list | None = None,
-                     run: int = 0) -> np.ndarray:
-    """The keep mask of one run, ``z (T, M, 2)``, ``valid (T, M)`` -> ``(T, M)`` bool."""
-    if support not in ("latest", "any"):
-        raise InputError(f"hough: support must be 'latest' or 'any', got {support!r}")
+                     sim_theta_deg: float = 3.0, eps: float = 4.0, support_reach=None, support: str = "local",
+                     vel_gate: float | None = 9.21, sigma_pos: float = 2.0, require_chain: bool = False,
+                     new_measurements: str = "detections", warmup: str = "drop", trace: list | None = None,
+                     run: int = 0, backend: str = "numpy"):
+    """The keep mask and output positions of one run: ``z (T, M, 2)``, ``valid (T, M)`` -> ``(T, M)`` bool,
+    ``(T, M, 2)``."""
     T = z.shape[0]
     sr = int(np.floor(sim_rho / grid.d_rho + 1e-9))
     st = int(np.floor(np.deg2rad(sim_theta_deg) / grid.d_theta + 1e-9))
@@ -581,17 +897,13 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
     pts = [z[k][s] for k, s in enumerate(slots)]
     most = max([len(s) for s in slots] + [1])
     cache = _RunCache(pts=pts, grid=grid, slots=slots, count_dtype=np.min_scalar_type(most),
-                      ring=np.empty((window, most, grid.n_theta), dtype=np.int32), ring_ping=[-1] * window)
+                      ring=np.empty((window, most, grid.n_theta), dtype=np.int32), ring_ping=[-1] * window,
+                      kernel=backend)
     vote_dtype, support_dtype = np.min_scalar_type(window * most), np.min_scalar_type(window)
     out = np.zeros(valid.shape, dtype=bool)
+    out_z = np.array(z, dtype=float, copy=True)
     first_output = window - 1 + shift
-    gaps = np.arange(window - 1, 0, -1)  # k - p for the earlier pings of B, oldest first
-    if support_reach is None:  # two pings at the largest speed
-        reach = np.full(gaps.shape, 2.0 * v_max * dt)
-    elif support_reach == "gap":  # the largest travel since that ping, at least two pings
-        reach = v_max * dt * np.maximum(gaps, 2).astype(float)
-    else:
-        reach = np.full(gaps.shape, float(support_reach))
+    reach = support_reaches(window, v_max, dt, support, support_reach)
     for k in range(T):
         if k < first_output and warmup == "keep":
             out[k] = valid[k]
@@ -603,8 +915,13 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
         n_pings = np.zeros(grid.n_rho * grid.n_theta, dtype=support_dtype)
         votes = np.zeros(grid.n_rho * grid.n_theta, dtype=vote_dtype)
         for p in group_b:
-            n_pings += counts[p] > 0
-            votes += counts[p]
+            if backend == "numba":
+                from . import hough_numba
+
+                hough_numba.accumulate(n_pings, votes, counts[p])
+            else:
+                n_pings += counts[p] > 0
+                votes += counts[p]
         n_pings, votes = n_pings.reshape(grid.shape), votes.reshape(grid.shape)
         cache.peaks[k] = peak_cells(n_pings, votes, v_min)
         for old in [q for q in cache.peaks if q < k - shift]:
@@ -614,9 +931,12 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
         fa, fb = cache.peaks[k - shift], cache.peaks[k]
         fb = fb[counts[k][fb] > 0]  # a B peak needs a vote from ping k
         sim = similar_cells(fb, fa, grid, sr, st)
-        rb, cb = np.divmod(fb[sim], grid.n_theta)
-        keep = _inverse(cache, grid, k, group_b, kept, counts, rb, cb, eps, reach, support)
+        keep = _inverse(cache, grid, k, group_b, kept, counts, fb[sim], eps, reach, support, vel_gate, sigma_pos,
+                        dt, require_chain, backend)
         out[k, slots[k][keep]] = True
+        if new_measurements == "projected":
+            idx = np.flatnonzero(keep)
+            out_z[k, slots[k][idx]] = _project(cache, grid, k, idx, fb[sim], eps)
         # memo entries later pings can no longer use
         for p in [p for p in cache.trees if p < k - window]:
             del cache.trees[p]
@@ -634,15 +954,24 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
                 "similar": np.stack([rho[rb[sim]], theta[cb[sim]]], axis=1),
                 "kept": slots[k][keep],
             })
-    return out
+    return out, out_z
+
+
+SUPPORTS = ("local", "latest", "any")
+BACKENDS = ("auto", "numba", "numpy")
+NEW_MEASUREMENTS = ("detections", "projected")
 
 
 def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt: float = 1.0, gate_gap: int = 2,
            d_rho: float = 1.0, d_theta_deg: float = 1.0, v_min: int = 3, sim_rho: float = 3.0,
-           sim_theta_deg: float = 3.0, eps: float = 4.0, support_reach=None, support: str = "latest",
-           warmup: str = "drop", trace: list | None = None) -> Scans:
+           sim_theta_deg: float = 3.0, eps: float = 4.0, support_reach=None, support: str = "local",
+           vel_gate: float | None = 9.21, sigma_pos: float = 2.0, require_chain: bool = False,
+           new_measurements: str = "detections", warmup: str = "drop", backend: str = "auto",
+           trace: list | None = None) -> Scans:
     """Hough clutter removal of every run of ``scans`` (Cartesian ``z (B, T, M, 2)``); see the module docstring.
 
+    Returns the scans with a narrower ``valid`` mask; with ``new_measurements="projected"`` the kept
+    detections are also moved onto their line (``z`` changes there, nowhere else).
     ``trace``: pass a list to receive one dict per output ping (accumulator support of group B, peaks of
     A and B, the similar lines, the kept detections) for figures and debugging.
     """
@@ -655,17 +984,41 @@ def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt
     if not (v_max > 0 and dt > 0 and eps >= 0 and sim_rho >= 0 and sim_theta_deg >= 0):
         raise InputError(f"hough: need v_max, dt > 0 and eps, sim_rho, sim_theta_deg >= 0; got {v_max}, {dt}, {eps}, "
                          f"{sim_rho}, {sim_theta_deg}")
+    if support not in SUPPORTS:
+        raise InputError(f"hough: support must be one of {SUPPORTS}, got {support!r}")
+    if new_measurements not in NEW_MEASUREMENTS:
+        raise InputError(f"hough: new_measurements must be one of {NEW_MEASUREMENTS}, got {new_measurements!r}")
+    if support_reach is not None and not (isinstance(support_reach, (int, float)) and support_reach > 0):
+        raise InputError(f"hough: support_reach must be None or a number > 0, got {support_reach!r}")
+    if vel_gate is not None and not vel_gate > 0 or not sigma_pos > 0:
+        raise InputError(f"hough: need vel_gate None or > 0 and sigma_pos > 0, got {vel_gate}, {sigma_pos}")
     if warmup not in ("drop", "keep"):
         raise InputError(f"hough: warmup must be 'drop' or 'keep', got {warmup!r}")
+    if require_chain and support != "local":
+        raise InputError("hough: require_chain applies to the local support rule only (support='local')")
+    if backend not in BACKENDS:
+        raise InputError(f"hough: backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "numba" and not numba_available():
+        raise InputError("hough: backend 'numba' needs numba, which this install lacks (pip install numba)")
+    kernel = "numba" if backend == "numba" or (backend == "auto" and numba_available() and window <= 64) else "numpy"
+    if kernel == "numba" and window > 64:
+        raise InputError(f"hough: the numba kernel takes window <= 64, got {window}; use backend='numpy'")
     valid = scans.valid
     # The grid only has to cover every point; its extent never changes a decision.
     extent = float(np.max(np.linalg.norm(scans.z[valid], axis=-1))) if valid.any() else 1.0
     grid = make_grid(d_rho, d_theta_deg, extent)
     keep = np.zeros(valid.shape, dtype=bool)
+    new_z = np.array(scans.z, copy=True) if new_measurements == "projected" else None
     for b in range(scans.batch):
-        keep[b] = hough_remove_run(scans.z[b], valid[b], grid, window, shift, v_max, dt, gate_gap, v_min, sim_rho,
-                                   sim_theta_deg, eps, support_reach, support, warmup, trace, b)
-    return scans.with_valid(keep)
+        keep[b], z_b = hough_remove_run(scans.z[b], valid[b], grid, window, shift, v_max, dt, gate_gap, v_min,
+                                        sim_rho, sim_theta_deg, eps, support_reach, support, vel_gate, sigma_pos,
+                                        require_chain, new_measurements, warmup, trace, b, kernel)
+        if new_z is not None:
+            new_z[b] = z_b
+    out = scans.with_valid(keep)
+    if new_z is not None:
+        out = dataclasses.replace(out, z=np.where(out.valid[..., None], new_z, out.z))
+    return out
 
 
 PARAMETERS = (
@@ -681,12 +1034,22 @@ PARAMETERS = (
     Param("sim_rho", 3.0, "rho tolerance of similar lines (A and B)", minimum=0.0),
     Param("sim_theta_deg", 3.0, "theta tolerance of similar lines, in degrees", minimum=0.0),
     Param("eps", 4.0, "distance from a similar line within which a detection is kept", minimum=0.0),
-    Param("support_reach", None, "distance from the line's latest support within which a detection is kept "
-          "(none: 2 v_max dt)", "float?", above=0.0),
-    Param("support", "latest", "which detections of the line support a kept detection", "str",
-          choices=("latest", "any")),
+    Param("support", "local", "which supports of the line keep a detection: the latest near it with a consistent "
+          "velocity (local), the latest anywhere on the line (latest), or any (any)", "str", choices=SUPPORTS),
+    Param("support_reach", None, "distance from a support within which a detection is kept (none: v_max dt "
+          "max(gap, 2) for local, 2 v_max dt otherwise)", "float?", above=0.0),
+    Param("vel_gate", 9.21, "chi-square (2 dof) bound of the velocity-consistency check of the local rule (none: no "
+          "check)", "float?", above=0.0),
+    Param("sigma_pos", 2.0, "position accuracy of a detection per axis, for the velocity-consistency check",
+          above=0.0),
+    Param("require_chain", False, "the local rule keeps a detection only when its support has an earlier local "
+          "support of its own (a three-point chain) to check the velocity against", "bool"),
+    Param("new_measurements", "detections", "what the tracker gets: the kept detections (the paper's extracted "
+          "measurements) or their projections onto the nearest similar line", "str", choices=NEW_MEASUREMENTS),
     Param("warmup", "drop", "pings before group A is full: no output (drop) or every detection (keep)", "str",
           choices=("drop", "keep")),
+    Param("backend", "auto", "the local rule's implementation: Numba where installed (auto), or the NumPy twin; the "
+          "decisions are the same", "str", choices=BACKENDS),
 )
 
 HOUGH = ClutterRemoverSpec(

@@ -14,7 +14,9 @@ covariance, linearised at the measurement (eqs 15-17 of paper 001)::
     R12 = (sigma_r^2 - r^2 sigma_b^2) sin b cos b
 
 i.e. ``R_c = A diag(sigma_r^2, sigma_b^2) A^T`` with ``A = d(x, y)/d(r, b) = [[cos b, -r sin b],
-[sin b, r cos b]]``.  (With a compass bearing, ``x = r sin b``, ``y = r cos b``, sin and cos swap; this
+[sin b, r cos b]]``.  Where the scan carries each detection's own covariance ``Scan.cov`` (a polar
+covariance ``C`` in ``(r, b)``; the ``detection_covariance`` capability), the same linearisation converts it:
+``R_c = A C A^T`` (equal to the above for ``C = diag(sigma_r^2, sigma_b^2)``).  (With a compass bearing, ``x = r sin b``, ``y = r cos b``, sin and cos swap; this
 plugin does not accept that convention.)  ``sigma_r`` and ``sigma_b`` are read from
 the model's declared ``std`` (``sigma_b`` in radians) and the sensor position from its declared
 ``sensor_position``, as :func:`workbench.models.range_bearing` publishes them.
@@ -43,6 +45,12 @@ def _polar_params(model: MeasurementModel) -> tuple[float, float, tuple[float, f
     return float(model.std[0]), float(model.std[1]), (float(sensor[0]), float(sensor[1]))
 
 
+def conversion_jacobian(r: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``A = d(x, y)/d(r, b) = [[cos b, -r sin b], [sin b, r cos b]]`` (math bearing), ``(B,) -> (B, 2, 2)``."""
+    c, s = np.cos(b), np.sin(b)
+    return np.stack([np.stack([c, -r * s], axis=-1), np.stack([s, r * c], axis=-1)], axis=-2)
+
+
 def init(prior: Gaussian, rng=None) -> Gaussian:
     return prior
 
@@ -61,7 +69,15 @@ def update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Ga
         item = int(np.argmax(present & ~np.isfinite(z).all(axis=1)))
         raise InputError(f"cmkf-l: batch item {item} has a non-finite (NaN or inf) measurement")
     zc = polar_to_cartesian(z, sensor)
-    Rc = converted_covariance(z[:, 0], z[:, 1], sigma_r, sigma_b)
+    if scan.cov is None:
+        Rc = converted_covariance(z[:, 0], z[:, 1], sigma_r, sigma_b)
+    else:  # the detection's own polar covariance C: R_c = A C A^T, A = d(x, y)/d(r, b)
+        row = np.argmax(scan.valid, axis=1)
+        C = scan.cov[np.arange(scan.batch), row]
+        A = conversion_jacobian(z[:, 0], z[:, 1])
+        Rc = A @ C @ np.swapaxes(A, -1, -2)
+        Rc = 0.5 * (Rc + np.swapaxes(Rc, -1, -2))
+        Rc = np.where(present[:, None, None], Rc, np.eye(2))
     n = state.dim
     H = np.zeros((2, n))
     H[0, 0] = H[1, 1] = 1.0  # H = [I 0]: position first in the state
@@ -76,7 +92,7 @@ CMKF_L = FilterSpec(
     name="cmkf-l",
     summary="Converted-measurement KF, linearised conversion covariance (range-bearing input, math bearing)",
     init=init, predict=predict, update=update, estimate=estimate,
-    capabilities=frozenset({"gaussian", "range_bearing_input"}),
+    capabilities=frozenset({"gaussian", "range_bearing_input", "detection_covariance"}),
 )
 
 

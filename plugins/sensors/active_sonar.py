@@ -12,12 +12,14 @@ clutter remover and the recorded-data loader.
 Measurement models (``measurement_model(frame=...)``):
 
 - ``frame="cartesian"`` (default, matches the detections): linear position model ``z = [I 0] x + v``,
-  ``R = sigma_xy^2 I`` (``sigma_xy`` defaults to ``sigma_pos``, i.e. the matched ``R = 4 I``).
+  ``R = sigma_xy^2 I`` (``sigma_xy`` defaults to ``sigma_pos``, i.e. the matched ``R = 4 I``).  Its declared
+  ``std = (sigma_xy, sigma_xy)`` is the sensor's stated position accuracy, which a tracker may give every
+  detection as its own covariance (``TrackerConfig.detection_sigma``).
 - ``frame="polar"``: :func:`workbench.models.range_bearing` with ``sigma_r`` and
   ``sigma_theta = deg2rad(sigma_b_deg)`` (the paper's 0.5 and 1 degree), sensor at ``sensor``.
   Bearing in the **mathematical** convention: ``b = atan2(y - sy, x - sx)``, counter-clockwise from
   the +x axis, so ``x = sx + r cos b``, ``y = sy + r sin b``.  This is the view the converted
-  measurement filter (``cmkf-l``) needs; the multi-target tracker (:mod:`workbench.tracker`) maps each
+  measurement filter (``cmkf-l``) needs; the multi-target tracker (:mod:`workbench.tracking.multi`) maps each
   Cartesian detection ``p`` into it as ``h(p)`` = ``(|p - s|, atan2)``, exactly as the paper computes
   ``(r, b)`` from a Cartesian detection only to build ``R``.  Paper 001 tracks with this polar model.
 

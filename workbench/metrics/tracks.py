@@ -17,7 +17,7 @@ False-track removal rate, for counts before and after clutter removal::
 averaged per run (:func:`removal_rate`), then mean +- std over Monte Carlo runs (:func:`mean_std`).
 The total-count variant uses the confirmed counts instead of the false counts.
 
-Continuity: the fraction of pings from the first held ping to the last at which the
+Continuity: the fraction of pings, from the first held ping to the last ping of the run, at which the
 target is held (0 for a run in which it never is).
 """
 

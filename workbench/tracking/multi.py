@@ -5,28 +5,43 @@ Per ping ``k``, with the live tracks as the batch axis of the filter functions (
 ``update`` call per ping for all tracks)::
 
     1. predict every live track                         filter.predict(state, motion)
-    2. gate    d2 = nu^T S^-1 nu,  nu = wrap(z - h(x-)),  S = J P- J^T + R   (J = model Jacobian at x-)
+    2. gate    d2 = nu^T S^-1 nu,  nu = wrap(z - h(x-)),  S = J P- J^T + R_g   (J = model Jacobian at x-)
                a (track, detection) pair is in the gate when d2 <= gate (9.21 = chi2_2 99 %)
     3. classify: a detection inside any track's gate is an association detection; the rest are
                initiation detections
     4. associate: nearest neighbour, each detection used at most once, greedy by smallest d2
     5. update every track with its detection (none: the item comes back as predicted)
-    6. manage: confirm at >= M hits in the last N pings (3 of 5); delete after 3 consecutive misses, or a
-               tentative track that can no longer reach M hits in its first N pings
+    6. manage (M-of-N, ``M = confirm_hits``, ``N = confirm_window``): the hit history holds the last N pings;
+               a tentative track is confirmed at >= M hits in it; a track is deleted after ``delete_misses``
+               consecutive misses, and a tentative track also when it can no longer reach M hits in its
+               first N pings.  ``initiation_hits`` of the two initiation detections count as hits (0 by
+               default: a track is confirmed by M hits after its initiation, so M + 2 detections in all;
+               2 counts both, the looser rule under which one more hit confirms a 3-of-5 track)
     7. initiate: a tentative track from every pair (initiation detection of ping k-1, initiation
                detection of ping k) inside the rectangular gate |dx|, |dy| <= v_max dt, each detection
                in at most one pair (greedy by smallest Chebyshev distance); the prior is
-               :func:`two_point_prior`
+               :func:`two_point_prior` (or :func:`speed_course_prior`, ``prior="speed-course"``)
+
+Options (:class:`TrackerConfig`): ``gate_sigma`` gates with a stated position accuracy instead of the
+filter's ``R``; ``detection_sigma`` gives every detection the stated covariance ``s^2 I`` in position (for
+the gate, the two-point prior and, through ``Scan.cov``, the update of a filter with the
+``detection_covariance`` capability); ``min_speed`` keeps slow tracks from confirmation (stationary clutter).
 
 Detections are Cartesian positions ``(x, y)``; the filter sees them through the measurement model as
 ``h(p)`` with ``p = [x, y, 0, ...]`` (:func:`measurement_view`).  That is exact for models whose ``h``
 depends on position only (the linear position model, range-bearing); for range-bearing it is the
 conversion ``(r, b) = (|p|, atan2(y, x))``.  The state layout is ``[x, y, vx, vy]``.
 
+Every step is vectorised across the live tracks: gating (dense below ``dense_limit`` pairs, else candidate
+pairs from a grid over the measurement space with each track's exact gate bounding box,
+:func:`gated_pairs`), the assignment (:func:`greedy_assign`, rounds of mutually cheapest pairs), the M-of-N
+state machine (:func:`mofn_step`, bit histories) and the filter states (:func:`take_items`,
+:func:`join_items`).
+
 The tracker never sees ``origin``; metrics (:mod:`workbench.metrics`) compare its log with the truth
 afterwards.  Every Monte Carlo run keeps its own tracks and its own random stream (track management is per
-run); inside a ping everything is vectorised.  Irregular ping intervals are honoured: the initiation box and the
-two-point velocity use the actual interval.
+run).  Irregular ping intervals are honoured: the initiation box and the two-point velocity use the actual
+interval.
 
 Filter states are the filter's own business; the tracker subsets and joins them with :func:`take_items`
 and :func:`join_items`, which walk dataclasses, tuples and arrays and treat every array whose leading
@@ -35,12 +50,14 @@ axis is the batch size as batched (the project's batch-first rule).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
 
+from ..linalg import wrap_angle
 from ..models import MeasurementModel, MotionModel
 from ..rng import generator
 from ..specs import FilterSpec
@@ -58,6 +75,9 @@ __all__ = [
     "measurement_view",
     "position_covariance",
     "two_point_prior",
+    "speed_course_prior",
+    "detection_covariance",
+    "PRIORS",
     "box_pairs",
     "gate_covariance",
     "gated_pairs",
@@ -76,19 +96,33 @@ TENTATIVE = 0
 CONFIRMED = 1
 
 
+PRIORS = ("two-point", "speed-course")
+
+
 @dataclass(frozen=True)
 class TrackerConfig:
-    """Tracker parameters (defaults: an active-sonar tracker of ~2 m position accuracy).
+    """Tracker parameters (defaults: an active-sonar tracker of ~2 units position accuracy).
 
     gate : Mahalanobis gate on ``d2`` (9.21: chi-square 2 dof, 99 %).
     v_max : initiation box half-width per ping, ``|dx|, |dy| <= v_max dt`` (units per ping).
-    confirm_hits, confirm_window : M-of-N confirmation (3 of 5).
+    confirm_hits, confirm_window : M-of-N confirmation, M of the last N pings (3 of 5).
     delete_misses : consecutive misses that delete a track (3).
-    sigma_v, sigma_c : speed (units/ping) and course (rad) standard deviations of the two-point prior.
+    initiation_hits : how many of the two initiation detections count as hits of the M-of-N window: 0
+        (default; confirmation needs M hits after initiation) up to 2 (both count).
+    prior : ``"two-point"`` (default, :func:`two_point_prior`: position and velocity covariance from the two
+        detections' covariances, with the cross terms) or ``"speed-course"`` (:func:`speed_course_prior` with
+        ``sigma_v``, ``sigma_c``).
+    sigma_v, sigma_c : speed (units/ping) and course (rad) standard deviations of the speed-course prior.
     dense_limit : above this many (track, detection) pairs, candidate pairs come from a spatial grid first.
     gate_sigma : ``None`` (default): gate with the filter's ``R``.  A number ``s``: gate with the position
         accuracy ``s`` instead, ``R_g = J_p (s^2 I) J_p^T`` (``J_p = dh/dp`` at the prediction), i.e.
         ``S_g = J P- J^T + R_g``; the filter's own update still uses its ``R``.
+    detection_sigma : ``None`` (default) or the stated position accuracy ``s`` of every detection: its
+        covariance is ``s^2 I`` in position, ``J_h(p) s^2 I J_h(p)^T`` in the measurement space.  Used for
+        the gate (as ``gate_sigma``), for the two-point prior and for the update (handed to the filter as
+        ``Scan.cov``; the filter needs the ``detection_covariance`` capability).
+    min_speed : ``None`` (default) or a speed (units per ping): a track whose estimated speed is below it is
+        not confirmed, and a confirmed one is deleted (a stationary-clutter test).
     """
 
     gate: float = 9.21
@@ -96,19 +130,31 @@ class TrackerConfig:
     confirm_hits: int = 3
     confirm_window: int = 5
     delete_misses: int = 3
+    initiation_hits: int = 0
+    prior: str = "two-point"
     sigma_v: float = 1.0
     sigma_c: float = 1.0
     dense_limit: int = 250_000
     gate_sigma: float | None = None
+    detection_sigma: float | None = None
+    min_speed: float | None = None
 
     def __post_init__(self) -> None:
         if self.gate_sigma is not None and not self.gate_sigma > 0:
             raise InputError(f"TrackerConfig: gate_sigma must be None or > 0, got {self.gate_sigma}")
+        if self.detection_sigma is not None and not self.detection_sigma > 0:
+            raise InputError(f"TrackerConfig: detection_sigma must be None or > 0, got {self.detection_sigma}")
+        if self.min_speed is not None and not self.min_speed >= 0:
+            raise InputError(f"TrackerConfig: min_speed must be None or >= 0, got {self.min_speed}")
         if not (self.gate > 0 and self.v_max > 0 and self.sigma_v >= 0 and self.sigma_c >= 0):
             raise InputError(f"TrackerConfig: need gate, v_max > 0 and sigma_v, sigma_c >= 0; got {self}")
         if not (1 <= self.confirm_hits <= self.confirm_window <= 30 and self.delete_misses >= 1):
             raise InputError(f"TrackerConfig: need 1 <= confirm_hits <= confirm_window <= 30 and delete_misses >= 1; "
                              f"got {self.confirm_hits}, {self.confirm_window}, {self.delete_misses}")
+        if not 0 <= self.initiation_hits <= 2:
+            raise InputError(f"TrackerConfig: initiation_hits must be 0, 1 or 2, got {self.initiation_hits}")
+        if self.prior not in PRIORS:
+            raise InputError(f"TrackerConfig: prior must be one of {PRIORS}, got {self.prior!r}")
 
 
 @dataclass(frozen=True)
@@ -238,9 +284,30 @@ def position_covariance(model: MeasurementModel, positions: np.ndarray, n: int) 
     return 0.5 * (out + np.swapaxes(out, -1, -2))
 
 
-def two_point_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, pos_cov: np.ndarray, sigma_v: float,
-                    sigma_c: float) -> Gaussian:
-    """Two-point track initialisation from gated detections of consecutive pings.
+def two_point_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, cov_prev: np.ndarray,
+                    cov_cur: np.ndarray) -> Gaussian:
+    """The standard two-point initialisation from detections of consecutive pings.
+
+    ``x0 = [p_cur, v0]``, ``v0 = (p_cur - p_prev) / dt``, with the covariance of exactly that difference
+    (``R0, R1``: the two detections' position covariances)::
+
+        P0 = [[R1,       R1 / dt          ],
+              [R1 / dt,  (R0 + R1) / dt^2 ]]
+
+    Shapes: ``p_prev, p_cur (K, 2)``, ``cov_prev, cov_cur (K, 2, 2)`` -> Gaussian ``(K, 4)``.
+    """
+    vel = (p_cur - p_prev) / dt
+    cov = np.empty((p_cur.shape[0], 4, 4))
+    cov[:, :2, :2] = cov_cur
+    cov[:, :2, 2:] = cov_cur / dt  # cov(p_cur, v0) = R1 / dt
+    cov[:, 2:, :2] = cov_cur / dt
+    cov[:, 2:, 2:] = (cov_prev + cov_cur) / (dt * dt)  # cov(v0) = (R0 + R1) / dt^2
+    return Gaussian(np.concatenate([p_cur, vel], axis=1), 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+
+
+def speed_course_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, pos_cov: np.ndarray, sigma_v: float,
+                       sigma_c: float) -> Gaussian:
+    """Two-point initialisation with a speed-course velocity covariance (``prior="speed-course"``).
 
     ``x0 = [p_cur, (p_cur - p_prev) / dt]`` and, with speed ``v`` and course ``c`` of that velocity
     (``vx = v cos c``, ``vy = v sin c``)::
@@ -263,6 +330,16 @@ def two_point_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, pos_cov: n
     return Gaussian(np.concatenate([p_cur, vel], axis=1), cov)
 
 
+def detection_covariance(model: MeasurementModel, positions: np.ndarray, n: int, sigma: float) -> np.ndarray:
+    """Each detection's covariance in the model's measurement space when its position accuracy is ``sigma`` per
+    axis: ``J_h(p) (sigma^2 I) J_h(p)^T``, ``J_h = dh/dp`` at the detection.  ``(M, 2) -> (M, m, m)``."""
+    state = np.zeros((positions.shape[0], n))
+    state[:, :2] = positions
+    jp = _jacobian(model, state)[:, :, :2]
+    out = sigma * sigma * (jp @ np.swapaxes(jp, -1, -2))
+    return 0.5 * (out + np.swapaxes(out, -1, -2))
+
+
 def _whiten(chol: np.ndarray, nu: np.ndarray) -> np.ndarray:
     """``L^-1 nu`` for lower-triangular ``chol (..., m, m)`` and ``nu (..., m)`` (broadcasting).
 
@@ -276,13 +353,46 @@ def _whiten(chol: np.ndarray, nu: np.ndarray) -> np.ndarray:
     return np.stack([w1, w2], axis=-1)
 
 
-def box_pairs(a: np.ndarray, b: np.ndarray, half, cell: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """All pairs ``(i, j)`` with ``|a_i - b_j| <= half_i`` on both axes, by spatial grid hashing.
+def _grid_query(lo: np.ndarray, hi: np.ndarray, b: np.ndarray, cell) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate pairs ``(i, j)``: every point ``b_j`` inside box ``i`` (``lo_i <= b_j <= hi_i`` on both axes) is
+    among them, by spatial grid hashing.
 
-    ``b`` is binned into square cells of side ``cell`` (default: the median box width, so a box covers a
-    few cells); each ``a_i`` visits the cells its box overlaps, and the candidates of those cells are
-    found with ``searchsorted`` on the sorted cell keys.  Fully vectorised, no ``(Na, Nb)`` matrix and no
-    Python loop over points; the cost is the number of (point, visited cell) and candidate pairs.
+    ``b`` is binned into cells of side ``cell`` (one value or one per axis); each box visits the cells it
+    overlaps, and the points of those cells are found with ``searchsorted`` on the sorted cell keys.  Fully
+    vectorised, no ``(Na, Nb)`` matrix and no Python loop over points.  Shapes: ``lo, hi (Na, 2)``, ``b (Nb, 2)``
+    -> ``i, j (P,)`` grouped by ``i``.
+    """
+    e = np.zeros(0, dtype=np.intp)
+    if lo.shape[0] == 0 or b.shape[0] == 0:
+        return e, e
+    cell = np.broadcast_to(np.asarray(cell, dtype=float), (2,))
+    b_lo = b.min(axis=0)
+    extent = b.max(axis=0) - b_lo
+    cell = np.maximum(np.maximum(cell, extent / 4096.0), 1e-12)
+    nb = np.floor((b - b_lo) / cell).astype(np.int64)
+    nx, ny = int(nb[:, 0].max()) + 1, int(nb[:, 1].max()) + 1
+    keys = nb[:, 0] * ny + nb[:, 1]
+    order = np.argsort(keys, kind="stable")
+    skeys = keys[order]
+    c0 = np.maximum(np.floor((lo - b_lo) / cell).astype(np.int64), 0)
+    c1 = np.minimum(np.floor((hi - b_lo) / cell).astype(np.int64), [nx - 1, ny - 1])
+    ncx, ncy = np.maximum(c1[:, 0] - c0[:, 0] + 1, 0), np.maximum(c1[:, 1] - c0[:, 1] + 1, 0)
+    # one run of consecutive keys per visited x column: cells (cx, c0y .. c1y)
+    rep = np.repeat(np.arange(lo.shape[0]), ncx)
+    cx = c0[rep, 0] + (np.arange(rep.size) - np.repeat(np.cumsum(ncx) - ncx, ncx))
+    first = np.searchsorted(skeys, cx * ny + c0[rep, 1], side="left")
+    count = np.searchsorted(skeys, cx * ny + c0[rep, 1] + ncy[rep] - 1, side="right") - first
+    n = int(count.sum())
+    if n == 0:
+        return e, e
+    i = np.repeat(rep, count)
+    j = order[np.repeat(first - (np.cumsum(count) - count), count) + np.arange(n)]
+    return i, j
+
+
+def box_pairs(a: np.ndarray, b: np.ndarray, half, cell: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All pairs ``(i, j)`` with ``|a_i - b_j| <= half_i`` on both axes, by spatial grid hashing
+    (:func:`_grid_query`; default cell: half the median box width).
 
     Shapes: ``a (Na, 2)``, ``b (Nb, 2)``, ``half`` scalar, ``(Na,)`` or ``(Na, 2)`` -> ``i, j (P,)``, sorted
     by ``i``.
@@ -295,68 +405,67 @@ def box_pairs(a: np.ndarray, b: np.ndarray, half, cell: float | None = None) -> 
     half = np.asarray(half, dtype=float)
     half = np.broadcast_to(half[..., None] if half.ndim == 1 else half, a.shape)
     if cell is None:
-        cell = float(np.median(2.0 * half))
-    lo = b.min(axis=0)
-    extent = b.max(axis=0) - lo
-    cell = max(float(cell), float(extent.max()) / 4096.0, 1e-9)
-    nb = np.floor((b - lo) / cell).astype(np.int64)
-    ny = int(nb[:, 1].max()) + 1
-    nx = int(nb[:, 0].max()) + 1
-    keys = nb[:, 0] * ny + nb[:, 1]
-    order = np.argsort(keys, kind="stable")
-    skeys = keys[order]
-    c0 = np.floor((a - half - lo) / cell).astype(np.int64)
-    c1 = np.floor((a + half - lo) / cell).astype(np.int64)
-    c0 = np.maximum(c0, 0)
-    c1 = np.minimum(c1, [nx - 1, ny - 1])
-    ncx, ncy = np.maximum(c1[:, 0] - c0[:, 0] + 1, 0), np.maximum(c1[:, 1] - c0[:, 1] + 1, 0)
-    ncell = ncx * ncy
-    total = int(ncell.sum())
-    if total == 0:
-        return e, e
-    # (point, visited cell) pairs
-    rep = np.repeat(np.arange(a.shape[0]), ncell)
-    local = np.arange(total) - np.repeat(np.cumsum(ncell) - ncell, ncell)
-    cx = c0[rep, 0] + local // ncy[rep]
-    cy = c0[rep, 1] + local % ncy[rep]
-    ckey = cx * ny + cy
-    first = np.searchsorted(skeys, ckey, side="left")
-    count = np.searchsorted(skeys, ckey, side="right") - first
-    n = int(count.sum())
-    if n == 0:
-        return e, e
-    # (point, candidate) pairs
-    i = np.repeat(rep, count)
-    j = order[np.repeat(first, count) + np.arange(n) - np.repeat(np.cumsum(count) - count, count)]
-    inside = np.all(np.abs(a[i] - b[j]) <= half[i], axis=1)
+        cell = float(np.median(half))
+    # the grid query with boxes widened by a relative 1e-9 (the exact test below decides)
+    pad = 1e-9 * (np.abs(a) + half) + 1e-300
+    i, j = _grid_query(a - half - pad, a + half + pad, b, max(float(cell), 1e-9))  # grouped by i, ascending
+    inside = (np.abs(a[i, 0] - b[j, 0]) <= half[i, 0]) & (np.abs(a[i, 1] - b[j, 1]) <= half[i, 1])
     return i[inside], j[inside]
 
 
 def gate_covariance(est: Gaussian, model: MeasurementModel, config: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
     """Gate innovation covariance ``S = J P- J^T + R_g`` and the Jacobian ``J`` at the prediction.
 
-    ``R_g = R`` (the filter's), or ``J_p (gate_sigma^2 I) J_p^T`` with ``J_p = dh/dp`` when
-    ``config.gate_sigma`` is set.  Shapes: ``(K, m, m)``, ``(K, m, n)``.
+    ``R_g = R`` (the filter's), or ``J_p (s^2 I) J_p^T`` with ``J_p = dh/dp`` and ``s = config.gate_sigma``
+    (else ``config.detection_sigma``) when one is set.  Shapes: ``(K, m, m)``, ``(K, m, n)``.
     """
     J = _jacobian(model, est.mean)
-    if config.gate_sigma is None:
+    sigma = config.gate_sigma if config.gate_sigma is not None else config.detection_sigma
+    if sigma is None:
         R = model.R
     else:
         jp = J[:, :, :2]
-        R = config.gate_sigma**2 * (jp @ np.swapaxes(jp, -1, -2))  # R_g = J_p (s^2 I) J_p^T
+        R = sigma**2 * (jp @ np.swapaxes(jp, -1, -2))  # R_g = J_p (s^2 I) J_p^T
     S = J @ est.cov @ np.swapaxes(J, -1, -2) + R  # S = J P- J^T + R_g
     return 0.5 * (S + np.swapaxes(S, -1, -2)), J
 
 
+def _measurement_boxes(zhat: np.ndarray, half: np.ndarray, angular: np.ndarray):
+    """The query boxes of gates centred at ``zhat (K, 2)`` with half-widths ``half (K, 2)`` in the measurement
+    space, angular components wrapped to (-pi, pi]: a box crossing the seam gets a second, shifted copy.
+    Returns ``track (Q,)``, ``lo, hi (Q, 2)``."""
+    lo, hi = zhat - half, zhat + half
+    track = np.arange(zhat.shape[0])
+    extra_t, extra_lo, extra_hi = [], [], []
+    for axis in np.flatnonzero(angular):
+        whole = half[:, axis] >= np.pi
+        lo[whole, axis], hi[whole, axis] = -np.pi - 1.0, np.pi + 1.0
+        for shift, over in ((2.0 * np.pi, lo[:, axis] < -np.pi), (-2.0 * np.pi, hi[:, axis] > np.pi)):
+            over &= ~whole
+            if over.any():
+                l2, h2 = lo[over].copy(), hi[over].copy()
+                l2[:, axis] += shift
+                h2[:, axis] += shift
+                extra_t.append(track[over])
+                extra_lo.append(l2)
+                extra_hi.append(h2)
+    if extra_t:
+        track = np.concatenate([track] + extra_t)
+        lo = np.concatenate([lo] + extra_lo)
+        hi = np.concatenate([hi] + extra_hi)
+    return track, lo, hi
+
+
 def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: MeasurementModel,
                 config: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All (track, detection) pairs with ``d2 <= gate``: ``rows, cols, d2`` (each ``(P,)``).
+    """``(track, detection, d2)`` for every pair inside the gate; see the module docstring.
 
-    ``d2 = nu^T S^-1 nu``, ``nu = wrap(z - h(x-))``, ``S`` from :func:`gate_covariance`.  Dense over all
-    pairs when ``K M <= dense_limit``; otherwise candidates come from a spatial grid
-    (:func:`box_pairs`) over the Cartesian positions: each track's box is the bounding box of its gate
-    ellipse in position space (covariance ``A S A^T``, ``A = (dh/dp)^-1``), widened 1.5x plus one unit
-    for the linearisation of a nonlinear ``h``; ``d2`` is then computed for the candidates only.
+    ``est`` are the predictions ``(K, n)``, ``positions (M, 2)`` the Cartesian detections and ``zm (M, m)`` the
+    same in the model's measurement space.  At most ``dense_limit`` pairs: every pair's ``d2``.  Above: a
+    pair's residual satisfies ``|nu_i| <= sqrt(gate S_ii)`` on each axis inside the gate ellipse, so the
+    candidates are the detections inside that box around ``h(x-)`` in the measurement space (angular
+    components wrapped; :func:`_grid_query`), and ``d2`` is computed for them only: the same pairs and
+    values as the dense computation.
     """
     K, M = est.batch, zm.shape[0]
     if K == 0 or M == 0:
@@ -371,19 +480,31 @@ def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: Mea
         d2 = np.einsum("kmi,kmi->km", w, w)
         rows, cols = np.nonzero(d2 <= config.gate)
         return rows, cols, d2[rows, cols]
-    # Sparse path: the gate ellipse in position space has covariance A S A^T (A = (dh/dp)^-1).
-    jp = J[:, :, :2]
-    x = np.linalg.solve(jp, S)
-    sc = np.linalg.solve(jp, np.swapaxes(x, -1, -2))
-    var = np.maximum(np.stack([sc[:, 0, 0], sc[:, 1, 1]], axis=1), 0.0)
-    half = 1.5 * np.sqrt(config.gate * var) + 1.0  # bounding box of d2 <= gate, widened
-    rows, cols = box_pairs(est.mean[:, :2], positions, half)
+    if model.dim != 2:
+        raise InputError(f"the tracker needs a 2-component measurement model, got m={model.dim}")
+    # |nu_i| <= sqrt(gate S_ii) inside the gate; widened by a relative 1e-9 (the d2 test decides)
+    half = np.sqrt(config.gate * np.maximum(np.diagonal(S, axis1=1, axis2=2), 0.0)) * (1.0 + 1e-9) + 1e-12
+    track, lo, hi = _measurement_boxes(zhat.astype(float), half, model.angle_mask)
+    cell = 0.25 * np.median(2.0 * half, axis=0)
+    rows, cols = _grid_query(lo, hi, np.asarray(zm, dtype=float), cell)
     if rows.size == 0:
         e = np.zeros(0, dtype=np.intp)
         return e, e, np.zeros(0)
-    nu = model.residual(zm[cols], zhat[rows])
-    w = _whiten(chol[rows], nu)
-    d2 = np.einsum("pi,pi->p", w, w)
+    rows = track[rows]
+    # nu = wrap(z - h(x-));  w = L^-1 nu (forward substitution, as _whiten), d2 = |w|^2; the per-track and
+    # per-detection factors are gathered from contiguous copies
+    z0, z1 = np.ascontiguousarray(zm[:, 0]), np.ascontiguousarray(zm[:, 1])
+    h0, h1 = np.ascontiguousarray(zhat[:, 0]), np.ascontiguousarray(zhat[:, 1])
+    l00, l10, l11 = (np.ascontiguousarray(chol[:, i, j]) for i, j in ((0, 0), (1, 0), (1, 1)))
+    nu0 = z0[cols] - h0[rows]
+    nu1 = z1[cols] - h1[rows]
+    if model.angle_mask[0]:
+        nu0 = wrap_angle(nu0)
+    if model.angle_mask[1]:
+        nu1 = wrap_angle(nu1)
+    w1 = nu0 / l00[rows]
+    w2 = (nu1 - l10[rows] * w1) / l11[rows]
+    d2 = w1 * w1 + w2 * w2
     inside = d2 <= config.gate
     return rows[inside], cols[inside], d2[inside]
 
@@ -391,29 +512,42 @@ def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: Mea
 def greedy_assign(rows: np.ndarray, cols: np.ndarray, cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Greedy one-to-one assignment by smallest cost (ties broken by row, then column).
 
-    Equivalent to repeatedly taking the globally cheapest remaining pair; computed in rounds in which
-    every pair that is the cheapest of both its row and its column is taken at once.
+    Equivalent to repeatedly taking the globally cheapest remaining pair in the order (cost, row, column);
+    computed in rounds in which every pair that is the first of both its row and its column in that order is
+    taken at once.  A round costs ``O(pairs left)`` and sorts nothing: the cheapest cost of every row and
+    column comes from ``np.minimum.at``, and among a row's (column's) pairs of equal cheapest cost the smallest
+    column (row) is found the same way.  Returns the taken ``rows, cols``.
     """
-    order = np.lexsort((cols, rows, cost))
-    rows, cols = rows[order], cols[order]
-    out_r, out_c = [], []
-    while rows.size:
-        # pairs are sorted by rank, so the first occurrence is the cheapest of its row / column
-        _, first_r = np.unique(rows, return_index=True)
-        _, first_c = np.unique(cols, return_index=True)
-        row_best = np.zeros(rows.size, dtype=bool)
-        row_best[first_r] = True
-        col_best = np.zeros(rows.size, dtype=bool)
-        col_best[first_c] = True
-        mutual = row_best & col_best
-        take_r, take_c = rows[mutual], cols[mutual]
-        out_r.append(take_r)
-        out_c.append(take_c)
-        alive = ~(np.isin(rows, take_r) | np.isin(cols, take_c))
-        rows, cols = rows[alive], cols[alive]
-    if not out_r:
+    rows, cols, cost = np.asarray(rows), np.asarray(cols), np.asarray(cost, dtype=float)
+    if rows.size == 0:
         e = np.zeros(0, dtype=np.intp)
         return e, e
+    rows, cols = rows.astype(np.intp), cols.astype(np.intp)
+    n_r, n_c = int(rows.max()) + 1, int(cols.max()) + 1
+    taken_r, taken_c = np.zeros(n_r, dtype=bool), np.zeros(n_c, dtype=bool)
+    best_r, best_c = np.empty(n_r), np.empty(n_c)
+    first_r, first_c = np.empty(n_r, dtype=np.intp), np.empty(n_c, dtype=np.intp)
+    live = np.arange(rows.size)
+    out_r, out_c = [], []
+    while live.size:
+        r, c, x = rows[live], cols[live], cost[live]
+        best_r.fill(np.inf)
+        best_c.fill(np.inf)
+        np.minimum.at(best_r, r, x)  # the cheapest remaining cost of each row and column
+        np.minimum.at(best_c, c, x)
+        at_r, at_c = x == best_r[r], x == best_c[c]
+        # ties: the smallest column among a row's cheapest pairs, the smallest row among a column's
+        first_r.fill(n_c)
+        first_c.fill(n_r)
+        np.minimum.at(first_r, r[at_r], c[at_r])
+        np.minimum.at(first_c, c[at_c], r[at_c])
+        mutual = at_r & at_c & (c == first_r[r]) & (r == first_c[c])
+        tr, tc = r[mutual], c[mutual]
+        out_r.append(tr)
+        out_c.append(tc)
+        taken_r[tr] = True
+        taken_c[tc] = True
+        live = live[~(taken_r[r] | taken_c[c])]
     return np.concatenate(out_r), np.concatenate(out_c)
 
 
@@ -427,8 +561,8 @@ def rectangular_pairs(a: np.ndarray, b: np.ndarray, box: float, dense_limit: int
         d = np.max(np.abs(a[:, None, :] - b[None, :, :]), axis=-1)
         i, j = np.nonzero(d <= box)
         return i, j, d[i, j]
-    i, j = box_pairs(a, b, box, cell=max(2.0 * box, 1e-9))
-    return i, j, np.max(np.abs(a[i] - b[j]), axis=-1)
+    i, j = box_pairs(a, b, box, cell=max(0.5 * box, 1e-9))
+    return i, j, np.maximum(np.abs(a[i, 0] - b[j, 0]), np.abs(a[i, 1] - b[j, 1]))
 
 
 _POPCOUNT = np.array([bin(v).count("1") for v in range(1 << 12)], dtype=np.int64)
@@ -444,15 +578,18 @@ def _popcount(x: np.ndarray) -> np.ndarray:
 
 
 def mofn_step(history: np.ndarray, misses: np.ndarray, age: np.ndarray, status: np.ndarray, hit: np.ndarray,
-              config: TrackerConfig):
+              config: TrackerConfig, slow: np.ndarray | None = None):
     """Advance the M-of-N state machine of every track by one ping.
 
     Returns ``history, misses, age, status, delete`` (each ``(K,)``)::
 
         history <- (history << 1 | hit) mod 2^N       hits = popcount(history)
-        confirm   tentative with hits >= M
+        confirm   tentative with hits >= M (and not slow)
         delete    misses >= delete_misses, or tentative with age >= N (never confirmed in its first N
-                  pings) or hits + (N - age) < M (can no longer be)
+                  pings) or hits + (N - age) < M (can no longer be), or confirmed and slow
+
+    ``age`` counts the pings since initiation plus ``initiation_hits`` (the initiation detections that count);
+    ``slow (K,)``: tracks below ``min_speed`` (``None``: none).
     """
     N, M = config.confirm_window, config.confirm_hits
     hit = np.asarray(hit, dtype=bool)
@@ -460,13 +597,26 @@ def mofn_step(history: np.ndarray, misses: np.ndarray, age: np.ndarray, status: 
     age = np.asarray(age) + 1
     misses = np.where(hit, 0, np.asarray(misses) + 1)
     hits = _popcount(history)
-    status = np.where((status == TENTATIVE) & (hits >= M), CONFIRMED, status).astype(np.int8)
+    was_confirmed = status == CONFIRMED
+    can = (hits >= M) if slow is None else (hits >= M) & ~slow
+    status = np.where((status == TENTATIVE) & can, CONFIRMED, status).astype(np.int8)
     tentative = status == TENTATIVE
     delete = (misses >= config.delete_misses) | (tentative & ((age >= N) | (hits + (N - age) < M)))
+    if slow is not None:
+        delete |= was_confirmed & slow
     return history, misses, age, status, delete
 
 
 # -- opaque filter states -------------------------------------------------------------------------
+
+
+def _replaced(obj: Any, changes: dict) -> Any:
+    """``dataclasses.replace(obj, **changes)`` without re-running ``__post_init__``: the values are sub-batches
+    or joins of arrays the filter's own state already validated."""
+    out = copy.copy(obj)
+    for name, value in changes.items():
+        object.__setattr__(out, name, value)
+    return out
 
 
 def take_items(state: Any, index: np.ndarray, batch: int) -> Any:
@@ -475,8 +625,8 @@ def take_items(state: Any, index: np.ndarray, batch: int) -> Any:
     if isinstance(state, np.ndarray):
         return state[index] if state.ndim and state.shape[0] == batch else state
     if dataclasses.is_dataclass(state) and not isinstance(state, type):
-        return dataclasses.replace(state, **{f.name: take_items(getattr(state, f.name), index, batch)
-                                             for f in dataclasses.fields(state) if f.init})
+        return _replaced(state, {f.name: take_items(getattr(state, f.name), index, batch)
+                                 for f in dataclasses.fields(state) if f.init})
     if isinstance(state, tuple):
         items = [take_items(v, index, batch) for v in state]
         return type(state)(*items) if hasattr(state, "_fields") else tuple(items)
@@ -490,8 +640,8 @@ def join_items(a: Any, b: Any, batch_a: int, batch_b: int) -> Any:
             return np.concatenate([a, b], axis=0)
         return a
     if dataclasses.is_dataclass(a) and not isinstance(a, type):
-        return dataclasses.replace(a, **{f.name: join_items(getattr(a, f.name), getattr(b, f.name), batch_a, batch_b)
-                                         for f in dataclasses.fields(a) if f.init})
+        return _replaced(a, {f.name: join_items(getattr(a, f.name), getattr(b, f.name), batch_a, batch_b)
+                             for f in dataclasses.fields(a) if f.init})
     if isinstance(a, tuple):
         items = [join_items(x, y, batch_a, batch_b) for x, y in zip(a, b)]
         return type(a)(*items) if hasattr(a, "_fields") else tuple(items)
@@ -512,6 +662,12 @@ def _predict_tracks(st: TrackerState, filt: FilterSpec, motion: MotionModel, rng
     return filt.predict(st.table.state, motion, rng) if st.table.size else None
 
 
+def _check_filter(filt: FilterSpec, config: TrackerConfig) -> None:
+    if config.detection_sigma is not None and "detection_covariance" not in filt.capabilities:
+        raise InputError(f"tracker: detection_sigma hands each detection's covariance to the filter, which filter "
+                         f"{filt.name!r} would ignore (it lacks the detection_covariance capability)")
+
+
 def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, motion: MotionModel,
                  model: MeasurementModel, config: TrackerConfig, rng: np.random.Generator,
                  predicted: Any = None) -> tuple[TrackerState, PingTracks]:
@@ -526,6 +682,7 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
     n = motion.dim
     if n != 4:
         raise InputError(f"tracker: the state must be [x, y, vx, vy] (n = 4), got a motion model with n = {n}")
+    _check_filter(filt, config)
     k = st.ping + 1
     table = st.table
     K, M = table.size, positions.shape[0]
@@ -541,10 +698,15 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         hit[a_rows] = True
         z = np.zeros((K, 1, model.dim))
         z[a_rows, 0] = zm[a_cols]
-        state = filt.update(state, Scan(z, hit[:, None]), model, rng)
+        cov = None
+        if config.detection_sigma is not None:  # each detection's own covariance, in the measurement space
+            cov = np.broadcast_to(np.eye(model.dim), (K, 1, model.dim, model.dim)).copy()
+            cov[a_rows, 0] = detection_covariance(model, positions[a_cols], n, config.detection_sigma)
+        state = filt.update(state, Scan(z, hit[:, None], cov=cov), model, rng)
         mean = filt.estimate(state).mean
+        slow = None if config.min_speed is None else np.hypot(mean[:, 2], mean[:, 3]) < config.min_speed
         history, misses, age, status, delete = mofn_step(table.history, table.misses, table.age, table.status, hit,
-                                                         config)
+                                                         config, slow)
         keep = np.flatnonzero(~delete)
         table = TrackTable(table.ids[keep], status[keep], history[keep], misses[keep], age[keep], mean[keep],
                            take_items(state, keep, K) if keep.size else None)
@@ -560,19 +722,31 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         order = np.argsort(a_c)  # new tracks in detection order
         a_p, a_c = a_p[order], a_c[order]
         p_prev, p_cur = st.candidates[a_p], init_pos[a_c]
-        pos_cov = position_covariance(model, p_cur, n)
-        prior = two_point_prior(p_prev, p_cur, motion.dt, pos_cov, config.sigma_v, config.sigma_c)
+        if config.detection_sigma is not None:
+            cov_cur = np.broadcast_to(config.detection_sigma**2 * np.eye(2), (a_c.size, 2, 2))
+            cov_prev = cov_cur
+        else:
+            cov_cur = position_covariance(model, p_cur, n)
+            cov_prev = position_covariance(model, p_prev, n) if config.prior == "two-point" else None
+        if config.prior == "two-point":
+            prior = two_point_prior(p_prev, p_cur, motion.dt, cov_prev, cov_cur)
+        else:
+            prior = speed_course_prior(p_prev, p_cur, motion.dt, cov_cur, config.sigma_v, config.sigma_c)
         new_state = filt.init(prior, rng)
         new_mean = filt.estimate(new_state).mean
         Kn = a_c.size
         ids = np.arange(next_id, next_id + Kn, dtype=np.int64)
         next_id += Kn
-        status0 = np.where(2 >= config.confirm_hits, CONFIRMED, TENTATIVE).astype(np.int8)
+        h0 = config.initiation_hits
+        status0 = CONFIRMED if h0 >= config.confirm_hits else TENTATIVE
+        if status0 == CONFIRMED and config.min_speed is not None:
+            status0 = np.where(np.hypot(new_mean[:, 2], new_mean[:, 3]) < config.min_speed, TENTATIVE, CONFIRMED)
         joined = new_state if table.size == 0 else join_items(table.state, new_state, table.size, Kn)
-        table = TrackTable(np.concatenate([table.ids, ids]), np.concatenate([table.status, np.full(Kn, status0)]),
-                           np.concatenate([table.history, np.full(Kn, 0b11, dtype=np.int64)]),
+        table = TrackTable(np.concatenate([table.ids, ids]),
+                           np.concatenate([table.status, np.broadcast_to(status0, (Kn,)).astype(np.int8)]),
+                           np.concatenate([table.history, np.full(Kn, (1 << h0) - 1, dtype=np.int64)]),
                            np.concatenate([table.misses, np.zeros(Kn, dtype=np.int64)]),
-                           np.concatenate([table.age, np.full(Kn, 2, dtype=np.int64)]),
+                           np.concatenate([table.age, np.full(Kn, h0, dtype=np.int64)]),
                            np.concatenate([table.mean, new_mean]), joined)
         hits_out = np.concatenate([hits_out, np.ones(Kn, dtype=bool)])
     used = np.zeros(init_pos.shape[0], dtype=bool)
@@ -605,6 +779,7 @@ class MofN:
     def start(self, ctx: Context, prior: Gaussian | None, first: Scan) -> _MofNCarry:
         if first.z.shape[-1] != 2:
             raise InputError(f"tracker: detections must be Cartesian (x, y), got dimension {first.z.shape[-1]}")
+        _check_filter(ctx.filter, self.config)
         rows: dict[str, list] = {"run": [], "ping": [], "track_id": [], "status": [], "hit": [], "mean": []}
         return _MofNCarry(ctx, [initial_state(ctx.motion.dim) for _ in range(ctx.batch)], [None] * ctx.batch,
                           [generator(self.seed, *self.key, b) for b in range(ctx.batch)], rows, ctx.motion)

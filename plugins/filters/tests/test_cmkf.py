@@ -85,3 +85,31 @@ def test_predict_is_the_linear_model_and_inputs_are_checked():
         CMKF_L.update(g, Scan(np.ones((1, 1, 2)), np.ones((1, 1), bool)), linear_measurement(np.eye(2, 4), np.eye(2)),
                       None)
     assert "range_bearing_input" in CMKF_L.capabilities
+
+
+def test_detection_covariance_is_converted_like_the_model_noise():
+    # a scan carrying each detection's own polar covariance C: R_c = A C A^T.  (1) with C = diag(sigma_r^2,
+    # sigma_b^2) the update equals the model-noise update; (2) with C = J_h (4 I) J_h^T (a position accuracy of 2
+    # mapped into (r, b)) the update equals a Kalman filter on positions with R = 4 I
+    from workbench.tracking.multi import detection_covariance
+    from workbench_filters.kalman import KF
+
+    rng = generator(5, "cmkf-cov")
+    B = 6
+    mean = np.column_stack([rng.uniform(50, 200, (B, 2)), rng.normal(0, 3, (B, 2))])
+    A = rng.normal(size=(B, 4, 4))
+    prior = Gaussian(mean, A @ np.swapaxes(A, 1, 2) + 4 * np.eye(4))
+    model = range_bearing(0.5, np.deg2rad(1.0))
+    z = model.h(mean + rng.normal(0, 2, (B, 4)))
+    present = np.array([True, True, False, True, True, True])
+    plain = CMKF_L.update(prior, Scan(z[:, None, :], present[:, None]), model, None)
+    same = np.broadcast_to(np.diag([0.25, np.deg2rad(1.0) ** 2]), (B, 1, 2, 2))
+    with_cov = CMKF_L.update(prior, Scan(z[:, None, :], present[:, None], cov=same), model, None)
+    assert np.allclose(with_cov.mean, plain.mean) and np.allclose(with_cov.cov, plain.cov)
+    xy = polar_to_cartesian(z)
+    C = detection_covariance(model, xy, 4, 2.0)[:, None]
+    stated = CMKF_L.update(prior, Scan(z[:, None, :], present[:, None], cov=C), model, None)
+    cart = linear_measurement(np.eye(2, 4), 4.0 * np.eye(2))
+    kf = KF.update(prior, Scan(xy[:, None, :], present[:, None]), cart, None)
+    assert np.allclose(stated.mean, kf.mean) and np.allclose(stated.cov, kf.cov)
+    assert "detection_covariance" in CMKF_L.capabilities
