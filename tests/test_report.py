@@ -307,3 +307,14 @@ def test_summary_is_strict_json_and_a_one_run_criterion_has_no_interval(tmp_path
     index = (tmp_path / "index.html").read_text()
     board = index.split("id='paperdemo-scoreboard'")[1].split("id='paperdemo-differs'")[0]
     assert ">inconclusive</span>" in board and "nan" not in board
+
+
+def test_a_recipe_whose_figure_and_table_share_an_id_is_refused():
+    from workbench.specs import FigureSpec, RecipeSpec, Table, TableSpec
+
+    fig = FigureSpec("gospa", "a figure", lambda results: {}, lambda data, fig: None)
+    table = TableSpec("gospa", "a table", lambda results: Table(("a",), ()))
+    with pytest.raises(ValueError, match="'gospa' is already a figure id"):
+        RecipeSpec("x", "t", {"quick": {}}, lambda options: [], figures=(fig,), tables=(table,))
+    RecipeSpec("x", "t", {"quick": {}}, lambda options: [], figures=(fig,),
+               tables=(TableSpec("gospa-table", "a table", table.make),))

@@ -397,3 +397,13 @@ class RecipeSpec:
     default_filters: tuple[str, ...] = ()
     published: Mapping[str, Any] = field(default_factory=dict)
     notes: str = ""
+
+    def __post_init__(self) -> None:
+        # a figure and a table (or two of either) with one id would write the same files of the report
+        seen: dict[str, str] = {}
+        for kind, specs in (("figure", self.figures), ("table", self.tables)):
+            for spec in specs:
+                if spec.id in seen:
+                    raise ValueError(f"recipe {self.paper}: the {kind} id {spec.id!r} is already a {seen[spec.id]} "
+                                     f"id; ids name the report's files and must be unique")
+                seen[spec.id] = kind

@@ -67,7 +67,7 @@ def report():
 def test_xy_figures_show_the_simulated_and_recorded_detections(report):
     recipe, results = report
     figs = {f.id: f.data(results) for f in recipe.figures}
-    assert set(figs) == {f"fig{i}" for i in range(3, 13)}
+    assert set(figs) == {f"fig{i}" for i in range(3, 13)} | {"gospa-per-ping"}
     # Figs 5-6: exactly the detections of run 0 of the first seed block, drawn again here
     scans = paper001.simulate_scans(HOST, 1, "sim", 1)
     v = scans.valid[0]
@@ -205,3 +205,33 @@ def test_notes_and_published_values_are_stated(report):
     # the confirmed tracks of the log are what the counts count
     b = _counts(results, "paper", "before")
     assert b.confirmed.shape == (10, 20) and np.all(b.false <= b.confirmed)
+
+
+def test_gospa_terms_agree_with_the_track_counts(report):
+    recipe, results = report
+    res = results["sim/0"]
+    half = paper001.GOSPA_C ** paper001.GOSPA_P / 2
+    for arm in ("paper", "stated", "previous"):
+        for phase in ("before", "after"):
+            counts = _counts(results, arm, phase)
+            g = {t: res[f"{arm}/{phase}/{t}"] for t in ("gospa", "gospa_loc", "gospa_missed", "gospa_false")}
+            # the decomposition: distance^p = localisation + missed + false
+            np.testing.assert_allclose(g["gospa"] ** paper001.GOSPA_P, g["gospa_loc"] + g["gospa_missed"]
+                                       + g["gospa_false"], rtol=1e-9, atol=1e-9)
+            # one target at every ping: estimates = confirmed tracks = assigned + false, and assigned + missed = 1
+            np.testing.assert_allclose((g["gospa_false"] - g["gospa_missed"]) / half, counts.confirmed - 1)
+            # a target held by a track (within 6 < c) is never counted missed
+            assert np.all(g["gospa_missed"][counts.held] == 0)
+    tables = {t.id: t.make(results) for t in recipe.tables}
+    rows = {(r[0].split(" ")[0], r[1]): r for r in tables["gospa"].rows}
+    post = np.arange(20) >= 5
+    for phase in ("before", "after"):
+        mean = res[f"paper/{phase}/gospa"][:, post].mean(axis=1).mean()
+        assert rows[("paper", phase)][2].startswith(paper001._f(mean)) and rows[("paper", phase)][6] == 10
+    # removal takes false tracks away: GOSPA's false-track part falls (its missed part may rise: the remover also
+    # drops some of the target's detections, so the distance itself need not fall)
+    fig = next(f for f in recipe.figures if f.id == "gospa-per-ping").data(results)
+    assert fig["false_after"][post].mean() < fig["false_before"][post].mean()
+    np.testing.assert_allclose(fig["false_after"] ** 2, res["paper/after/gospa_false"].mean(axis=0))
+    np.testing.assert_allclose(fig["gospa_before"], res["paper/before/gospa"].mean(axis=0))
+    assert np.all(fig["gospa_after"][~post] == fig["gospa_after"][0])  # nothing confirmed in the warm-up
