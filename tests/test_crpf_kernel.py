@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from workbench.filtering import run_filter
-from workbench.kernels.crpf_step import (atan2_poly, crpf_step, crpf_step_numpy, numba_available,
+from workbench.kernels.crpf_step import (atan2_poly, crpf_step, crpf_step_numpy, numba_available, pmf_offset,
                                         propagation_normals)
 from workbench.models import random_walk_velocity, range_bearing
 from workbench.plugins import load_host
@@ -24,17 +24,45 @@ def _inputs(B=7, N=64, seed=0):
     z = np.stack([np.full(B, 110.0), np.full(B, 3.1)], axis=1) + rng.normal(size=(B, 2)) * [1.0, 0.1]
     z[:, 1] = np.angle(np.exp(1j * z[:, 1]))  # bearings near +-pi: the residual must wrap
     x[:, :, 1] *= np.sign(rng.normal(size=(B, N)))  # particles on both sides of the -x axis
-    return x, c, z, int(rng.integers(2 ** 63)), rng.random(B), np.sqrt(0.1) * np.array([0.5, 0.5, 1.0, 1.0])
+    s2 = rng.exponential(0.1, (B, N))  # every particle its own propagation variance
+    t = rng.integers(1, 50, B).astype(float)  # every run its own step index
+    return x, c, s2, t, z, int(rng.integers(2 ** 63)), rng.random(B), np.array([0.5, 0.5, 1.0, 1.0])
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("q, beta, arc", [(2.0, 2.0, False), (1.5, 3.0, False), (2.0, 2.0, True), (3.0, 1.0, True)])
-def test_kernel_matches_the_numpy_twin(backend, q, beta, arc):
-    x, c, z, key, u0, std = _inputs()
-    ref = crpf_step_numpy(x, c, F, z, key, u0, std, 0.9, beta, 0.01, q, arc, sensor=(5.0, -3.0))
-    got = crpf_step(x, c, F, z, key, u0, std, 0.9, beta, 0.01, q, arc, sensor=(5.0, -3.0), backend=backend)
+@pytest.mark.parametrize("q, beta, arc, adaptive, relative", [
+    (2.0, 2.0, False, False, False),  # the previous CRPF
+    (1.5, 3.0, False, True, False),
+    (2.0, 2.0, True, True, True),  # the paper CRPF
+    (3.0, 1.0, True, False, True),
+])
+def test_kernel_matches_the_numpy_twin(backend, q, beta, arc, adaptive, relative):
+    x, c, s2, t, z, key, u0, shape = _inputs()
+    ref = crpf_step_numpy(x, c, s2, t, F, z, key, u0, shape, 0.9, beta, 0.3, q, arc, (5.0, -3.0), adaptive, relative)
+    got = crpf_step(x, c, s2, t, F, z, key, u0, shape, 0.9, beta, 0.3, q, arc, (5.0, -3.0), adaptive, relative,
+                    backend=backend)
     for a, b in zip(ref, got):
         assert np.allclose(a, b, rtol=1e-11, atol=1e-11)
+
+
+@pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
+def test_numba_serial_and_parallel_paths_agree():
+    # below PARALLEL_FROM runs the kernel runs on one thread; the runs are independent, so a batch split in two
+    # gives the same numbers as the whole batch (run b's normals depend on the key and b only: pass the rows of
+    # the second half with their own row index by running the whole batch on each path)
+    from workbench.kernels import crpf_numba
+
+    x, c, s2, t, z, key, u0, shape = _inputs(B=40, N=30, seed=4)
+    args = (x, c, s2, t, F, z, key, u0, shape, 0.95, 2.0, 0.3, 2.0, True, (0.0, 0.0), True, True)
+    whole = crpf_step(*args, backend="numba")
+    saved = crpf_numba.PARALLEL_FROM
+    try:
+        crpf_numba.PARALLEL_FROM = 10 ** 9  # every batch serial
+        serial = crpf_step(*args, backend="numba")
+    finally:
+        crpf_numba.PARALLEL_FROM = saved
+    for a, b in zip(whole, serial):
+        assert np.array_equal(a, b)
 
 
 def test_polynomial_atan2_matches_the_library_to_an_ulp_or_two():
@@ -59,43 +87,82 @@ def test_kernel_atan2_is_the_numpy_twin_of_the_polynomial():
     x = np.zeros((B, 1, 4))
     x[:, 0, :2] = rng.normal(size=(B, 2)) * np.exp(rng.normal(size=(B, 1)) * 4)
     z = np.zeros((B, 2))
-    _, cn, _, _ = crpf_step(x, np.zeros((B, 1)), np.eye(4), z, 0, np.zeros(B), np.zeros(4), 1.0, 2.0, 0.01,
-                            backend="numba")
+    _, cn, _, _, _ = crpf_step(x, np.zeros((B, 1)), np.zeros((B, 1)), 1.0, np.eye(4), z, 0, np.zeros(B), np.ones(4),
+                               1.0, 2.0, 0.01, adaptive=False, relative=False, backend="numba")
     theta = atan2_poly(x[:, 0, 1], x[:, 0, 0])
     assert np.allclose(cn[:, 0], np.hypot(x[:, 0, 0], x[:, 0, 1]) ** 2 + theta ** 2, rtol=1e-14, atol=0)
 
 
 def test_numpy_twin_follows_the_formulas():
-    # N = 1: selection is trivial; x' = F x + std e, C' = lam C + ||z - h(x')||^q with a wrapped bearing
-    x, c, z, key, u0, std = _inputs(B=5, N=1)
-    xn, cn, mean, cov = crpf_step_numpy(x, c, F, z, key, u0, std, 0.8, 2.0, 0.01, 3.0)
-    assert np.allclose(xn, x @ F.T + std * propagation_normals(key, 5, 1, 4))
+    # N = 1: selection is trivial; x' = F x + shape sigma e, C' = lam C + ||z - h(x')||^q with a wrapped bearing,
+    # sigma'^2 = ((t - 1) / t) sigma^2 + ||(x' - F x) / shape||^2 / (t n), written out here from Table 6
+    x, c, s2, t, z, key, u0, shape = _inputs(B=5, N=1)
+    xn, cn, s2n, mean, cov = crpf_step_numpy(x, c, s2, t, F, z, key, u0, shape, 0.8, 2.0, 0.01, 3.0)
+    e = propagation_normals(key, 5, 1, 4)
+    assert np.allclose(xn, x @ F.T + shape * np.sqrt(s2)[..., None] * e)
+    assert np.allclose(s2n[:, 0], (t - 1) / t * s2[:, 0] + s2[:, 0] * np.sum(e[:, 0] ** 2, axis=1) / (4 * t))
     h = range_bearing(1.0, 1.0).h(xn[:, 0])
     dt = np.angle(np.exp(1j * (z[:, 1] - h[:, 1])))
     assert np.allclose(cn[:, 0], 0.8 * c[:, 0] + ((z[:, 0] - h[:, 0]) ** 2 + dt ** 2) ** 1.5)
     assert np.allclose(mean, xn[:, 0]) and np.allclose(cov, 0.0)
+    # the fixed variance keeps the parent's
+    assert np.array_equal(crpf_step_numpy(x, c, s2, t, F, z, key, u0, shape, 0.8, 2.0, 0.01, adaptive=False)[2], s2)
+
+
+def test_adaptive_variance_is_the_running_mean_of_the_lineage_moves():
+    # Table 6's recursion from sigma_0^2 over t = 1..T with one particle is the mean of the T squared moves / n:
+    # sigma_T^2 = (1/T) sum_t ||x_t - F x_{t-1}||^2 / n, and each move has E||.||^2 = n sigma_{t-1}^2
+    x, c, s2, _, z, key, u0, shape = _inputs(B=3, N=1)
+    shape = np.ones(4)
+    moves = []
+    for t in range(1, 9):
+        xn, c, s2, _, _ = crpf_step_numpy(x, c, s2, float(t), F, z, key + t, u0, shape, 0.9, 2.0, 0.01)
+        moves.append(np.sum((xn[:, 0] - x[:, 0] @ F.T) ** 2, axis=1) / 4)
+        x = xn
+    assert np.allclose(s2[:, 0], np.mean(moves, axis=0), rtol=1e-12)
+
+
+def test_relative_offset_makes_the_pmf_scale_free():
+    # delta_R = delta * (mean R - min R) over the finite R: scaling every cost by k scales the offset by k, so the
+    # PMF (C - min C + delta_R)^-beta, normalised, does not change; with an absolute delta it does
+    _, c, *_ = _inputs(B=6, N=40, seed=2)
+    assert np.allclose(pmf_offset(c, 0.3, True)[:, 0], 0.3 * (c.mean(axis=1) - c.min(axis=1)))
+    assert np.allclose(pmf_offset(c, 0.3, False), 0.3)
+    offsets = pmf_offset(np.array([[1.0, 1.0, 1.0], [2.0, np.inf, 4.0], [np.nan, 1.0, 2.0]]), 0.5, True)[:, 0]
+    assert np.allclose(offsets, [0.5, 0.5, 0.25])  # no spread: delta itself; the mean over the finite costs only
+
+    def pmf(costs, relative):
+        w = (costs - costs.min(axis=1, keepdims=True) + pmf_offset(costs, 0.3, relative)) ** -2.0
+        return w / w.sum(axis=1, keepdims=True)
+
+    assert np.allclose(pmf(1e4 * c, True), pmf(c, True), rtol=1e-10)
+    assert not np.allclose(pmf(1e4 * c, False), pmf(c, False), rtol=1e-3)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_selection_counts_and_degenerate_rows(backend):
-    x, c, z, key, u0, std = _inputs(B=4, N=50, seed=3)
+@pytest.mark.parametrize("relative", [False, True])
+def test_selection_counts_and_degenerate_rows(backend, relative):
+    x, c, s2, t, z, key, u0, shape = _inputs(B=4, N=50, seed=3)
     c[1, ::2] = np.inf  # infinite cost: never selected
     c[2] = np.inf  # no finite cost: uniform selection
     c[3, :] = 0.0
     c[3, 7] = -1e6  # one dominant particle: every child descends from it
-    std0 = np.zeros(4)
-    xn, cn, _, _ = crpf_step(x, c, F, z, key, u0, std0, 1.0, 2.0, 0.01, backend=backend)
+    s2 = np.zeros_like(s2)  # no propagation noise: each child sits on its parent's prediction
+    xn, cn, s2n, _, _ = crpf_step(x, c, s2, t, F, z, key, u0, shape, 1.0, 2.0, 0.01, relative=relative,
+                                  backend=backend)
     xf = x @ F.T
     parent = np.array([[np.flatnonzero(np.all(xf[b] == xn[b, j], axis=1))[0] for j in range(50)] for b in range(4)])
     assert np.all(parent[1] % 2 == 1)
     assert np.array_equal(np.sort(parent[2]), np.arange(50))  # uniform systematic: each once
     assert np.all(parent[3] == 7)
-    # row 0: each particle drawn floor(N pi) or ceil(N pi) times with pi ~ (R - min R + delta)^-beta
-    ref = crpf_step_numpy(x, c, F, z, key, u0, std0, 1.0, 2.0, 0.01)
+    assert np.all(s2n == 0.0)
+    # row 0: each particle drawn floor(N pi) or ceil(N pi) times with pi ~ (R - min R + delta_R)^-beta
+    ref = crpf_step_numpy(x, c, s2, t, F, z, key, u0, shape, 1.0, 2.0, 0.01, relative=relative)
     assert np.allclose(ref[0], xn, rtol=1e-12)
     risk = c[0] + ((z[0, 0] - np.hypot(xf[0, :, 0], xf[0, :, 1])) ** 2
                    + np.angle(np.exp(1j * (z[0, 1] - np.arctan2(xf[0, :, 1], xf[0, :, 0])))) ** 2)
-    w = (risk - risk.min() + 0.01) ** -2.0
+    delta = 0.01 * (risk.mean() - risk.min()) if relative else 0.01
+    w = (risk - risk.min() + delta) ** -2.0
     w /= w.sum()
     k = np.bincount(parent[0], minlength=50)
     assert np.all(k >= np.floor(50 * w) - 1e-9) and np.all(k <= np.ceil(50 * w) + 1e-9)
@@ -110,7 +177,8 @@ def test_plugin_gives_the_same_run_with_and_without_the_kernel():
     scans.valid[3, 5] = False  # a missed detection takes the array path for that step
     prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 12)
     motion, model = random_walk_velocity(2, 1.0, 0.1), range_bearing(1.0, 0.1)
-    for kw in (dict(scale=(0.5, 0.5, 1.0, 1.0)), dict(cost="arc-length", kappa=10.0)):
+    for kw in (dict(), dict(variance="fixed", scale=(0.5, 0.5, 1.0, 1.0), cost="norm", delta_mode="absolute",
+                            delta=0.01), dict(sigma0=0.3, delta=1.0, scale=(0.5, 0.5, 1.0, 1.0))):
         runs = {b: run_filter(make_crpf(60, backend=b, **kw), prior, motion, model, scans, generator(1, "f"))
                 for b in ["numpy"] + BACKENDS}
         for b in BACKENDS:

@@ -1,30 +1,42 @@
-"""Cost-reference particle filter (CRPF; Míguez, Bugallo & Djurić 2004), batch-first over ``(B, N)``.
+"""Cost-reference particle filter (CRPF; Míguez, Bugallo & Djurić 2004; Table 6 of paper 003), batch-first.
 
 The CRPF needs no noise statistics: it never reads ``Q`` or ``R``.  It uses the motion model's ``F``
 (the noise-free prediction ``f``), the sensor's ``h`` and the sensor's angle-aware ``residual``.
-Particles carry a cost instead of a likelihood weight.  For each measurement ``y_t``::
+Particles carry a cost instead of a likelihood weight, and (Table 6) a propagation variance of their own.
+For each measurement ``y_t`` (``t`` counts the propagations, ``t >= 1``)::
 
-    dC(x | y)  = || y - h(x) ||^q                         incremental cost (eq 5), bearing wrapped
-    R_t^(i)    = lam C_{t-1}^(i) + dC(f(x_{t-1}^(i)) | y_t)  risk (eq 6), noise-free prediction
-    pi^(i)    ~  (R_t^(i) - min_k R_t^(k) + delta)^-beta  selection PMF (eq 8), in the log domain
-    k_i        ~  systematic(pi)                          select N parents, carrying x and C
-    x_t^(i)    ~  N(f(x_{t-1}^(k_i)), sigma^2 diag(s^2))  propagation, sigma^2 = kappa / N^(2/n)
-    C_t^(i)    = lam C_{t-1}^(k_i) + dC(x_t^(i) | y_t)     cost update (eq 4)
+    dC(x | y)  = || y - h(x) ||^q                              incremental cost (eq 5), bearing wrapped;
+                 arc-length: ((dr)^2 + (r_meas dtheta)^2)^(q/2)
+    R_t^(i)    = lam C_{t-1}^(i) + dC(f(x_{t-1}^(i)) | y_t)      risk (eq 6), noise-free prediction
+    delta_R    = delta, or delta * (mean_i R_t^(i) - min_k R_t^(k))   relative offset
+    pi^(i)    ~  (R_t^(i) - min_k R_t^(k) + delta_R)^-beta       selection PMF (eq 8), in the log domain
+    k_i        ~  systematic(pi)                               select N parents, carrying x, C and sigma^2
+    x_t^(i)    ~  N(f(x_{t-1}^(k_i)), sigma_{t-1}^{2,(k_i)} diag(s^2))   propagation
+    sigma_t^{2,(i)} = ((t-1)/t) sigma_{t-1}^{2,(k_i)} + ||(x_t^(i) - f(x_{t-1}^(k_i))) / s||^2 / (t dim)
+                                                               adaptive variance (Table 6; s = 1 there);
+                 fixed variance: sigma^2 = kappa / N^(2/dim) for every particle and step
+    C_t^(i)    = lam C_{t-1}^(k_i) + dC(x_t^(i) | y_t)          cost update (eq 4)
 
-and the estimate is ``x_t = sum_i pi_t^(i) x_t^(i)`` with ``pi_t^(i) ~ (C_t^(i) - min C_t + delta)^-beta``.
+and the estimate is ``x_t = sum_i pi_t^(i) x_t^(i)`` with ``pi_t^(i) ~ (C_t^(i) - min C_t + delta_C)^-beta``
+(``delta_C`` as ``delta_R``, from the costs).  Every particle starts with ``sigma_0^2 = sigma0^2`` (adaptive).
 
 Mapping onto the workbench's predict/update split: the CRPF's selection needs ``y_t``, so ``predict``
 only records the motion model (the state becomes *pending*) and ``update`` runs risk, selection,
-propagation and cost update in one go.  The estimate of a pending state is the exact weighted moment
-of the noise-free prediction plus the propagation variance (``F m``, ``F P F^T + sigma^2 diag(s^2)``).
-A pending item that receives no measurement stays pending; the next ``predict`` moves it blindly
-(``x <- f(x) + noise``, ``C <- lam C``) before recording the new motion.  The first ``update`` after
-``init`` (nothing pending) only adds the incremental cost of the initial particles.
+propagation and cost update in one go.  The estimate of a pending state is the weighted moment of the
+noise-free prediction plus the particles' mean propagation variance (``F m``, ``F P F^T + mean_i sigma_i^2
+diag(s^2)``; exact for a fixed variance).  A pending item that receives no measurement stays pending; the next
+``predict`` moves it blindly (``x <- f(x) + noise``, the variance updated, ``C <- lam C``) before recording the
+new motion.  The first ``update`` after ``init`` (nothing pending) only adds the incremental cost of the initial
+particles.
 
 Initial particles are uniform in a box around the prior mean with half-widths ``box * sqrt(diag(P0))``
 (for the paper-003 prior ``P0 = diag(10^2, 10^2, 2^2, 2^2)``: +-10 m and +-2 m/s, as the brief says).
 
-Shapes: particles ``(B, N, n)``, costs ``(B, N)``.
+For a range-bearing model (declared frame and sensor position) a step in which every item moves and has a
+measurement runs the fused kernel :func:`workbench.kernels.crpf_step.crpf_step` (Numba on the CPU, else
+Taichi); the array code below is its reference in the plugin and gives the same particles up to round-off.
+
+Shapes: particles ``(B, N, n)``, costs and variances ``(B, N)``, step counts ``(B,)``.
 """
 
 from __future__ import annotations
@@ -37,7 +49,7 @@ import numpy as np
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.kernels.counter_normals import draw_key
-from workbench.kernels.crpf_step import crpf_step, propagation_normals
+from workbench.kernels.crpf_step import crpf_step, pmf_offset, propagation_normals
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
 from workbench.resampling import normalise_log_weights, systematic_resample
@@ -45,20 +57,36 @@ from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
 
 COSTS = ("norm", "arc-length")
+VARIANCES = ("adaptive", "fixed")
+DELTA_MODES = ("relative", "absolute")
 #: "auto": the fused kernel (:mod:`workbench.kernels.crpf_step`, Numba on the CPU, else Taichi) for a
 #: range-bearing model; "numpy": always the array code below; "numba"/"taichi": that kernel backend.
 BACKENDS = ("auto", "numpy", "numba", "taichi")
+
+#: The paper filters' setting, chosen once on tuning runs by the rule of docs/paper003.md ("The CRPF setting"):
+#: the initial propagation standard deviation sigma0 (m and m/s, isotropic) and the relative offset delta.  The rule
+#: picked sigma0 = 1 and delta = 0.1 among sigma0 in {0.1, 0.3, 1, 3} x delta in {0.1, 0.3, 1} (the report's
+#: "tuning" table recomputes the search and marks its choice beside the setting in use).
+PAPER_SIGMA0 = 1.0
+PAPER_DELTA = 0.1
 
 PARAMETERS = (
     Param("particles", 100, "particles per run", "int", minimum=1),
     Param("lam", 0.95, "forgetting factor of the cost", above=0.0, maximum=1.0),
     Param("q", 2.0, "exponent of the incremental cost ||y - h(x)||^q", minimum=1.0),
     Param("beta", 2.0, "exponent of the selection PMF (R - min R + delta)^-beta", above=0.0),
-    Param("delta", 0.01, "offset of the selection PMF", above=0.0),
-    Param("kappa", 1.0, "propagation variance sigma^2 = kappa / N^(2/n)", above=0.0),
+    Param("delta", PAPER_DELTA, "offset of the selection PMF: a multiple of the mean gap of the risks above their "
+                                "minimum (delta_mode 'relative') or a cost (delta_mode 'absolute')", above=0.0),
+    Param("delta_mode", "relative", "how delta is read: relative to the spread of the risks, or absolute", "str",
+          choices=DELTA_MODES),
+    Param("variance", "adaptive", "propagation variance: Table 6's per-particle running estimate, or fixed "
+                                  "sigma^2 = kappa / N^(2/n)", "str", choices=VARIANCES),
+    Param("sigma0", PAPER_SIGMA0, "initial propagation standard deviation of every particle (adaptive variance)",
+          above=0.0),
+    Param("kappa", 1.0, "fixed propagation variance sigma^2 = kappa / N^(2/n) (variance 'fixed')", above=0.0),
     Param("scale", None, "per-component scale of the propagation noise (length n; none: isotropic)", "vector?",
           minimum=0.0),
-    Param("cost", "norm", "incremental cost: the plain norm or the arc-length residual", "str", choices=COSTS),
+    Param("cost", "arc-length", "incremental cost: the plain norm or the arc-length residual", "str", choices=COSTS),
     Param("box", 1.0, "half-width of the uniform initial box, in prior standard deviations", above=0.0),
     Param("backend", "auto", "kernel backend of the fused range-bearing step (auto: the policy's choice)", "str",
           choices=BACKENDS),
@@ -67,18 +95,22 @@ PARAMETERS = (
 
 @dataclass(frozen=True)
 class CRPFParams:
-    """The CRPF's tuning: ``particles`` N, forgetting ``lam`` (0 < lam <= 1), cost exponent ``q >= 1``,
-    PMF exponent ``beta > 0`` and offset ``delta > 0``, jitter ``kappa > 0`` with optional per-component
-    ``scale`` (length n), the incremental ``cost`` form and the initial ``box`` (multiples of sqrt(diag P0))."""
+    """The CRPF's setting: ``particles`` N, forgetting ``lam`` (0 < lam <= 1), cost exponent ``q >= 1``,
+    PMF exponent ``beta > 0`` and offset ``delta > 0`` (relative or absolute), the propagation variance
+    (adaptive from ``sigma0``, or fixed ``kappa / N^(2/n)``) with optional per-component ``scale`` (length n),
+    the incremental ``cost`` form and the initial ``box`` (multiples of sqrt(diag P0))."""
 
     particles: int = 100
     lam: float = 0.95
     q: float = 2.0
     beta: float = 2.0
-    delta: float = 0.01
+    delta: float = PAPER_DELTA
+    delta_mode: str = "relative"
+    variance: str = "adaptive"
+    sigma0: float = PAPER_SIGMA0
     kappa: float = 1.0
     scale: tuple[float, ...] | None = None
-    cost: str = "norm"
+    cost: str = "arc-length"
     box: float = 1.0
     backend: str = "auto"
 
@@ -89,29 +121,49 @@ class CRPFParams:
             (self.q >= 1.0, f"q must be >= 1, got {self.q}"),
             (self.beta > 0.0, f"beta must be > 0, got {self.beta}"),
             (self.delta > 0.0, f"delta must be > 0, got {self.delta}"),
+            (self.sigma0 > 0.0, f"sigma0 must be > 0, got {self.sigma0}"),
             (self.kappa > 0.0, f"kappa must be > 0, got {self.kappa}"),
             (self.box > 0.0, f"box must be > 0, got {self.box}"),
             (self.cost in COSTS, f"cost must be one of {COSTS}, got {self.cost!r}"),
+            (self.variance in VARIANCES, f"variance must be one of {VARIANCES}, got {self.variance!r}"),
+            (self.delta_mode in DELTA_MODES, f"delta_mode must be one of {DELTA_MODES}, got {self.delta_mode!r}"),
             (self.backend in BACKENDS, f"backend must be one of {BACKENDS}, got {self.backend!r}"),
             (self.scale is None or all(s >= 0 for s in self.scale), f"scale entries must be >= 0, got {self.scale}"),
+            (self.scale is None or self.variance == "fixed" or all(s > 0 for s in self.scale),
+             f"the adaptive variance needs every scale entry > 0 (it divides by them), got {self.scale}"),
         ]
         for ok, message in checks:
             if not ok:
                 raise InputError(f"crpf: {message}")
 
-    def jitter_std(self, dim: int) -> np.ndarray:
-        """Per-component propagation standard deviation, ``(n,)``: ``sqrt(kappa / N^(2/n)) * scale``."""
+    @property
+    def adaptive(self) -> bool:
+        return self.variance == "adaptive"
+
+    @property
+    def relative(self) -> bool:
+        return self.delta_mode == "relative"
+
+    def shape(self, dim: int) -> np.ndarray:
+        """Per-component scale ``s`` of the propagation noise, ``(n,)`` (ones: isotropic)."""
         if self.scale is not None and len(self.scale) != dim:
             raise InputError(f"crpf: scale has {len(self.scale)} entries but the state has dimension {dim}")
-        # sigma_t^2 = kappa / N^(2 / dim(x))
-        sigma = np.sqrt(self.kappa / self.particles ** (2.0 / dim))
-        scale = np.ones(dim) if self.scale is None else np.asarray(self.scale, dtype=float)
-        return sigma * scale
+        return np.ones(dim) if self.scale is None else np.asarray(self.scale, dtype=float)
+
+    def initial_variance(self, dim: int) -> float:
+        """``sigma_0^2``: ``sigma0^2`` (adaptive) or the fixed ``kappa / N^(2 / dim)``."""
+        # fixed: sigma^2 = kappa / N^(2 / dim(x))
+        return self.sigma0 ** 2 if self.adaptive else self.kappa / self.particles ** (2.0 / dim)
+
+    def jitter_std(self, dim: int) -> np.ndarray:
+        """Per-component propagation standard deviation at the start, ``(n,)``: ``sigma_0 * scale``."""
+        return np.sqrt(self.initial_variance(dim)) * self.shape(dim)
 
 
 @dataclass(frozen=True)
 class CRPFState:
-    """Particles and costs; ``pending (B,)`` marks items predicted with ``F`` but not yet updated.
+    """Particles, costs and propagation variances; ``pending (B,)`` marks items predicted with ``F`` but not yet
+    updated; ``steps (B,)`` counts each item's propagations (the ``t`` of the adaptive variance).
 
     ``belief`` caches the estimate (weighted moments of the particles, or of their prediction while
     pending), so ``estimate`` is free.  ``selections`` counts resampling (selection) events.
@@ -119,6 +171,8 @@ class CRPFState:
 
     particles: np.ndarray  # (B, N, n)
     costs: np.ndarray  # (B, N)
+    variances: np.ndarray  # (B, N)
+    steps: np.ndarray  # (B,) int
     belief: Gaussian
     pending: np.ndarray  # (B,) bool
     F: np.ndarray | None = None  # (n, n) motion of the pending prediction
@@ -126,18 +180,20 @@ class CRPFState:
     blind_moves: int = 0
 
 
-def log_pmf(costs: np.ndarray, beta: float, delta: float) -> np.ndarray:
-    """Unnormalised log selection PMF ``-beta log(C - min C + delta)`` of costs ``(B, N)``.
+def log_pmf(costs: np.ndarray, beta: float, delta: float, relative: bool = False) -> np.ndarray:
+    """Unnormalised log PMF ``-beta log(C - min C + delta_C)`` of costs ``(B, N)``.
 
-    Finite costs of any size give finite log-weights; an infinite cost gets ``-inf`` (weight zero),
-    and a row whose every cost is infinite (or NaN) becomes uniform instead of NaN.
+    ``delta_C`` is ``delta`` or, ``relative``, ``delta`` times the mean gap of the row's finite costs above their
+    minimum (:func:`workbench.kernels.crpf_step.pmf_offset`).  Finite costs of any size give finite
+    log-weights; an infinite cost gets ``-inf`` (weight zero), and a row whose every cost is infinite (or NaN)
+    becomes uniform instead of NaN.
     """
     cmin = np.min(costs, axis=1, keepdims=True)
     ok = np.isfinite(cmin)
-    # pi ~ (C - min C + delta)^-beta, taken in the log domain
+    # pi ~ (C - min C + delta_C)^-beta, taken in the log domain
     gap = np.where(ok, costs - np.where(ok, cmin, 0.0), 0.0)
-    with np.errstate(invalid="ignore"):
-        out = -beta * np.log(gap + delta)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = -beta * np.log(gap + pmf_offset(costs, delta, relative))
     return np.where(np.isnan(out), -np.inf, out)
 
 
@@ -163,43 +219,67 @@ def incremental_cost(z: np.ndarray, points: np.ndarray, model: MeasurementModel,
 
 
 def _moments(x: np.ndarray, costs: np.ndarray, params: CRPFParams) -> Gaussian:
-    """Weighted mean and covariance with the estimation PMF ``pi ~ (C - min C + delta)^-beta``."""
-    return Particles(x, normalise_log_weights(log_pmf(costs, params.beta, params.delta))).to_gaussian()
+    """Weighted mean and covariance with the estimation PMF ``pi ~ (C - min C + delta_C)^-beta``."""
+    return Particles(x, normalise_log_weights(log_pmf(costs, params.beta, params.delta, params.relative))).to_gaussian()
+
+
+def _propagate(parents: np.ndarray, s2: np.ndarray, steps: np.ndarray, e: np.ndarray,
+               params: CRPFParams) -> tuple[np.ndarray, np.ndarray]:
+    """``x = f_parent + s sigma_parent e`` and the parent's variance updated (Table 6) for step ``t = steps``.
+
+    Shapes: ``parents (B, N, n)`` (the noise-free predictions of the parents), ``s2 (B, N)``, ``steps (B,)``,
+    ``e (B, N, n)`` -> ``x (B, N, n)``, ``s2' (B, N)``.
+    """
+    n = parents.shape[-1]
+    dev = e
+    dev *= np.sqrt(s2)[..., None]  # in place: e is this step's own array
+    x = dev * params.shape(n)
+    x += parents
+    if not params.adaptive:
+        return x, s2
+    t = steps.astype(float)[:, None]
+    # sigma_t^2 = ((t - 1) / t) sigma_{t-1}^2 + ||(x_t - f(x_{t-1})) / s||^2 / (t dim)
+    sq = dev[..., 0] * dev[..., 0]
+    for j in range(1, n):
+        sq += dev[..., j] * dev[..., j]
+    return x, ((t - 1.0) / t) * s2 + sq / (t * n)
 
 
 def init(prior: Gaussian, rng: np.random.Generator, params: CRPFParams) -> CRPFState:
-    """Uniform particles in ``mean +- box * sqrt(diag(cov))``, zero costs."""
+    """Uniform particles in ``mean +- box * sqrt(diag(cov))``, zero costs, every variance ``sigma_0^2``."""
     B, n = prior.mean.shape
     half = params.box * np.sqrt(np.diagonal(prior.cov, axis1=1, axis2=2))  # (B, n)
     u = rng.uniform(-1.0, 1.0, size=(B, params.particles, n))
     x = prior.mean[:, None, :] + half[:, None, :] * u
     costs = np.zeros((B, params.particles))
-    return CRPFState(x, costs, _moments(x, costs, params), np.zeros(B, dtype=bool))
+    s2 = np.full((B, params.particles), params.initial_variance(n))
+    return CRPFState(x, costs, s2, np.zeros(B, dtype=np.int64), _moments(x, costs, params), np.zeros(B, dtype=bool))
 
 
 def _blind_move(state: CRPFState, rng: np.random.Generator, params: CRPFParams) -> CRPFState:
     """Propagate the pending items that never got a measurement: ``x <- f(x) + noise``, ``C <- lam C``."""
     rows = np.flatnonzero(state.pending)
-    x = state.particles.copy()
-    c = state.costs.copy()
+    x, c, s2, steps = state.particles.copy(), state.costs.copy(), state.variances.copy(), state.steps.copy()
     sub = x[rows]
-    std = params.jitter_std(sub.shape[-1])
-    x[rows] = sub @ state.F.T + rng.standard_normal(sub.shape) * std
+    steps[rows] += 1
+    x[rows], s2[rows] = _propagate(sub @ state.F.T, s2[rows], steps[rows], rng.standard_normal(sub.shape), params)
     c[rows] = params.lam * c[rows]
-    return CRPFState(x, c, _moments(x, c, params), np.zeros_like(state.pending), None, state.selections,
+    return CRPFState(x, c, s2, steps, _moments(x, c, params), np.zeros_like(state.pending), None, state.selections,
                      state.blind_moves + rows.size)
 
 
 def predict(state: CRPFState, motion: MotionModel, rng: np.random.Generator, params: CRPFParams) -> CRPFState:
-    """Record ``F``; the predicted belief is ``N(F m, F P F^T + sigma^2 diag(s^2))``."""
+    """Record ``F``; the predicted belief is ``N(F m, F P F^T + mean_i sigma_i^2 diag(s^2))``."""
     if state.pending.any():
         state = _blind_move(state, rng, params)
     F = np.asarray(motion.F, dtype=float)
-    std = params.jitter_std(F.shape[0])
+    n = F.shape[0]
+    spread = np.mean(state.variances, axis=1)  # (B,): the particles' mean propagation variance
     mean = state.belief.mean @ F.T
-    cov = F @ state.belief.cov @ F.T + np.diag(std * std)
-    return CRPFState(state.particles, state.costs, Gaussian(mean, cov), np.ones(state.pending.shape, dtype=bool),
-                     F, state.selections, state.blind_moves)
+    cov = F @ state.belief.cov @ F.T + spread[:, None, None] * np.diag(params.shape(n) ** 2)
+    # F P F^T + a non-negative diagonal is symmetric positive semi-definite: no eigenvalue test needed
+    return CRPFState(state.particles, state.costs, state.variances, state.steps, Gaussian.trusted(mean, cov),
+                     np.ones(state.pending.shape, dtype=bool), F, state.selections, state.blind_moves)
 
 
 def _fused(model: MeasurementModel, params: CRPFParams) -> bool:
@@ -217,48 +297,52 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
     if not np.all(np.isfinite(z[present])):
         item = int(np.flatnonzero(present & ~np.all(np.isfinite(z), axis=1))[0])
         raise InputError(f"crpf: the measurement of batch item {item} is not finite (NaN or inf)")
-    x, c = state.particles, state.costs
+    x, c, s2 = state.particles, state.costs, state.variances
     B, N, n = x.shape
     lam = params.lam
     moving = present & state.pending
+    steps = state.steps + moving  # this propagation's t for the moving items
     if moving.all() and _fused(model, params):
         # the same draws in the same order as below: selection offsets, then the key of the propagation normals
         u0 = rng.random((B, 1))
         key = draw_key(rng)
-        new_x, costs, mean, cov = crpf_step(x, c, state.F, z, key, u0, params.jitter_std(n), lam, params.beta,
-                                            params.delta, params.q, params.cost == "arc-length",
-                                            model.sensor_position, backend=params.backend)
-        return CRPFState(new_x, costs, Gaussian(mean, cov), np.zeros(B, dtype=bool), None,
+        new_x, costs, new_s2, mean, cov = crpf_step(
+            x, c, s2, steps, state.F, z, key, u0, params.shape(n), lam, params.beta, params.delta, params.q,
+            params.cost == "arc-length", model.sensor_position, params.adaptive, params.relative,
+            backend=params.backend)
+        # the kernel's weighted moments are symmetric positive semi-definite by construction
+        return CRPFState(new_x, costs, new_s2, steps, Gaussian.trusted(mean, cov), np.zeros(B, dtype=bool), None,
                          state.selections + B, state.blind_moves)
     if moving.any():
         xf = x @ state.F.T  # noise-free prediction f(x_{t-1})
         # R_t = lam C_{t-1} + dC(f(x_{t-1}) | y_t)
         risk = lam * c + incremental_cost(z, xf, model, params)
-        idx = systematic_resample(log_pmf(risk, params.beta, params.delta), rng)  # (B, N)
+        idx = systematic_resample(log_pmf(risk, params.beta, params.delta, params.relative), rng)  # (B, N)
         flat = (idx + (np.arange(B) * N)[:, None]).ravel()
         parents = xf.reshape(B * N, n).take(flat, axis=0).reshape(B, N, n)
         c_sel = c.ravel().take(flat).reshape(B, N)
-        # x_t ~ N(f(x_{t-1}^(k)), sigma^2 diag(s^2))
-        x_new = propagation_normals(draw_key(rng), B, N, n)
-        x_new *= params.jitter_std(n)
-        x_new += parents  # in place: fresh (B, N, n) temporaries are costly
+        # x_t ~ N(f(x_{t-1}^(k)), sigma_{t-1}^{2,(k)} diag(s^2)), and sigma_t^2 (Table 6)
+        x_new, s2_new = _propagate(parents, s2.ravel().take(flat).reshape(B, N), np.maximum(steps, 1),
+                                   propagation_normals(draw_key(rng), B, N, n), params)
         keep_x = x_new if moving.all() else np.where(moving[:, None, None], x_new, x)
         keep_c = c_sel if moving.all() else np.where(moving[:, None], c_sel, c)
+        keep_s2 = s2_new if moving.all() else np.where(moving[:, None], s2_new, s2)
     else:
-        keep_x, keep_c = x, c
+        keep_x, keep_c, keep_s2 = x, c, s2
     # C_t = lam C_{t-1} + dC(x_t | y_t); the very first update (nothing pending) starts from C_0
     decay = lam if moving.all() else np.where(moving, lam, 1.0)[:, None]
     costs = decay * keep_c + incremental_cost(z, keep_x, model, params)
     if present.all():
-        new_x, belief = keep_x, _moments(keep_x, costs, params)
+        new_x, new_s2, belief = keep_x, keep_s2, _moments(keep_x, costs, params)
     else:
         costs = keep_where(present, costs, c)
         new_x = keep_where(present, keep_x, x)
+        new_s2 = keep_where(present, keep_s2, s2)
         belief = _moments(new_x, costs, params)
-        belief = Gaussian(keep_where(present, belief.mean, state.belief.mean),
-                          keep_where(present, belief.cov, state.belief.cov))
+        belief = Gaussian.trusted(keep_where(present, belief.mean, state.belief.mean),
+                                  keep_where(present, belief.cov, state.belief.cov))
     pending = state.pending & ~present
-    return CRPFState(new_x, costs, belief, pending, state.F if pending.any() else None,
+    return CRPFState(new_x, costs, new_s2, steps, belief, pending, state.F if pending.any() else None,
                      state.selections + int(moving.sum()), state.blind_moves)
 
 
@@ -270,16 +354,21 @@ def diagnostics(state: CRPFState) -> dict:
     return {"selections": state.selections, "blind_moves": state.blind_moves}
 
 
-def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: float = 2.0, delta: float = 0.01,
-              kappa: float = 1.0, scale=None, cost: str = "norm", box: float = 1.0,
-              name: str | None = None, backend: str = "auto") -> FilterSpec:
-    """A cost-reference particle filter; defaults are the brief's (lam 0.95, q 2, beta 2, delta 0.01, kappa 1)."""
-    params = CRPFParams(int(particles), float(lam), float(q), float(beta), float(delta), float(kappa),
-                        None if scale is None else tuple(float(s) for s in scale), cost, float(box), backend)
+def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: float = 2.0, delta: float = PAPER_DELTA,
+              delta_mode: str = "relative", variance: str = "adaptive", sigma0: float = PAPER_SIGMA0,
+              kappa: float = 1.0, scale=None, cost: str = "arc-length", box: float = 1.0, name: str | None = None,
+              backend: str = "auto") -> FilterSpec:
+    """A cost-reference particle filter; the defaults are the paper filters' setting (Table 6's adaptive variance,
+    the arc-length cost, a relative delta; sigma0 and delta chosen by the tuning rule of docs/paper003.md)."""
+    params = CRPFParams(int(particles), float(lam), float(q), float(beta), float(delta), delta_mode, variance,
+                        float(sigma0), float(kappa), None if scale is None else tuple(float(s) for s in scale), cost,
+                        float(box), backend)
+    spread = (f"adaptive sigma^2 from sigma0={params.sigma0:g}" if params.adaptive
+              else f"fixed sigma^2=kappa/N^(2/n), kappa={params.kappa:g}")
     return FilterSpec(
         name=name or f"crpf-{params.particles}",
-        summary=(f"Cost-reference particle filter, N={params.particles}, lam={params.lam}, q={params.q}, "
-                 f"beta={params.beta}, delta={params.delta}, sigma^2=kappa/N^(2/n) with kappa={params.kappa}"),
+        summary=(f"Cost-reference particle filter, N={params.particles}, {params.cost} cost, lam={params.lam:g}, "
+                 f"q={params.q:g}, beta={params.beta:g}, {params.delta_mode} delta={params.delta:g}, {spread}"),
         init=partial(init, params=params),
         predict=partial(predict, params=params),
         update=partial(update, params=params),
@@ -288,7 +377,8 @@ def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: flo
         capabilities=frozenset({"stochastic", "ignores_noise_statistics"}
                                | ({"range_bearing_input"} if cost == "arc-length" else set())),
         params={"particles": params.particles, "lam": params.lam, "q": params.q, "beta": params.beta,
-                "delta": params.delta, "kappa": params.kappa, "scale": params.scale, "cost": params.cost,
+                "delta": params.delta, "delta_mode": params.delta_mode, "variance": params.variance,
+                "sigma0": params.sigma0, "kappa": params.kappa, "scale": params.scale, "cost": params.cost,
                 "box": params.box, "backend": params.backend},
         diagnostics=diagnostics,
         parameters=PARAMETERS,
@@ -296,45 +386,10 @@ def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: flo
     )
 
 
-#: The paper's three particle counts.
+#: The paper's three particle counts: the registered filters ``crpf-100``, ``crpf-300`` and ``crpf-500``.
 PAPER_FILTERS = (100, 300, 500)
-
-#: Per-component jitter shapes of the sweep (brief § 3.3: "a per-component scale vector, since position
-#: and velocity have different units"), for the state [x, y, vx, vy] and T = 1 s.  "dwna" is the
-#: acceleration-driven shape G = [T^2/2, T^2/2, T, T]; "iso" is the brief's literal sigma^2 I_4.  (The sweep
-#: in docs/paper003.md also ran position-only jitter (1, 1, 0, 0): its velocities collapse to one value, the
-#: particle covariance becomes singular, and it tracked worst; it is not registered.)
-JITTER_SHAPES = {
-    "iso": None,
-    "vel0.1": (1.0, 1.0, 0.1, 0.1),
-    "dwna": (0.5, 0.5, 1.0, 1.0),
-}
-
-#: The default of the paper filters, chosen from the plain-norm sweep (kappa in {0.1, 1, 10} x the shapes
-#: above, CRPF-100, 300 runs per level, seed 0) by one rule for every level: the smallest geometric mean
-#: over L1-L3 of the time-averaged MSE (docs/paper003.md).  The brief's literal default (kappa = 1,
-#: isotropic) is the ablation "crpf-100-iso".
-PAPER_SHAPE = "dwna"
-PAPER_KAPPA = 1.0
-
-
-def ablation_name(shape: str, kappa: float, cost: str = "norm") -> str:
-    """``crpf-100[-arc][-shape][-k<kappa>]``; the paper default's shape and kappa are left out of the name."""
-    return ("crpf-100" + ("-arc" if cost == "arc-length" else "") + ("" if shape == PAPER_SHAPE else f"-{shape}")
-            + ("" if kappa == PAPER_KAPPA else f"-k{kappa:g}"))
-
-
-#: Ablations of CRPF-100: the jitter sweep with the paper's plain norm, and the arc-length cost
-#: (isotropic and dwna shapes), kappa in {0.1, 1, 10}.  (name, shape, kappa, cost)
-ABLATIONS = tuple(
-    (ablation_name(shape, kappa, cost), shape, kappa, cost)
-    for cost, shapes in (("norm", tuple(JITTER_SHAPES)), ("arc-length", ("iso", "dwna")))
-    for shape in shapes for kappa in (0.1, 1.0, 10.0)
-)
 
 
 @hookimpl
 def workbench_filters():
-    paper = [make_crpf(n, kappa=PAPER_KAPPA, scale=JITTER_SHAPES[PAPER_SHAPE]) for n in PAPER_FILTERS]
-    return paper + [make_crpf(100, kappa=k, scale=JITTER_SHAPES[shape], cost=cost, name=name)
-                    for name, shape, k, cost in ABLATIONS if name != "crpf-100"]
+    return [make_crpf(n) for n in PAPER_FILTERS]

@@ -69,21 +69,33 @@ def costs_into(out, base, px, py, zr, zt, sx, sy, q, arc):
 
 
 @jit(inline="always")
-def pmf(vals, N, beta, delta, w):
-    """w_i ~ (v_i - min v + delta)^-beta (scaled so the best is 1); returns the sum."""
+def pmf(vals, N, beta, delta, relative, w):
+    """w_i ~ (v_i - min v + delta_v)^-beta (scaled so the best is 1); returns the sum.  ``delta_v = delta``, or
+    for ``relative`` ``delta`` times the mean gap of the finite values above their minimum (``delta`` where
+    there is no gap): the twin's :func:`~workbench.kernels.crpf_step_numpy.pmf_offset`."""
     m = math.inf
     bad = False
+    total = 0.0
+    count = 0
     for i in range(N):
         v = vals[i]
         if v != v:
             bad = True
         elif v < m:
             m = v
+        if abs(v) < math.inf:
+            total += v
+            count += 1
     bad = bad or not (m < math.inf)
     if bad:
         for i in range(N):
             w[i] = 1.0
         return float(N)
+    if relative:
+        # delta_v = delta * (mean_i v_i - min_i v_i)
+        gap = total / count - m
+        if gap > 0.0 and gap < math.inf:
+            delta = delta * gap
     # pi ~ (C - min C + delta)^-beta = ((C - min C + delta) / delta)^-beta up to a constant
     inv = 1.0 / delta
     if beta == 2.0:
@@ -119,7 +131,7 @@ def select(w, total, u0, parent, edges):
 
 
 @jit
-def one_run(xb, cb, F, zr, zt, key, b, u0, std, scal, xn, cn, mean, cov, w):
+def one_run(xb, cb, s2b, t, F, zr, zt, key, b, u0, shape, scal, xn, cn, s2n, mean, cov, w):
     """The step of one run.  (Compiled as a function of its own: written inline in the prange body,
     its loops vectorised less and the kernel was 1.5x slower.)  The common state is 4-D
     ``[x, y, vx, vy]``; that case has its loops over components written out (2x faster)."""
@@ -127,6 +139,11 @@ def one_run(xb, cb, F, zr, zt, key, b, u0, std, scal, xn, cn, mean, cov, w):
     lam, beta, delta, q = scal[0], scal[1], scal[2], scal[3]
     arc = scal[4] != 0.0
     sx, sy = scal[5], scal[6]
+    adaptive = scal[7] != 0.0
+    relative = scal[8] != 0.0
+    # sigma'^2 = a sigma_parent^2 + ||dev||^2 b  with a = (t - 1) / t, b = 1 / (t n); fixed: a = 1, b = 0
+    a = (t - 1.0) / t if adaptive else 1.0
+    bn = 1.0 / (t * n) if adaptive else 0.0
     px = np.empty(N)
     py = np.empty(N)
     base = np.empty(N)
@@ -145,41 +162,55 @@ def one_run(xb, cb, F, zr, zt, key, b, u0, std, scal, xn, cn, mean, cov, w):
         py[i] = ay
         base[i] = lam * cb[i]
     costs_into(w, base, px, py, zr, zt, sx, sy, q, arc)
-    total = pmf(w, N, beta, delta, w)
+    total = pmf(w, N, beta, delta, relative, w)
     select(w, total, u0, parent, edges)
-    # x' = F x_parent + std e ;  C' = lam C_parent + dC(x' | z)
+    # dev = sigma_parent e;  x' = F x_parent + shape dev;  sigma'^2 = a sigma_parent^2 + b ||dev||^2;
+    # C' = lam C_parent + dC(x' | z)
     if n == 4:
         f00, f01, f02, f03 = F[0, 0], F[0, 1], F[0, 2], F[0, 3]
         f10, f11, f12, f13 = F[1, 0], F[1, 1], F[1, 2], F[1, 3]
         f20, f21, f22, f23 = F[2, 0], F[2, 1], F[2, 2], F[2, 3]
         f30, f31, f32, f33 = F[3, 0], F[3, 1], F[3, 2], F[3, 3]
-        s0, s1, s2, s3 = std[0], std[1], std[2], std[3]
+        g0, g1, g2, g3 = shape[0], shape[1], shape[2], shape[3]
         for j in range(N):
             i = parent[j]
+            v = s2b[i]
+            sd = math.sqrt(v)
             x0, x1, x2, x3 = xb[i, 0], xb[i, 1], xb[i, 2], xb[i, 3]
-            y0 = f00 * x0 + f01 * x1 + f02 * x2 + f03 * x3 + s0 * eb[4 * j]
-            y1 = f10 * x0 + f11 * x1 + f12 * x2 + f13 * x3 + s1 * eb[4 * j + 1]
+            d0 = sd * eb[4 * j]
+            d1 = sd * eb[4 * j + 1]
+            d2 = sd * eb[4 * j + 2]
+            d3 = sd * eb[4 * j + 3]
+            y0 = f00 * x0 + f01 * x1 + f02 * x2 + f03 * x3 + g0 * d0
+            y1 = f10 * x0 + f11 * x1 + f12 * x2 + f13 * x3 + g1 * d1
             xn[j, 0] = y0
             xn[j, 1] = y1
-            xn[j, 2] = f20 * x0 + f21 * x1 + f22 * x2 + f23 * x3 + s2 * eb[4 * j + 2]
-            xn[j, 3] = f30 * x0 + f31 * x1 + f32 * x2 + f33 * x3 + s3 * eb[4 * j + 3]
+            xn[j, 2] = f20 * x0 + f21 * x1 + f22 * x2 + f23 * x3 + g2 * d2
+            xn[j, 3] = f30 * x0 + f31 * x1 + f32 * x2 + f33 * x3 + g3 * d3
+            s2n[j] = a * v + bn * (d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3)
             px[j] = y0
             py[j] = y1
             base[j] = lam * cb[i]
     else:
         for j in range(N):
             i = parent[j]
+            v = s2b[i]
+            sd = math.sqrt(v)
+            ss = 0.0
             for r in range(n):
                 acc = 0.0
                 for k in range(n):
                     acc += F[r, k] * xb[i, k]
-                xn[j, r] = acc + std[r] * eb[j * n + r]
+                d = sd * eb[j * n + r]
+                ss += d * d
+                xn[j, r] = acc + shape[r] * d
+            s2n[j] = a * v + bn * ss
             px[j] = xn[j, 0]
             py[j] = xn[j, 1]
             base[j] = lam * cb[i]
     costs_into(cn, base, px, py, zr, zt, sx, sy, q, arc)
-    # estimate: pi' ~ (C' - min C' + delta)^-beta, weighted mean and covariance
-    total = pmf(cn, N, beta, delta, w)
+    # estimate: pi' ~ (C' - min C' + delta_C)^-beta, weighted mean and covariance
+    total = pmf(cn, N, beta, delta, relative, w)
     if n == 4:
         m0 = m1 = m2 = m3 = 0.0
         for i in range(N):
@@ -240,7 +271,25 @@ def one_run(xb, cb, F, zr, zt, key, b, u0, std, scal, xn, cn, mean, cov, w):
 
 
 @jit(parallel=True, cache=True)
-def kernel(x, c, F, z, key, u0, std, scal, x_new, c_new, mean, cov, scratch):
+def kernel_parallel(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
     for b in numba.prange(x.shape[0]):
-        one_run(x[b], c[b], F, z[b, 0], z[b, 1], key, b, u0[b], std, scal, x_new[b], c_new[b], mean[b],
-                cov[b], scratch[b])
+        one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], key, b, u0[b], shape, scal, x_new[b], c_new[b],
+                s2_new[b], mean[b], cov[b], scratch[b])
+
+
+@jit(cache=True)
+def kernel_serial(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
+    for b in range(x.shape[0]):
+        one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], key, b, u0[b], shape, scal, x_new[b], c_new[b],
+                s2_new[b], mean[b], cov[b], scratch[b])
+
+
+#: Below this many runs the step runs on one thread: waking the thread pool costs more than the work (and on a
+#: busy machine a parallel region waits for a descheduled thread: 15 ms a step instead of 0.6 ms for B = 1).
+PARALLEL_FROM = 16
+
+
+def kernel(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
+    """The step of every run: a thread per run from :data:`PARALLEL_FROM` runs on, else one thread."""
+    run = kernel_parallel if x.shape[0] >= PARALLEL_FROM else kernel_serial
+    run(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch)

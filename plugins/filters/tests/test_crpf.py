@@ -1,4 +1,4 @@
-"""The cost-reference particle filter against hand-computed references (paper 003)."""
+"""The cost-reference particle filter against hand-computed references (Table 6 of paper 003)."""
 
 import numpy as np
 import pytest
@@ -41,6 +41,13 @@ def test_selection_pmf_is_finite_with_huge_costs():
     # systematic resampling of a huge-cost row never picks a zero-weight particle
     idx = systematic_resample(lp, np.random.default_rng(0))
     assert not np.any(np.isin(idx[2], [0, 2]))
+    # the relative offset: delta_C = delta (mean C - min C) over the finite costs, and the same guarantees
+    lr = log_pmf(costs, beta=2.0, delta=0.3, relative=True)
+    assert not np.any(np.isnan(lr)) and lr[2, 0] == -np.inf and np.allclose(lr[3], lr[3, 0])
+    row = np.array([3.0, 5.0, 10.0])
+    lr2 = log_pmf(row[None], 2.0, 0.3, relative=True)[0]
+    direct = (row - 3.0 + 0.3 * (row.mean() - 3.0)) ** -2.0
+    assert np.allclose(np.exp(lr2 - lr2.max()) / np.exp(lr2 - lr2.max()).sum(), direct / direct.sum())
 
 
 def test_systematic_resampling_preserves_expected_counts():
@@ -63,18 +70,51 @@ def test_systematic_resampling_preserves_expected_counts():
 
 
 def test_jitter_schedule():
-    p = CRPFParams(particles=100, kappa=1.0)
-    # sigma^2 = kappa / N^(2 / dim) = 1 / 100^(1/2)
+    p = CRPFParams(particles=100, kappa=1.0, variance="fixed")
+    # fixed: sigma^2 = kappa / N^(2 / dim) = 1 / 100^(1/2)
     assert np.allclose(p.jitter_std(4), np.sqrt(0.1))
-    q = CRPFParams(particles=500, kappa=10.0, scale=(1.0, 1.0, 0.1, 0.1))
+    q = CRPFParams(particles=500, kappa=10.0, scale=(1.0, 1.0, 0.1, 0.1), variance="fixed")
     assert np.allclose(q.jitter_std(4), np.sqrt(10.0 / np.sqrt(500.0)) * np.array([1, 1, 0.1, 0.1]))
+    # adaptive: every particle starts from sigma_0 = sigma0, whatever N
+    assert np.allclose(CRPFParams(particles=500, sigma0=0.7).jitter_std(4), 0.7)
     with pytest.raises(InputError, match="scale has 4 entries"):
         CRPFParams(scale=(1, 1, 1, 1)).jitter_std(6)
 
 
-def test_one_particle_follows_the_cost_recursion():
+@pytest.mark.parametrize("backend", ["numpy", "auto"])
+def test_one_particle_follows_table_6(backend):
+    # N = 1: selection is trivial, so the cost C_t = lam C_{t-1} + ||y_t - h(x_t)||^q and the variance
+    # sigma_t^2 = ((t-1)/t) sigma_{t-1}^2 + ||x_t - f(x_{t-1})||^2 / (t dim) can be checked by hand.
+    spec = make_crpf(particles=1, lam=0.8, q=1.5, sigma0=0.5, cost="norm", backend=backend)
+    model = range_bearing(1.0, 0.1)
+    motion = random_walk_velocity(2, 1.0, 0.1)
+    rng = generator(0, "crpf-one")
+    prior = Gaussian.broadcast([100.0, 50.0, -1.0, 1.0], np.diag([1.0, 1.0, 0.1, 0.1]), 3)
+    state = spec.init(prior, rng)
+    assert np.all(state.variances == 0.25)
+    zs = [np.array([[111.0, 0.47]] * 3), np.array([[110.0, 0.48]] * 3), np.array([[109.5, 3.1]] * 3),
+          np.array([[109.0, 0.5]] * 3)]
+    expected, s2 = np.zeros(3), np.full(3, 0.25)
+    for k, z in enumerate(zs):
+        if k:
+            before = state.particles[:, 0].copy()
+            state = spec.predict(state, motion, rng)
+        state = spec.update(state, Scan.single(z), model, rng)
+        x = state.particles[:, 0]
+        res = z - np.stack([np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])], axis=-1)
+        res[:, 1] = _wrap(res[:, 1])
+        inc = np.sum(res ** 2, axis=1) ** 0.75
+        expected = 0.8 * expected + inc if k else inc
+        assert np.allclose(state.costs[:, 0], expected, rtol=1e-12)
+        if k:
+            moved = np.sum((x - before @ motion.F.T) ** 2, axis=1)
+            s2 = (k - 1) / k * s2 + moved / (k * 4)
+            assert np.allclose(state.variances[:, 0], s2, rtol=1e-10) and np.all(state.steps == k)
+
+
+def test_one_particle_follows_the_cost_recursion_with_a_fixed_variance():
     # N = 1: selection is trivial, so C_t = lam C_{t-1} + ||y_t - h(x_t)||^q can be checked by hand.
-    spec = make_crpf(particles=1, lam=0.8, q=1.5, kappa=0.5)
+    spec = make_crpf(particles=1, lam=0.8, q=1.5, kappa=0.5, variance="fixed", cost="norm")
     model = range_bearing(1.0, 0.1)
     motion = random_walk_velocity(2, 1.0, 0.1)
     rng = generator(0, "crpf-one")
@@ -99,15 +139,17 @@ def test_one_particle_follows_the_cost_recursion():
         assert np.allclose(state.costs, expected, rtol=1e-12)
 
 
-def test_estimate_is_the_cost_weighted_mean_and_covariance():
-    spec = make_crpf(particles=200, beta=2.0, delta=0.01)
+@pytest.mark.parametrize("mode", ["absolute", "relative"])
+def test_estimate_is_the_cost_weighted_mean_and_covariance(mode):
+    spec = make_crpf(particles=200, beta=2.0, delta=0.01 if mode == "absolute" else 0.3, delta_mode=mode)
     model = range_bearing(1.0, 0.1)
     rng = generator(0, "crpf-estimate")
     prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 2)
     state = spec.update(spec.init(prior, rng), Scan.single(np.array([[111.8, 0.46], [112.0, 0.45]])), model, rng)
     est = spec.estimate(state)
     c = state.costs
-    w = (c - c.min(axis=1, keepdims=True) + 0.01) ** -2.0
+    offset = 0.01 if mode == "absolute" else 0.3 * (c.mean(axis=1, keepdims=True) - c.min(axis=1, keepdims=True))
+    w = (c - c.min(axis=1, keepdims=True) + offset) ** -2.0
     w /= w.sum(axis=1, keepdims=True)
     mean = np.einsum("bn,bni->bi", w, state.particles)
     d = state.particles - mean[:, None, :]
@@ -141,7 +183,7 @@ def test_tracks_with_accurate_measurements():
     truth = sample_motion(np.tile([100.0, 50.0, -1.0, 1.0], (B, 1)), random_walk_velocity(2, 1.0, 0.01), 40, rng)
     scans = HOST.sensor("range-bearing").simulate(truth, rng, sigma_r=0.1, sigma_theta=0.01)
     prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), B)
-    est = run_filter(HOST.filter("crpf-100-arc-k10"), prior, random_walk_velocity(2, 1.0, 0.1),
+    est = run_filter(HOST.filter("crpf-100"), prior, random_walk_velocity(2, 1.0, 0.1),
                      range_bearing(1.0, 0.1), scans, generator(0, "crpf-track-filter"))
     err = np.hypot(*(est.mean[..., :2] - truth.states[..., :2]).transpose(2, 0, 1))
     assert np.median(err[:, -10:]) < 3.0  # started 14 m off
@@ -174,13 +216,19 @@ def test_missed_detection_moves_the_cloud_blindly():
     again = spec.predict(missed, motion, rng)
     assert spec.diagnostics(again)["blind_moves"] == 1
     assert np.allclose(again.costs[1], 0.95 * state.costs[1])  # C <- lam C without a measurement
+    # the blind move is a propagation: item 1 has moved as often as item 0 and its variances were updated
+    assert again.steps.tolist() == [1, 1] and not np.array_equal(again.variances[1], missed.variances[1])
 
 
 def test_parameters_are_validated():
     for bad in (dict(lam=0.0), dict(q=0.5), dict(beta=0.0), dict(delta=0.0), dict(kappa=-1.0), dict(cost="l1"),
-                dict(particles=0), dict(scale=(1.0, -1.0, 1.0, 1.0))):
+                dict(particles=0), dict(scale=(1.0, -1.0, 1.0, 1.0)), dict(sigma0=0.0), dict(variance="running"),
+                dict(delta_mode="median"), dict(scale=(1.0, 1.0, 0.0, 0.0))):  # adaptive divides by the scale
         with pytest.raises(InputError, match="crpf"):
             make_crpf(**{"particles": 10, **bad})
+    make_crpf(particles=10, variance="fixed", scale=(1.0, 1.0, 0.0, 0.0))  # a fixed variance may zero a component
+    with pytest.raises(InputError, match="variance"):
+        HOST.filter("crpf-100").configure(variance="running")
 
 
 def test_nan_measurement_is_refused():
@@ -196,8 +244,56 @@ def test_works_for_any_measurement_model():
     # The plain cost needs only h and residual: a custom model with a 3-D measurement.
     model = MeasurementModel("xyz", h=lambda x: np.concatenate([x[..., :2], x[..., 2:3] * 2], axis=-1),
                              R=np.eye(3))
-    spec = make_crpf(particles=30)
+    spec = make_crpf(particles=30, cost="norm")
     prior = Gaussian.broadcast([1.0, 2.0, 0.0, 0.0], np.eye(4), 3)
     rng = generator(0, "xyz")
     state = spec.update(spec.init(prior, rng), Scan.single(np.ones((3, 3))), model, rng)
     assert state.costs.shape == (3, 30) and np.all(np.isfinite(spec.estimate(state).mean))
+
+
+def test_registered_filters_and_configured_variants():
+    crpf = sorted(n for n in HOST.filters if n.startswith("crpf"))
+    assert crpf == ["crpf-100", "crpf-300", "crpf-500"]
+    for n in (100, 300, 500):
+        p = HOST.filter(f"crpf-{n}").params
+        assert p["particles"] == n and p["variance"] == "adaptive" and p["cost"] == "arc-length"
+        assert p["delta_mode"] == "relative"
+        assert "range_bearing_input" in HOST.filter(f"crpf-{n}").capabilities
+    # the previous reconstruction is a configuration of crpf-100, named as asked, and the same filter as make_crpf's
+    previous = HOST.filter("crpf-100").configure(name="crpf-100 previous", variance="fixed", kappa=1.0,
+                                                 scale=[0.5, 0.5, 1.0, 1.0], cost="norm", delta_mode="absolute",
+                                                 delta=0.01)
+    assert previous.name == "crpf-100 previous" and "range_bearing_input" not in previous.capabilities
+    direct = make_crpf(100, variance="fixed", kappa=1.0, scale=(0.5, 0.5, 1.0, 1.0), cost="norm",
+                       delta_mode="absolute", delta=0.01)
+    rng = generator(0, "crpf-configure")
+    truth = sample_motion(np.tile([100.0, 50.0, -1.0, 1.0], (3, 1)), random_walk_velocity(2, 1.0, 0.1), 10, rng)
+    scans = HOST.sensor("range-bearing").simulate(truth, rng, sigma_r=1.0, sigma_theta=0.1)
+    prior = Gaussian.broadcast([110.0, 40.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), 3)
+    motion, model = random_walk_velocity(2, 1.0, 0.1), range_bearing(1.0, 0.1)
+    a = run_filter(previous, prior, motion, model, scans, generator(1, "f"))
+    b = run_filter(direct, prior, motion, model, scans, generator(1, "f"))
+    assert np.array_equal(a.mean, b.mean)
+    # and differs from the paper setting on the same data and random numbers
+    c = run_filter(HOST.filter("crpf-100"), prior, motion, model, scans, generator(1, "f"))
+    assert not np.allclose(a.mean, c.mean)
+
+
+def test_the_adaptive_variance_follows_the_process_noise():
+    # Table 6's variance is carried through selection: lineages whose moves fit the measurements survive, so with
+    # a process noise far above sigma0 the particles' sigma grows over the run, and with none it stays small
+    B = 30
+    motion_truth = {1.0: random_walk_velocity(2, 1.0, 1.0), 0.0: random_walk_velocity(2, 1.0, 0.0)}
+    sigma = {}
+    for sa, motion in motion_truth.items():
+        rng = generator(3, "crpf-adapt", sa)
+        truth = sample_motion(np.tile([100.0, 50.0, -1.0, 1.0], (B, 1)), motion, 60, rng)
+        scans = HOST.sensor("range-bearing").simulate(truth, rng, sigma_r=0.5, sigma_theta=0.005)
+        spec = make_crpf(100, sigma0=0.3)
+        state = spec.init(Gaussian.broadcast([100.0, 50.0, -1.0, 1.0], np.diag([1.0, 1.0, 0.1, 0.1]), B), rng)
+        for k in range(60):
+            if k:
+                state = spec.predict(state, motion, rng)
+            state = spec.update(state, scans.scan(k).for_filter(), range_bearing(0.5, 0.005), rng)
+        sigma[sa] = float(np.median(np.sqrt(state.variances)))
+    assert sigma[1.0] > 0.3 > sigma[0.0]

@@ -1,0 +1,149 @@
+"""Paper 003's criteria fed hand-made run data: each verdict, including "not attainable" and "inconclusive"."""
+
+import numpy as np
+import pytest
+
+from workbench_papers.paper003 import judging
+from workbench_papers.paper003.recipe import CRPF_FILTERS, KALMAN_TYPE
+
+LEVELS = ("L1", "L2", "L3")
+RUNS = 1500
+
+
+def _runs(mean, n=RUNS, seed=0, spread=0.2):
+    """Per-run time-averaged MSE with the given mean (log-normal scatter, the shape MSEs have)."""
+    x = np.random.default_rng(seed).lognormal(0.0, spread, n)
+    return mean * x / x.mean()
+
+
+def _results(means, ref=None, n=RUNS, ref_runs=200):
+    """``means[level][filter]`` -> fake summaries of the radians reading; ``ref[level]`` the reference's mean."""
+    out = {}
+    for i, lv in enumerate(LEVELS):
+        for j, (name, m) in enumerate(means[lv].items()):
+            r = _runs(m, n, seed=100 * i + j)
+            out[f"mc/{lv}/{name}/mismatched"] = {"run_mse": r, "mse_t": np.full(5, r.mean()),
+                                                 "lost": np.zeros(n, dtype=bool)}
+        if ref is not None and lv in ref:
+            r = _runs(ref[lv], ref_runs, seed=1000 + i)
+            out[f"reference/{lv}"] = {"run_mse": r, "mse_t": np.full(5, r.mean()), "runs": np.array(ref_runs)}
+    return out
+
+
+def _means(crpf_l2=10.0, crpf_l3=100.0, kf=(20.0, 200.0), monotone=True):
+    out = {}
+    for lv, scale in zip(LEVELS, (1.0, 10.0, 100.0)):
+        kf_mean = {"L1": 2.0, "L2": kf[0], "L3": kf[1]}[lv]
+        row = {"ekf": 1.04 * kf_mean, "ukf": 1.02 * kf_mean, "cdkf": kf_mean, "sr-ukf": 1.02 * kf_mean,
+               "sr-cdkf": kf_mean}
+        c100 = {"L1": 1.5, "L2": crpf_l2, "L3": crpf_l3}[lv]
+        row.update({"crpf-100": c100, "crpf-300": c100 * (0.8 if monotone else 1.2), "crpf-500": c100 * 0.7})
+        out[lv] = row
+    return out
+
+
+@pytest.fixture(autouse=True)
+def _fewer_resamples(monkeypatch):
+    monkeypatch.setattr(judging, "RESAMPLES", 400)  # the verdicts below are far from their thresholds
+
+
+def _crit(results, only=None):
+    if only == "C4-L2":
+        return {"C4-L2": judging._c4_level(results, "rad", "L2")}
+    return {c.id: c for c in judging.criteria(results)}
+
+
+def test_criterion_4_verdicts():
+    # CRPF-100 at half the best Kalman MSE: met whatever the reference says
+    c = _crit(_results(_means(crpf_l2=10.0), ref={"L2": 30.0, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "met" and c["C4-L2"].n == RUNS
+    lo, hi = c["C4-L2"].interval
+    assert lo <= c["C4-L2"].ours <= hi < 1.0
+    # CRPF-100 at twice the best Kalman MSE while the reference beats the Kalman filters: not met
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 10.0, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "not met"
+    # ... while the reference itself only ties with them (the Kalman filter is optimal): not attainable
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 20.3, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "not attainable"
+    assert c["C4-L2"].extra["reference"]["verdict"] == "inconclusive" and "Not attainable" in c["C4-L2"].detail
+    # ... or is worse than them: not attainable
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "not attainable" and c["C4-L2"].extra["reference"]["verdict"] == "not met"
+    # CRPF-100 ties with the best Kalman filter: inconclusive (the interval straddles 1)
+    c = _crit(_results(_means(crpf_l2=20.05), ref={"L2": 10.0, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "inconclusive" and c["C4-L2"].interval[0] < 1.0 < c["C4-L2"].interval[1]
+    # too few reference runs to call it not attainable: the CRPF's own verdict stands
+    few = judging.MIN_REF_RUNS - 1
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}, ref_runs=few), "C4-L2")
+    assert c["C4-L2"].verdict == "not met"
+    # a reference far worse than the Kalman filters (a degenerate bootstrap PF) is flagged in the detail
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 100.0, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "not attainable" and "far from optimal" in c["C4-L2"].detail
+    assert "true noise statistics" in c["C4-L2"].detail  # L2 is the nominal level
+    # no reference row: the CRPF's own verdict
+    c = _crit(_results(_means(crpf_l2=40.0)), "C4-L2")
+    assert c["C4-L2"].verdict == "not met" and "No reference row" in c["C4-L2"].detail
+
+
+def test_too_few_runs_is_inconclusive():
+    c = _crit(_results(_means(crpf_l2=10.0), ref={"L2": 10.0, "L3": 100.0}, n=judging.MIN_RUNS - 1))
+    for cid in ("C1", "C2", "C3", "C4-L2", "C4-L3", "C4-N"):
+        assert c[cid].verdict == "inconclusive" and c[cid].n == judging.MIN_RUNS - 1
+
+
+def test_criterion_4_in_n_and_criterion_1():
+    c = _crit(_results(_means(monotone=True)))
+    assert c["C4-N"].verdict == "met" and c["C1"].verdict == "met"
+    assert c["C4-N"].ours == pytest.approx(0.875, rel=1e-6)  # max over levels of (0.8, 0.7 / 0.8)
+    c = _crit(_results(_means(monotone=False)))
+    assert c["C4-N"].verdict == "not met" and c["C4-N"].interval[0] > 1.0
+    # C1 fails when one filter's L2 MSE exceeds its L3 MSE
+    means = _means()
+    means["L2"]["ekf"] = 10 * means["L3"]["ekf"]
+    assert _crit(_results(means))["C1"].verdict == "not met"
+
+
+def test_criteria_2_and_3():
+    c = _crit(_results(_means()))
+    assert c["C2"].verdict == "met"  # CDKF <= UKF <= EKF at every level, within 5 %
+    assert c["C3"].verdict == "not met"  # our fake SR forms differ from the full forms by 2 % at every level
+    means = _means()
+    for lv in LEVELS:
+        means[lv]["sr-ukf"] = means[lv]["ukf"]
+        means[lv]["sr-cdkf"] = means[lv]["cdkf"]
+    res = _results(means)
+    for lv in LEVELS:  # the same runs, to round-off
+        res[f"mc/{lv}/sr-ukf/mismatched"] = res[f"mc/{lv}/ukf/mismatched"]
+        res[f"mc/{lv}/sr-cdkf/mismatched"] = res[f"mc/{lv}/cdkf/mismatched"]
+    assert _crit(res)["C3"].verdict == "met"
+    for lv in LEVELS:  # the EKF best everywhere: the ordering fails at every level
+        means[lv]["ekf"] = 0.5 * means[lv]["cdkf"]
+    assert _crit(_results(means))["C2"].verdict == "not met"
+
+
+def test_timing_criteria():
+    rng = np.random.default_rng(5)
+    res = {}
+    runs = judging.MIN_TIMED_RUNS
+    for n, per in zip(CRPF_FILTERS, (1.0, 3.0, 5.0)):  # ms per run: linear in N, CRPF-300/500 slowest
+        res[f"timing/{n}"] = {"per_run_s": 1e-3 * per * rng.lognormal(0, 0.05, runs),
+                              "batched_per_run_s": 1e-4 * per * rng.lognormal(0, 0.05, 7)}
+    for k, n in enumerate(KALMAN_TYPE):
+        per = 2.0 + 0.1 * k  # sr forms slower than the full forms
+        res[f"timing/{n}"] = {"per_run_s": 1e-3 * per * rng.lognormal(0, 0.05, runs),
+                              "batched_per_run_s": 1e-4 * per * rng.lognormal(0, 0.05, 7)}
+    c = {x.id: x for x in judging._timing_criteria(res)}
+    assert c["C5-linear"].verdict == "met" and c["C5-slower"].verdict == "met"
+    assert c["C5-linear-batched"].verdict == "met" and c["C5-slower-batched"].n == 7
+    assert c["C6"].verdict == "not met"
+    for n, per in zip(CRPF_FILTERS, (9.0, 9.1, 9.05)):  # the per-call overhead dominates: not linear
+        res[f"timing/{n}"]["per_run_s"] = 1e-3 * per * rng.lognormal(0, 0.01, runs)
+    c = {x.id: x for x in judging._timing_criteria(res)}
+    assert c["C5-linear"].verdict in ("not met", "inconclusive") and c["C5-slower"].verdict == "met"
+    res["timing/crpf-300"]["batched_per_run_s"] = res["timing/crpf-300"]["batched_per_run_s"][:3]
+    res["timing/crpf-100"]["batched_per_run_s"] = res["timing/crpf-100"]["batched_per_run_s"][:3]
+    res["timing/crpf-500"]["batched_per_run_s"] = res["timing/crpf-500"]["batched_per_run_s"][:3]
+    for n in KALMAN_TYPE:
+        res[f"timing/{n}"]["batched_per_run_s"] = res[f"timing/{n}"]["batched_per_run_s"][:3]
+    c = {x.id: x for x in judging._timing_criteria(res)}
+    assert c["C5-slower-batched"].verdict == "inconclusive"  # 3 repetitions < MIN_REPEATS
