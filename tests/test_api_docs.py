@@ -66,7 +66,8 @@ def test_the_reference_builds_strictly_and_documents_every_public_name(site):
     ("types", "workbench.types"), ("models", "workbench.models"), ("models", "workbench.frames"),
     ("params", "workbench.params"), ("specs", "workbench.specs"), ("tracking", "workbench.tracking"),
     ("metrics", "workbench.metrics"), ("metrics", "workbench.metrics.ospa"), ("criteria", "workbench.criteria"),
-    ("tracks_io", "workbench.tracks_io"), ("hookspecs", "workbench.hookspecs"), ("testing", "workbench.testing"),
+    ("tracks_io", "workbench.tracks_io"), ("recorded", "workbench.recorded.sonar"),
+    ("recorded", "workbench.recorded.pcl"), ("hookspecs", "workbench.hookspecs"), ("testing", "workbench.testing"),
     ("interop", "workbench_interop.stonesoup_filters"), ("interop", "workbench_interop.stonesoup_export"),
 ])
 def test_each_public_module_is_documented_with_its_exports(site, page, module):

@@ -103,7 +103,7 @@ def test_cli_reports_errors_without_traceback(tmp_path, capsys):
 EXAMPLES = Path(__file__).parents[1] / "examples" / "scenarios"
 
 
-@pytest.mark.parametrize("name", ["range_bearing", "sonar_recorded", "pcl_recorded"])
+@pytest.mark.parametrize("name", ["range_bearing", "sonar_recorded", "pcl_recorded", "sonar_moving_ship"])
 def test_example_scenarios_run(tmp_path, name):
     from workbench.cli import main
 
@@ -120,6 +120,24 @@ def test_example_scenarios_run(tmp_path, name):
         assert mean.shape == (120, 2) and np.all(np.isfinite(mean))
         assert np.std(np.diff(mean[:, 0])) < 10.0
         assert summary["diagnostics"]["kf"]["frames_updated"] > 90
+    elif name == "sonar_moving_ship":
+        # irregular pings and a turning own ship: the track follows the target the file was made from, and the
+        # figure draws the own ship where the file puts it
+        import importlib.util
+        import sys
+
+        spec = importlib.util.spec_from_file_location("sonar_moving_ship", EXAMPLES.parent / "data" /
+                                                      "sonar_moving_ship.py")
+        example = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = example
+        spec.loader.exec_module(example)
+        scene = example.scene()
+        mean = data["mean_kf"][0]
+        np.testing.assert_array_equal(data["times"], scene.times)
+        error = np.linalg.norm(mean[10:, :2] - scene.target[10:, :2], axis=1)
+        assert np.median(error) < 40.0 and summary["diagnostics"]["kf"]["frames_updated"] >= 45
+        plot = np.load(tmp_path / "tracks.npz")
+        np.testing.assert_array_equal(plot["own_ship_xy"], scene.own_ship.position)
     else:
         assert summary["position_rmse"]["ekf"] < summary["position_rmse"]["sir"] < 50
 

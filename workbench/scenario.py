@@ -453,6 +453,12 @@ def _plot_data(scenario: Scenario, model, scans: Scans, truth: Truth | None, est
         data["left_labels"] = np.array(["time (s)", label, "run 0: the first measured component over time"])
     if truth is not None:
         data["truth_xy"] = truth.states[0, :, :2] if planar else np.column_stack([truth.times, truth.states[0, :, 0]])
+    if planar and scenario.detections is not None and scenario.detections_format == "sonar":
+        from .recorded.sonar import load_sonar_recording
+
+        own = load_sonar_recording(scenario.detections).own_ship
+        if own is not None:  # the recording's own ship: where its detections were measured from
+            data["own_ship_xy"] = own.position
     for name, est in estimates.items():
         data[f"track_{name}"] = est.mean[0, :, :2] if planar else np.column_stack([scans.times, est.mean[0, :, 0]])
     for name, log in logs.items():
@@ -481,6 +487,8 @@ def _draw(data: Mapping[str, np.ndarray], fig) -> None:
     ax1.plot(d[:, 0], d[:, 1], ".", color="0.7", ms=3, label="detections")
     if "truth_xy" in data:
         ax1.plot(data["truth_xy"][:, 0], data["truth_xy"][:, 1], "k-", label="truth")
+    if "own_ship_xy" in data:
+        ax1.plot(data["own_ship_xy"][:, 0], data["own_ship_xy"][:, 1], "--", color="tab:green", label="own ship")
     for key, value in data.items():
         if key.startswith("track_"):
             ax1.plot(value[:, 0], value[:, 1], label=key[len("track_"):])

@@ -2,6 +2,8 @@
 range-Doppler candidate lists (:mod:`.pcl`), both validated CSV formats documented in ``docs/recorded-data.md``."""
 
 from .pcl import load_pcl_candidates, write_pcl_candidates
-from .sonar import load_sonar_csv, write_sonar_csv
+from .pcl import PCLMetadata, pcl_metadata
+from .sonar import OwnShip, SonarRecording, load_sonar_csv, load_sonar_recording, write_sonar_csv
 
-__all__ = ["load_sonar_csv", "write_sonar_csv", "load_pcl_candidates", "write_pcl_candidates"]
+__all__ = ["load_sonar_csv", "load_sonar_recording", "write_sonar_csv", "OwnShip", "SonarRecording",
+           "load_pcl_candidates", "write_pcl_candidates", "pcl_metadata", "PCLMetadata"]
