@@ -10,8 +10,9 @@ from workbench.models import constant_velocity, linear_measurement, range_bearin
 from workbench.plugins import load_host
 from workbench.rng import generator
 from workbench.tracking.multi import (CONFIRMED, TENTATIVE, TrackerConfig, TrackLog, box_pairs, detection_covariance,
-                                      gated_pairs, greedy_assign, join_items, mofn_step, position_covariance,
-                                      rectangular_pairs, run_tracker, speed_course_prior, take_items, two_point_prior)
+                                      gated_pairs, greedy_assign, join_items, measurement_covariance, mofn_step,
+                                      position_covariance, rectangular_pairs, run_tracker, speed_course_prior,
+                                      take_items, two_point_prior)
 from workbench.types import CLUTTER, Gaussian, InputError, Scans
 
 HOST = load_host()
@@ -281,3 +282,85 @@ def test_tracker_never_reads_origin_is_reproducible_and_checks_its_input():
                     MOTION, model)
     with pytest.raises(InputError, match="detection_covariance"):
         run_tracker(scans, HOST.filter("ukf"), MOTION, model, TrackerConfig(detection_sigma=2.0))
+
+
+# -- each detection's own covariance (Scan.cov) ---------------------------------------------------------------
+
+
+def test_per_detection_gate_is_the_pairwise_mahalanobis_distance():
+    # brute force: d2_kj = nu^T (J P J^T + J_h C_j J_h^T)^-1 nu, every pair, on both gate paths
+    rng = generator(12, "own-cov gate")
+    K, M = 15, 400
+    mean = np.column_stack([rng.uniform(-200, 200, (K, 2)), rng.normal(0, 3, (K, 2))])
+    est = Gaussian(mean, np.repeat(np.diag([9.0, 4.0, 4.0, 4.0])[None], K, 0))
+    pos = rng.uniform(-220, 220, (M, 2))
+    pos[:30] = mean[:, :2].repeat(2, 0) + rng.normal(0, 3, (30, 2))
+    a = rng.normal(0, 1.5, (M, 2, 2))
+    C = a @ np.swapaxes(a, 1, 2) + 0.5 * np.eye(2)  # each detection its own, correlated, covariance
+    for model in (range_bearing(0.5, np.deg2rad(1.0)), linear_measurement(np.eye(2, 4), 4 * np.eye(2))):
+        zm = model.h(np.column_stack([pos, np.zeros((M, 2))]))
+        R = measurement_covariance(model, pos, 4, C)
+        J = np.stack([model.jacobian(m[None])[0] if model.jacobian is not None else model.H for m in mean])
+        ref = {}
+        for k in range(K):
+            for j in range(M):
+                nu = model.residual(zm[j], model.h(mean[k][None])[0])
+                S = J[k] @ est.cov[k] @ J[k].T + R[j]
+                d2 = float(nu @ np.linalg.solve(S, nu))
+                if d2 <= 9.21:
+                    ref[(k, j)] = d2
+        assert ref
+        for cfg in (TrackerConfig(), TrackerConfig(dense_limit=0)):
+            rows, cols, d2 = gated_pairs(est, pos, zm, model, cfg, R)
+            got = dict(zip(zip(rows.tolist(), cols.tolist()), d2))
+            assert got.keys() == ref.keys()
+            assert all(np.isclose(got[p], ref[p], rtol=1e-9) for p in ref)
+
+
+def test_scan_covariances_equal_to_a_stated_accuracy_track_as_detection_sigma():
+    # C_j = s^2 I for every detection is detection_sigma = s: the same tracks, ping by ping
+    scans, _ = _two_targets(runs=2, clutter=15)
+    s = 1.5
+    cov = np.broadcast_to(s * s * np.eye(2), (*scans.z.shape[:3], 2, 2)).copy()
+    own = Scans(scans.z, scans.valid, scans.times, origin=scans.origin, cov=cov)
+    sensor = HOST.sensor("active-sonar")
+    for name, frame in (("kf", "cartesian"), ("cmkf-l", "polar")):
+        model = sensor.measurement_model(frame=frame, sigma_xy=1.0)
+        a = run_tracker(scans, HOST.filter(name), MOTION, model, TrackerConfig(detection_sigma=s), seed=4)
+        b = run_tracker(own, HOST.filter(name), MOTION, model, TrackerConfig(), seed=4)
+        for key, value in a.to_arrays().items():
+            assert np.allclose(value, b.to_arrays()[key], rtol=1e-9, atol=1e-9), (name, key)
+        # and they differ from tracking with the model's own R, so the covariances are read
+        c = run_tracker(scans, HOST.filter(name), MOTION, model, TrackerConfig(), seed=4)
+        assert c.mean.shape != b.mean.shape or not np.allclose(c.mean, b.mean)
+
+
+def test_per_detection_covariance_weights_the_update():
+    # one confirmed-path track, one detection a ping: a detection stated as 100x less accurate moves the
+    # estimate 100x less (in the linear position model with a known prediction)
+    scans, _ = _two_targets(runs=1, clutter=0)
+    model = HOST.sensor("active-sonar").measurement_model(frame="cartesian", sigma_xy=1.0)
+    cov = np.broadcast_to(np.eye(2), (*scans.z.shape[:3], 2, 2)).copy()
+    cov[0, -1] *= 1e6  # the last ping's detections are stated as 1 km accurate
+    own = Scans(scans.z, scans.valid, scans.times, cov=cov)
+    ref = Scans(scans.z, scans.valid, scans.times, cov=np.broadcast_to(np.eye(2), cov.shape).copy())
+    a = run_tracker(own, HOST.filter("kf"), MOTION, model, TrackerConfig(gate=1e9), seed=5)
+    b = run_tracker(ref, HOST.filter("kf"), MOTION, model, TrackerConfig(gate=1e9), seed=5)
+    last = scans.steps - 1
+    pa, pb = a.mean[a.ping == last], b.mean[b.ping == last]
+    prev = b.mean[b.ping == last - 1]
+    predicted = prev[:, :2] + prev[:, 2:]  # dt = 1
+    # the inaccurate detection barely moves the estimate off the prediction; the accurate one pulls it in
+    assert np.all(np.linalg.norm(pa[:, :2] - predicted, axis=1) < 1e-3 * np.linalg.norm(pb[:, :2] - predicted,
+                                                                                       axis=1) + 1e-9)
+
+
+def test_scan_covariances_are_refused_beside_detection_sigma_or_by_a_filter_that_ignores_them():
+    scans, _ = _two_targets(runs=1, clutter=2)
+    cov = np.broadcast_to(np.eye(2), (*scans.z.shape[:3], 2, 2)).copy()
+    own = Scans(scans.z, scans.valid, scans.times, cov=cov)
+    model = HOST.sensor("active-sonar").measurement_model(frame="cartesian")
+    with pytest.raises(InputError, match="detection_sigma"):
+        run_tracker(own, HOST.filter("kf"), MOTION, model, TrackerConfig(detection_sigma=2.0))
+    with pytest.raises(InputError, match="detection_covariance"):
+        run_tracker(own, HOST.filter("ukf"), MOTION, model)

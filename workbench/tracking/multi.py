@@ -26,6 +26,9 @@ Options (:class:`TrackerConfig`): ``gate_sigma`` gates with a stated position ac
 filter's ``R``; ``detection_sigma`` gives every detection the stated covariance ``s^2 I`` in position (for
 the gate, the two-point prior and, through ``Scan.cov``, the update of a filter with the
 ``detection_covariance`` capability); ``min_speed`` keeps slow tracks from confirmation (stationary clutter).
+Scans that carry each detection's own Cartesian covariance ``C_j`` (``Scan.cov``, a recording's stated
+accuracy) are used the same way, per detection: gate ``S_kj = J P- J^T + J_h C_j J_h^T``, the two-point
+prior from the two detections' ``C``, and the update; ``detection_sigma`` beside them is refused.
 
 Detections are Cartesian positions ``(x, y)``; the filter sees them through the measurement model as
 ``h(p)`` with ``p = [x, y, 0, ...]`` (:func:`measurement_view`).  That is exact for models whose ``h``
@@ -77,6 +80,7 @@ __all__ = [
     "two_point_prior",
     "speed_course_prior",
     "detection_covariance",
+    "measurement_covariance",
     "PRIORS",
     "box_pairs",
     "gate_covariance",
@@ -189,6 +193,7 @@ class TrackerState:
     candidates: np.ndarray  # (P, 2) initiation detections of the last ping not used by a new track
     next_id: int = 0
     ping: int = -1
+    candidate_cov: np.ndarray | None = None  # (P, 2, 2) their own position covariances, where the scans carry them
 
 
 @dataclass(frozen=True)
@@ -333,10 +338,17 @@ def speed_course_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, pos_cov
 def detection_covariance(model: MeasurementModel, positions: np.ndarray, n: int, sigma: float) -> np.ndarray:
     """Each detection's covariance in the model's measurement space when its position accuracy is ``sigma`` per
     axis: ``J_h(p) (sigma^2 I) J_h(p)^T``, ``J_h = dh/dp`` at the detection.  ``(M, 2) -> (M, m, m)``."""
+    return measurement_covariance(model, positions, n, np.broadcast_to(sigma * sigma * np.eye(2),
+                                                                       (positions.shape[0], 2, 2)))
+
+
+def measurement_covariance(model: MeasurementModel, positions: np.ndarray, n: int, pos_cov: np.ndarray) -> np.ndarray:
+    """Each detection's covariance in the model's measurement space from its own Cartesian position covariance
+    ``C_j``: ``J_h(p_j) C_j J_h(p_j)^T``, ``J_h = dh/dp`` at the detection.  ``(M, 2), (M, 2, 2) -> (M, m, m)``."""
     state = np.zeros((positions.shape[0], n))
     state[:, :2] = positions
     jp = _jacobian(model, state)[:, :, :2]
-    out = sigma * sigma * (jp @ np.swapaxes(jp, -1, -2))
+    out = jp @ pos_cov @ np.swapaxes(jp, -1, -2)
     return 0.5 * (out + np.swapaxes(out, -1, -2))
 
 
@@ -413,15 +425,20 @@ def box_pairs(a: np.ndarray, b: np.ndarray, half, cell: float | None = None) -> 
     return i[inside], j[inside]
 
 
-def gate_covariance(est: Gaussian, model: MeasurementModel, config: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+def gate_covariance(est: Gaussian, model: MeasurementModel, config: TrackerConfig,
+                    per_detection: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Gate innovation covariance ``S = J P- J^T + R_g`` and the Jacobian ``J`` at the prediction.
 
     ``R_g = R`` (the filter's), or ``J_p (s^2 I) J_p^T`` with ``J_p = dh/dp`` and ``s = config.gate_sigma``
-    (else ``config.detection_sigma``) when one is set.  Shapes: ``(K, m, m)``, ``(K, m, n)``.
+    (else ``config.detection_sigma``) when one is set.  ``per_detection`` (and no ``gate_sigma``): ``R_g = 0``,
+    each detection's own covariance is added per pair by :func:`gated_pairs`.  Shapes: ``(K, m, m)``,
+    ``(K, m, n)``.
     """
     J = _jacobian(model, est.mean)
     sigma = config.gate_sigma if config.gate_sigma is not None else config.detection_sigma
-    if sigma is None:
+    if per_detection and config.gate_sigma is None:
+        R = 0.0
+    elif sigma is None:
         R = model.R
     else:
         jp = J[:, :, :2]
@@ -457,33 +474,43 @@ def _measurement_boxes(zhat: np.ndarray, half: np.ndarray, angular: np.ndarray):
 
 
 def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: MeasurementModel,
-                config: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                config: TrackerConfig, det_cov: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(track, detection, d2)`` for every pair inside the gate; see the module docstring.
 
     ``est`` are the predictions ``(K, n)``, ``positions (M, 2)`` the Cartesian detections and ``zm (M, m)`` the
-    same in the model's measurement space.  At most ``dense_limit`` pairs: every pair's ``d2``.  Above: a
+    same in the model's measurement space.  ``det_cov (M, m, m)``: each detection's own covariance in the
+    measurement space; unless ``config.gate_sigma`` is set, pair ``(k, j)`` is gated with
+    ``S_kj = J_k P_k J_k^T + det_cov_j``.  At most ``dense_limit`` pairs: every pair's ``d2``.  Above: a
     pair's residual satisfies ``|nu_i| <= sqrt(gate S_ii)`` on each axis inside the gate ellipse, so the
     candidates are the detections inside that box around ``h(x-)`` in the measurement space (angular
-    components wrapped; :func:`_grid_query`), and ``d2`` is computed for them only: the same pairs and
-    values as the dense computation.
+    components wrapped; :func:`_grid_query`; with ``det_cov``, ``S_ii`` bounded by the largest detection's),
+    and ``d2`` is computed for them only: the same pairs and values as the dense computation.
     """
     K, M = est.batch, zm.shape[0]
     if K == 0 or M == 0:
         e = np.zeros(0, dtype=np.intp)
         return e, e, np.zeros(0)
     zhat = model.h(est.mean)
-    S, J = gate_covariance(est, model, config)
-    chol = np.linalg.cholesky(S)
+    pair_cov = det_cov is not None and config.gate_sigma is None
+    S, J = gate_covariance(est, model, config, per_detection=pair_cov)
     if K * M <= config.dense_limit:
         nu = model.residual(zm[None, :, :], zhat[:, None, :])  # (K, M, m)
-        w = _whiten(chol[:, None], nu)  # L^-1 nu
+        if pair_cov:
+            Skj = S[:, None] + det_cov[None]  # S_kj = J P- J^T + R_j
+            chol = np.linalg.cholesky(0.5 * (Skj + np.swapaxes(Skj, -1, -2)))
+            w = _whiten(chol, nu)
+        else:
+            w = _whiten(np.linalg.cholesky(S)[:, None], nu)  # L^-1 nu
         d2 = np.einsum("kmi,kmi->km", w, w)
         rows, cols = np.nonzero(d2 <= config.gate)
         return rows, cols, d2[rows, cols]
     if model.dim != 2:
         raise InputError(f"the tracker needs a 2-component measurement model, got m={model.dim}")
     # |nu_i| <= sqrt(gate S_ii) inside the gate; widened by a relative 1e-9 (the d2 test decides)
-    half = np.sqrt(config.gate * np.maximum(np.diagonal(S, axis1=1, axis2=2), 0.0)) * (1.0 + 1e-9) + 1e-12
+    diag = np.diagonal(S, axis1=1, axis2=2)
+    if pair_cov:
+        diag = diag + np.max(np.diagonal(det_cov, axis1=1, axis2=2), axis=0)
+    half = np.sqrt(config.gate * np.maximum(diag, 0.0)) * (1.0 + 1e-9) + 1e-12
     track, lo, hi = _measurement_boxes(zhat.astype(float), half, model.angle_mask)
     cell = 0.25 * np.median(2.0 * half, axis=0)
     rows, cols = _grid_query(lo, hi, np.asarray(zm, dtype=float), cell)
@@ -495,15 +522,28 @@ def gated_pairs(est: Gaussian, positions: np.ndarray, zm: np.ndarray, model: Mea
     # per-detection factors are gathered from contiguous copies
     z0, z1 = np.ascontiguousarray(zm[:, 0]), np.ascontiguousarray(zm[:, 1])
     h0, h1 = np.ascontiguousarray(zhat[:, 0]), np.ascontiguousarray(zhat[:, 1])
-    l00, l10, l11 = (np.ascontiguousarray(chol[:, i, j]) for i, j in ((0, 0), (1, 0), (1, 1)))
     nu0 = z0[cols] - h0[rows]
     nu1 = z1[cols] - h1[rows]
     if model.angle_mask[0]:
         nu0 = wrap_angle(nu0)
     if model.angle_mask[1]:
         nu1 = wrap_angle(nu1)
-    w1 = nu0 / l00[rows]
-    w2 = (nu1 - l10[rows] * w1) / l11[rows]
+    if pair_cov:
+        # the 2x2 Cholesky factor of S_kj = S_k + R_j per pair: l00 = sqrt(s00), l10 = s10 / l00,
+        # l11 = sqrt(s11 - l10^2)
+        s00 = S[rows, 0, 0] + det_cov[cols, 0, 0]
+        s10 = 0.5 * (S[rows, 1, 0] + S[rows, 0, 1] + det_cov[cols, 1, 0] + det_cov[cols, 0, 1])
+        s11 = S[rows, 1, 1] + det_cov[cols, 1, 1]
+        l00 = np.sqrt(s00)
+        l10 = s10 / l00
+        l11 = np.sqrt(s11 - l10 * l10)
+        w1 = nu0 / l00
+        w2 = (nu1 - l10 * w1) / l11
+    else:
+        chol = np.linalg.cholesky(S)
+        l00, l10, l11 = (np.ascontiguousarray(chol[:, i, j]) for i, j in ((0, 0), (1, 0), (1, 1)))
+        w1 = nu0 / l00[rows]
+        w2 = (nu1 - l10[rows] * w1) / l11[rows]
     d2 = w1 * w1 + w2 * w2
     inside = d2 <= config.gate
     return rows[inside], cols[inside], d2[inside]
@@ -662,19 +702,28 @@ def _predict_tracks(st: TrackerState, filt: FilterSpec, motion: MotionModel, rng
     return filt.predict(st.table.state, motion, rng) if st.table.size else None
 
 
-def _check_filter(filt: FilterSpec, config: TrackerConfig) -> None:
+def _check_filter(filt: FilterSpec, config: TrackerConfig, own_cov: bool = False) -> None:
     if config.detection_sigma is not None and "detection_covariance" not in filt.capabilities:
         raise InputError(f"tracker: detection_sigma hands each detection's covariance to the filter, which filter "
+                         f"{filt.name!r} would ignore (it lacks the detection_covariance capability)")
+    if own_cov and config.detection_sigma is not None:
+        raise InputError("tracker: the detections carry their own covariances (Scan.cov) and detection_sigma states "
+                         "another; give one of the two")
+    if own_cov and "detection_covariance" not in filt.capabilities:
+        raise InputError(f"tracker: the detections carry their own covariances (Scan.cov), which filter "
                          f"{filt.name!r} would ignore (it lacks the detection_covariance capability)")
 
 
 def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, motion: MotionModel,
                  model: MeasurementModel, config: TrackerConfig, rng: np.random.Generator,
-                 predicted: Any = None) -> tuple[TrackerState, PingTracks]:
+                 predicted: Any = None, position_cov: np.ndarray | None = None) -> tuple[TrackerState, PingTracks]:
     """Process one ping's Cartesian detections ``positions (M, 2)``; see the module docstring.
 
     ``predicted`` is the live tracks' filter state already predicted to this ping (by :func:`_predict_tracks`);
-    ``None`` predicts here.
+    ``None`` predicts here.  ``position_cov (M, 2, 2)``: each detection's own Cartesian position covariance
+    ``C_j`` (a recording's stated accuracy); it takes the place of ``detection_sigma`` everywhere: the gate
+    (``S_kj = J P- J^T + J_h C_j J_h^T``, unless ``gate_sigma``), the update (``Scan.cov``) and the two-point
+    prior.
     """
     positions = np.asarray(positions, dtype=float).reshape(-1, 2)
     if not np.all(np.isfinite(positions)):
@@ -682,16 +731,22 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
     n = motion.dim
     if n != 4:
         raise InputError(f"tracker: the state must be [x, y, vx, vy] (n = 4), got a motion model with n = {n}")
-    _check_filter(filt, config)
+    _check_filter(filt, config, own_cov=position_cov is not None)
     k = st.ping + 1
     table = st.table
     K, M = table.size, positions.shape[0]
     zm = measurement_view(model, positions, n) if M else np.zeros((0, model.dim))
+    det_cov = None
+    if position_cov is not None:
+        position_cov = np.asarray(position_cov, dtype=float).reshape(M, 2, 2)
+        if not np.all(np.isfinite(position_cov)):
+            raise InputError(f"tracker: ping {k} holds a non-finite detection covariance")
+        det_cov = measurement_covariance(model, positions, n, position_cov) if M else np.zeros((0, 2, 2))
     near = np.zeros(M, dtype=bool)
     if K:
         state = predicted if predicted is not None else filt.predict(table.state, motion, rng)
         pred = filt.estimate(state)
-        rows, cols, d2 = gated_pairs(pred, positions, zm, model, config)
+        rows, cols, d2 = gated_pairs(pred, positions, zm, model, config, det_cov)
         near[cols] = True
         a_rows, a_cols = greedy_assign(rows, cols, d2)
         hit = np.zeros(K, dtype=bool)
@@ -699,9 +754,10 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         z = np.zeros((K, 1, model.dim))
         z[a_rows, 0] = zm[a_cols]
         cov = None
-        if config.detection_sigma is not None:  # each detection's own covariance, in the measurement space
+        if config.detection_sigma is not None or det_cov is not None:  # each detection's own covariance
             cov = np.broadcast_to(np.eye(model.dim), (K, 1, model.dim, model.dim)).copy()
-            cov[a_rows, 0] = detection_covariance(model, positions[a_cols], n, config.detection_sigma)
+            cov[a_rows, 0] = (det_cov[a_cols] if det_cov is not None
+                              else detection_covariance(model, positions[a_cols], n, config.detection_sigma))
         state = filt.update(state, Scan(z, hit[:, None], cov=cov), model, rng)
         mean = filt.estimate(state).mean
         slow = None if config.min_speed is None else np.hypot(mean[:, 2], mean[:, 3]) < config.min_speed
@@ -715,6 +771,7 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         hits_out = np.zeros(0, dtype=bool)
     # initiation from the unclaimed detections of this ping and the last
     init_pos = positions[~near]
+    init_cov = None if position_cov is None else position_cov[~near]
     pi, ci, dist = rectangular_pairs(st.candidates, init_pos, config.v_max * motion.dt, config.dense_limit)
     a_p, a_c = greedy_assign(pi, ci, dist)
     next_id = st.next_id
@@ -722,7 +779,11 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         order = np.argsort(a_c)  # new tracks in detection order
         a_p, a_c = a_p[order], a_c[order]
         p_prev, p_cur = st.candidates[a_p], init_pos[a_c]
-        if config.detection_sigma is not None:
+        if init_cov is not None:
+            cov_cur = init_cov[a_c]
+            cov_prev = (st.candidate_cov[a_p] if st.candidate_cov is not None
+                        else position_covariance(model, p_prev, n))
+        elif config.detection_sigma is not None:
             cov_cur = np.broadcast_to(config.detection_sigma**2 * np.eye(2), (a_c.size, 2, 2))
             cov_prev = cov_cur
         else:
@@ -752,7 +813,8 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
     used = np.zeros(init_pos.shape[0], dtype=bool)
     used[a_c] = True
     out = PingTracks(k, table.ids.copy(), table.status.copy(), hits_out, table.mean.copy())
-    return TrackerState(table, init_pos[~used], next_id, k), out
+    return TrackerState(table, init_pos[~used], next_id, k,
+                        None if init_cov is None else init_cov[~used]), out
 
 
 @dataclass
@@ -779,7 +841,7 @@ class MofN:
     def start(self, ctx: Context, prior: Gaussian | None, first: Scan) -> _MofNCarry:
         if first.z.shape[-1] != 2:
             raise InputError(f"tracker: detections must be Cartesian (x, y), got dimension {first.z.shape[-1]}")
-        _check_filter(ctx.filter, self.config)
+        _check_filter(ctx.filter, self.config, own_cov=first.cov is not None)
         rows: dict[str, list] = {"run": [], "ping": [], "track_id": [], "status": [], "hit": [], "mean": []}
         return _MofNCarry(ctx, [initial_state(ctx.motion.dim) for _ in range(ctx.batch)], [None] * ctx.batch,
                           [generator(self.seed, *self.key, b) for b in range(ctx.batch)], rows, ctx.motion)
@@ -794,7 +856,8 @@ class MofN:
         ctx = carry.ctx
         for b in range(ctx.batch):
             st, out = tracker_step(carry.states[b], scan.z[b][scan.valid[b]], ctx.filter, carry.motion, ctx.model,
-                                   self.config, carry.rngs[b], predicted=carry.predicted[b])
+                                   self.config, carry.rngs[b], predicted=carry.predicted[b],
+                                   position_cov=None if scan.cov is None else scan.cov[b][scan.valid[b]])
             carry.states[b], carry.predicted[b] = st, None
             K = out.ids.shape[0]
             carry.rows["run"].append(np.full(K, b))
