@@ -33,7 +33,6 @@ single-target :class:`~workbench.tracking.Track`, mean and covariance per run an
 from __future__ import annotations
 
 import csv
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +43,7 @@ import numpy as np
 from .models import MotionModel
 from .tracking.loop import Track
 from .tracking.multi import CONFIRMED, TENTATIVE, TrackLog
+from .textfields import finite_number
 from .types import InputError
 
 __all__ = ["FORMAT", "VERSION", "TrackFile", "state_layout", "write_tracks", "write_track_log", "write_track",
@@ -411,12 +411,12 @@ def read_tracks(path) -> TrackFile:
         rows["run"].append(run)
         rows["track"].append(track)
         rows["step"].append(step)
-        rows["time"].append(_number(fields[3], where("time")))
+        rows["time"].append(finite_number(fields[3], where("time")))
         rows["status"].append(_STATUS_CODE[status])
         rows["updated"].append(int(upd) if upd else -1)
-        rows["mean"].append([_number(fields[6 + i], where(names[i])) for i in range(n)])
+        rows["mean"].append([finite_number(fields[6 + i], where(names[i])) for i in range(n)])
         if with_cov:
-            tri = [_number(fields[6 + n + k], where(expected[6 + n + k])) for k in range(len(iu[0]))]
+            tri = [finite_number(fields[6 + n + k], where(expected[6 + n + k])) for k in range(len(iu[0]))]
             c = np.zeros((n, n))
             c[iu] = tri
             c.T[iu] = tri
@@ -434,14 +434,3 @@ def _integer(text: str, where: str) -> int:
     if not re.fullmatch(r"\d+", text):
         raise InputError(f"{where}: expected an integer >= 0, got {text!r}")
     return int(text)
-
-
-def _number(text: str, where: str) -> float:
-    text = text.strip()
-    try:
-        value = float(text)
-    except ValueError:
-        raise InputError(f"{where}: expected a finite number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise InputError(f"{where}: expected a finite number, got {text!r}")
-    return value

@@ -12,33 +12,13 @@ import numba
 import numpy as np
 
 from .counter_normals_numba import row_normals
-from .crpf_step_numpy import ATAN_P, ATAN_Q, TAN_PI_8, TWO_PI
+from .crpf_step_numpy import TWO_PI
+from .particle_numba import atan2  # the select-only atan2 (Cephes' rational approximation) both kernels use
 
-p0, p1, p2, p3, p4 = ATAN_P
-q0, q1, q2, q3, q4 = ATAN_Q
-tan_pi_8, pi, two_pi = TAN_PI_8, math.pi, TWO_PI
+pi, two_pi = math.pi, TWO_PI
 # error_model="numpy": a float division by zero gives inf instead of raising, so the loops below
 # carry no exception branch and LLVM can vectorise them; no fastmath (the NaN checks must hold).
 jit = functools.partial(numba.njit, error_model="numpy")
-
-
-@jit(inline="always")
-def atan2(y, x):  # atan2_poly, select by select
-    ax = abs(x)
-    ay = abs(y)
-    swap = ay > ax
-    mx = ay if swap else ax
-    mn = ax if swap else ay
-    a = mn / (mx if mx > 0.0 else 1.0)
-    big = a > tan_pi_8
-    t = (a - 1.0 if big else a) / (a + 1.0 if big else 1.0)
-    z = t * t
-    r = t + t * z * ((((p0 * z + p1) * z + p2) * z + p3) * z + p4) / (((((z + q0) * z + q1) * z + q2) * z + q3)
-                                                                        * z + q4)
-    r = r + (0.25 * pi if big else 0.0)
-    r = 0.5 * pi - r if swap else r
-    r = pi - r if math.copysign(1.0, x) < 0.0 else r  # the sign bit: atan2(+-0, -0) = +-pi
-    return math.copysign(r, y)
 
 
 @jit(inline="always")

@@ -43,7 +43,7 @@ from typing import Iterable
 import numpy as np
 
 from ..sensing.bistatic import doppler_to_range_rate, range_rate_to_doppler, wavelength
-from .sonar import finite_number
+from ..textfields import finite_number, read_text
 from ..types import InputError, Scans
 
 __all__ = ["COLUMNS", "PCLMetadata", "pcl_metadata", "load_pcl_candidates", "write_pcl_candidates"]
@@ -69,12 +69,7 @@ class PCLMetadata:
 
 
 def _read_text(path: Path) -> str:
-    try:
-        return path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the candidate file ({exc.strerror or exc})") from None
+    return read_text(path, "candidate file")
 
 
 def _metadata(path: Path, text: str) -> PCLMetadata:

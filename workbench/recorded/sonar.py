@@ -38,6 +38,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..textfields import finite_number, read_text
 from ..types import InputError, Scans
 
 __all__ = ["SONAR_COLUMNS", "OwnShip", "SonarRecording", "load_sonar_recording", "load_sonar_csv",
@@ -78,31 +79,12 @@ class SonarRecording:
     bearing: str = "true"
 
 
-def finite_number(text: str, where: str) -> float:
-    """Parse one CSV field as a finite float; ``where`` (file, line, column) goes into the error."""
-    text = text.strip()
-    try:
-        value = float(text)
-    except ValueError:
-        raise InputError(f"{where}: expected a finite number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise InputError(f"{where}: expected a finite number, got {text!r}")
-    return value
-
-
 def _where(path: Path, line: int, column: str | None = None) -> str:
     return f"{path} line {line}" + (f", column {column!r}" if column else "")
 
 
 def _read_text(path: Path) -> str:
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    try:
-        return path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the sonar file ({exc.strerror or exc})") from None
+    return read_text(path, "sonar file")
 
 
 def _bearing_reference(path: Path, lines: list[str]) -> str:
