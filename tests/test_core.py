@@ -44,6 +44,48 @@ def test_scans_merge_slice_and_strip_origin():
         both.with_valid(np.zeros((2, 3), bool))
 
 
+def test_merge_all_equals_pairwise_concatenation_and_releases_its_inputs():
+    import gc
+    import weakref
+
+    rng = np.random.default_rng(4)
+    t = np.arange(4.0)
+    parts = []
+    for m, snr in ((1, True), (3, False), (2, True)):
+        valid = rng.random((2, 4, m)) < 0.7
+        parts.append(Scans(rng.normal(size=(2, 4, m, 2)), valid, t,
+                           snr=rng.normal(size=(2, 4, m)) if snr else None, origin=np.zeros((2, 4, m), int)))
+    ref = parts[0].merge(parts[1]).merge(parts[2])
+    # by hand: every field concatenated along M, snr NaN where a part had none, padding zeroed
+    z = np.concatenate([np.where(p.valid[..., None], p.z, 0.0) for p in parts], axis=2)
+    snr = np.concatenate([p.snr if p.snr is not None else np.full(p.valid.shape, np.nan) for p in parts], axis=2)
+    assert np.array_equal(ref.z, z) and np.array_equal(ref.snr, snr, equal_nan=True) and ref.doppler is None
+    watch = [weakref.ref(p.z) for p in parts]
+    lst = list(parts)
+    del parts
+    got = Scans.merge_all(lst)
+    assert lst == []  # emptied: the caller's list no longer holds the inputs
+    for name in ("z", "valid", "snr", "origin"):
+        assert np.array_equal(getattr(got, name), getattr(ref, name), equal_nan=True), name
+    del ref
+    gc.collect()
+    assert all(w() is None for w in watch)  # the inputs were released
+    with pytest.raises(InputError, match="empty"):
+        Scans.merge_all([])
+    with pytest.raises(InputError, match="time stamps"):
+        Scans.merge_all([got, Scans(got.z, got.valid, got.times + 1.0)])
+
+
+def test_scans_do_not_copy_clean_padding_but_zero_dirty_padding():
+    z = np.ones((1, 2, 2, 2))
+    valid = np.array([[[True, False], [True, True]]])
+    dirty = Scans(z, valid, np.arange(2.0))
+    assert np.array_equal(dirty.z[0, 0, 1], [0.0, 0.0]) and np.array_equal(z[0, 0, 1], [1.0, 1.0])  # caller's kept
+    z[0, 0, 1] = 0.0
+    clean = Scans(z, valid, np.arange(2.0))
+    assert np.array_equal(clean.z, z)
+
+
 # -- linear algebra -----------------------------------------------------------------------------------
 
 def test_wrap_angle_interval():

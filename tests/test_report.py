@@ -73,6 +73,30 @@ def test_quick_report_declares_nothing_met_and_shows_n_interval_and_verdict(tmp_
     assert "<td>kf, ekf</td>" in published  # a tuple, joined readably
 
 
+def test_scoreboard_moves_the_statistics_sentence_into_its_columns(tmp_path, demo_host):
+    from workbench.criteria import RUNS_DETAIL, criterion_from_counts, criterion_from_runs
+    from workbench.report.html import scoreboard_detail
+
+    runs = criterion_from_runs("a", "mean below 2", np.linspace(0.0, 2.0, 50), np.mean, 2.0, "<=", min_n=30,
+                               detail_fmt="paired runs; " + RUNS_DETAIL)
+    counts = criterion_from_counts("b", "share", 45, 50, 0.8, ">=", min_n=40,
+                                   detail_fmt="{k} of {n} held. ours {k}/{n} = {ours:.4g}, {pct:g} % interval "
+                                              "[{lo:.4g}, {hi:.4g}] (exact, Clopper-Pearson); passes if {threshold}; "
+                                              "needs n >= {min_n}. Runs 3 and 7 lost.")
+    text, method, min_n = scoreboard_detail(counts.detail)
+    assert (text, method, min_n) == ("45 of 50 held. Runs 3 and 7 lost.", "exact, Clopper-Pearson", "40")
+    assert scoreboard_detail("no statistics here") == ("no statistics here", None, None)
+    # the demo paper's full report: the interval column names its method, the n column the runs needed, and the
+    # criterion column no longer repeats them
+    run_report(demo_host, tmp_path, papers=["demo"], size="full", seed=3, progress=False)
+    index = (tmp_path / "index.html").read_text()
+    board = index[index.index("id='paperdemo-scoreboard'"):index.index("id='paperdemo-differs'")]
+    crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
+    assert "passes if" in crit["2"]["detail"] and "passes if" not in board  # summary.json keeps it whole
+    assert "percentile bootstrap over n = 100 runs" in board and "needs &ge;" in board
+    assert runs.detail.startswith("paired runs; ours ") and scoreboard_detail(runs.detail)[0] == "paired runs"
+
+
 def test_full_report_gives_firm_verdicts(tmp_path, demo_host):
     run_report(demo_host, tmp_path, papers=["demo"], size="full", seed=3, progress=False)
     crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))

@@ -250,11 +250,13 @@ def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):
     valid = _array(f"{cls_name}.valid", valid, lead + 1, dtype=bool)
     if valid.shape != z.shape[:-1]:
         raise InputError(f"{cls_name}.valid must have shape {z.shape[:-1]} to match z {z.shape}, got {valid.shape}")
-    if not np.all(np.isfinite(z[valid])):
-        rows = np.argwhere(valid & ~np.all(np.isfinite(z), axis=-1))
+    # (B, T, M)-sized boolean temporaries only: a full-size scan series is not copied to be checked
+    bad = valid & ~np.all(np.isfinite(z), axis=-1)
+    if bad.any():
         raise InputError(f"{cls_name}.z holds NaN or inf in a valid measurement at index "
-                         f"{tuple(int(i) for i in rows[0])}; mark padding rows invalid instead")
-    out = {"z": np.where(valid[..., None], z, 0.0), "valid": valid}
+                         f"{tuple(int(i) for i in np.argwhere(bad)[0])}; mark padding rows invalid instead")
+    dirty = ~valid & np.any(z != 0.0, axis=-1)  # padding rows not yet zeroed (NaN counts as not zero)
+    out = {"z": np.where(valid[..., None], z, 0.0) if dirty.any() else z, "valid": valid}
     for key, value in extra.items():
         if value is None:
             out[key] = None
@@ -427,30 +429,47 @@ class Scans:
 
     def merge(self, other: "Scans") -> "Scans":
         """Concatenate the detections of two scan series along the detection axis ``M``."""
-        if other.z.shape[:2] != self.z.shape[:2] or other.z.shape[3] != self.z.shape[3]:
-            raise InputError(f"cannot merge scans of shapes {self.z.shape} and {other.z.shape}")
+        return Scans.merge_all([self, other])
 
-        def cat(a, b, fill):
-            if a is None and b is None:
-                return None
-            a = np.full(self.valid.shape, fill) if a is None else a
-            b = np.full(other.valid.shape, fill) if b is None else b
-            return np.concatenate([a, b], axis=2)
+    @staticmethod
+    def merge_all(parts: list) -> "Scans":
+        """Concatenate the detections of every scan series in ``parts`` along ``M``, emptying the list.
 
-        def cat_cov(a, b):
-            if a is None and b is None:
-                return None
-            if a is None or b is None:
-                raise InputError("cannot merge a scan series that carries per-detection covariances (cov) with one "
-                                 "that does not; give both, or neither")
-            return np.concatenate([a, b], axis=2)
-
-        if not np.allclose(self.times, other.times, rtol=1e-12, atol=1e-9):
-            raise InputError("cannot merge scan series with different time stamps")
-        return Scans(np.concatenate([self.z, other.z], axis=2), np.concatenate([self.valid, other.valid], axis=2),
-                     self.times, cat(self.snr, other.snr, np.nan), cat(self.doppler, other.doppler, np.nan),
-                     cat(self.origin, other.origin, CLUTTER), cat_cov(self.cov, other.cov),
-                     cat(self.clutter_density, other.clutter_density, np.nan))
+        Each field's inputs are released as soon as its output is built, so where the list holds the only
+        references (``Scans.merge_all([sensor.simulate(...), clutter.generate(...)])``) a merge of full-size series
+        holds the inputs plus one output field, not the inputs plus every output.  A field missing from some parts
+        is filled (``snr``, ``doppler``, ``clutter_density``: NaN; ``origin``: ``CLUTTER``); per-detection ``cov``
+        must be given by all parts or none.
+        """
+        if not parts:
+            raise InputError("cannot merge an empty list of scan series")
+        first = other = parts[0]
+        for other in parts[1:]:
+            if other.z.shape[:2] != first.z.shape[:2] or other.z.shape[3] != first.z.shape[3]:
+                raise InputError(f"cannot merge scans of shapes {first.z.shape} and {other.z.shape}")
+            if not np.allclose(first.times, other.times, rtol=1e-12, atol=1e-9):
+                raise InputError("cannot merge scan series with different time stamps")
+        if len({p.cov is None for p in parts}) > 1:
+            raise InputError("cannot merge a scan series that carries per-detection covariances (cov) with one "
+                             "that does not; give both, or neither")
+        names = ("z", "valid", "snr", "doppler", "origin", "cov", "clutter_density")
+        fields = {name: [getattr(p, name) for p in parts] for name in names}
+        shapes = [p.valid.shape for p in parts]
+        times = first.times
+        del first, other
+        parts.clear()  # from here on only ``fields`` holds the inputs
+        fills = {"snr": np.nan, "doppler": np.nan, "origin": CLUTTER, "clutter_density": np.nan}
+        out = {}
+        for name in names:
+            arrays = fields.pop(name)
+            if all(a is None for a in arrays):
+                out[name] = None
+                continue
+            if name in fills:
+                arrays = [np.full(shape, fills[name]) if a is None else a for a, shape in zip(arrays, shapes)]
+            out[name] = np.concatenate(arrays, axis=2)
+            del arrays
+        return Scans(out.pop("z"), out.pop("valid"), times, **out)
 
 
 @dataclass(frozen=True)

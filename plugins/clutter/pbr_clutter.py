@@ -69,26 +69,31 @@ def generate(truth: Truth, rng: np.random.Generator, **params) -> Scans:
     B, T = truth.batch, truth.steps
     lam = wavelength(p["frequency_hz"])
 
+    # the draws in their fixed order, each written straight into its slice of the output (3,000 full-size runs:
+    # no second copy of the candidates is held)
     n_res = rng.poisson(p["residue_rate"], (B, T))
     valid_res, m_res = _block(n_res)
-    r_res = rng.uniform(0.0, p["range_max"], (B, T, m_res))
-    rdot_res = p["residue_sigma_range_rate"] * rng.standard_normal((B, T, m_res))
-    s_res = p["residue_strength_db"] + p["residue_strength_sigma_db"] * rng.standard_normal((B, T, m_res))
+    z_res = np.empty((B, T, m_res, 2))
+    snr_res = np.empty((B, T, m_res))
+    z_res[..., 0] = rng.uniform(0.0, p["range_max"], (B, T, m_res))
+    z_res[..., 1] = p["residue_sigma_range_rate"] * rng.standard_normal((B, T, m_res))
+    snr_res[...] = p["residue_strength_db"] + p["residue_strength_sigma_db"] * rng.standard_normal((B, T, m_res))
 
     n_fa = rng.poisson(p["false_alarm_rate"], (B, T))
     valid_fa, m_fa = _block(n_fa)
-    r_fa = rng.uniform(0.0, p["range_max"], (B, T, m_fa))
+    M = m_res + m_fa
+    z = np.empty((B, T, M, 2))
+    snr = np.empty((B, T, M))
+    z[:, :, :m_res], snr[:, :, :m_res] = z_res, snr_res
+    del z_res, snr_res
+    z[:, :, m_res:, 0] = rng.uniform(0.0, p["range_max"], (B, T, m_fa))
     vmax = p["false_alarm_range_rate_max"]
-    rdot_fa = rng.uniform(-vmax, vmax, (B, T, m_fa))
+    z[:, :, m_res:, 1] = rng.uniform(-vmax, vmax, (B, T, m_fa))
     # strength of an exponential noise cell above the threshold ln(1/Pfa): 10 log10(ln(1/Pfa) + Exp(1))
-    s_fa = 10.0 * np.log10(np.log(1.0 / p["false_alarm_pfa"]) + rng.exponential(1.0, (B, T, m_fa)))
-
-    rng_all = np.concatenate([r_res, r_fa], axis=2)
-    rdot_all = np.concatenate([rdot_res, rdot_fa], axis=2)
+    snr[:, :, m_res:] = 10.0 * np.log10(np.log(1.0 / p["false_alarm_pfa"]) + rng.exponential(1.0, (B, T, m_fa)))
     valid = np.concatenate([valid_res, valid_fa], axis=2)
-    return Scans(np.stack([rng_all, rdot_all], axis=-1), valid, truth.times,
-                 snr=np.concatenate([s_res, s_fa], axis=2),
-                 doppler=range_rate_to_doppler(rdot_all, lam),
+    z[~valid] = 0.0  # padding rows zeroed here, in place
+    return Scans(z, valid, truth.times, snr=snr, doppler=range_rate_to_doppler(z[..., 1], lam),
                  origin=np.full(valid.shape, CLUTTER, dtype=int))
 
 

@@ -313,6 +313,29 @@ def _tally(criteria) -> dict[str, int]:
     return counts
 
 
+#: The statistics sentence :mod:`workbench.criteria` ends or interrupts a criterion's detail with (ours, the
+#: interval and how it was computed, the passing condition, the runs needed).  The scoreboard shows those numbers in
+#: their own columns, so the sentence is taken out of the detail text there (``summary.json`` keeps it whole).
+_STATS_SENTENCE = re.compile(
+    r"(?:^|(?<=[;.])\s*)ours (?:\d+/\d+ = )?[^;]*?, [\d.]+ % interval \[[^\]]*\] \((?P<method>[^)]*)\); "
+    r"passes if .*?; needs n >= (?P<min_n>\d+)\.?")
+
+
+def scoreboard_detail(detail: str) -> tuple[str, str | None, str | None]:
+    """A criterion's detail for the scoreboard: ``(explanation, how the interval was computed, runs needed)``.
+
+    The statistics sentence of :mod:`workbench.criteria` (``ours ..., 95 % interval [...] (method); passes if ...;
+    needs n >= k``) is taken out, since the scoreboard has columns for those numbers; its method and ``k`` are
+    returned for those columns.  A detail without that sentence comes back whole, with ``None, None``.
+    """
+    m = _STATS_SENTENCE.search(detail or "")
+    if m is None:
+        return detail, None, None
+    text = (detail[:m.start()].rstrip(" ;") + (" " if m.start() and detail[m.end():].strip() else "")
+            + detail[m.end():].lstrip(" ;")).strip()
+    return text, m.group("method"), m.group("min_n")
+
+
 # -- sections ------------------------------------------------------------------------------------------------
 
 def _scoreboard(p) -> str:
@@ -333,9 +356,16 @@ def _scoreboard(p) -> str:
             verdict += "<br><span class='ind'>indicative (quick run)</span>"
             if c.quick_verdict == "met":
                 verdict += "<div class='would'>quick-run numbers pass</div>"
-        statement = _esc(c.text) + (f"<div class='detail'>{_esc(c.detail)}</div>" if c.detail else "")
+        explanation, method, min_n = scoreboard_detail(c.detail)
+        statement = _esc(c.text) + (f"<div class='detail'>{_esc(explanation)}</div>" if explanation else "")
         row = [c.id, c.text, c.verdict, c.ours, c.published, c.n, interval, c.threshold or None]
-        cell = [None, statement, verdict, None, None, None, _esc(interval) if interval else "n/a",
+        n_cell = None
+        if min_n is not None and c.n is not None:
+            n_cell = f"{_esc(format_value(c.n))}<div class='detail'>needs &ge; {_esc(min_n)}</div>"
+        interval_cell = _esc(interval) if interval else "n/a"
+        if method and interval:
+            interval_cell += f"<div class='detail'>{_esc(method)}</div>"
+        cell = [None, statement, verdict, None, None, n_cell, interval_cell,
                 _esc(c.threshold) if c.threshold else "n/a"]
         if with_rep:
             row.append(None if c.replication is None else f"{c.replication[0]}/{c.replication[1]}")
