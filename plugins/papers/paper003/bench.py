@@ -42,6 +42,9 @@ __all__ = ["bench", "monte_carlo_wall_time", "crpf_step_cost", "ukf_vs_filterpy"
 _HOST = None
 #: The target for the full primary Monte Carlo (with the reference row) in one process on 2 cores (seconds).
 MC_TARGET_S = 60.0
+#: The speed work's stricter goal for the same Monte Carlo (set when it had neither the reference row nor the
+#: adaptive-variance CRPF); printed as a second target so that a miss is seen.
+MC_STRICT_TARGET_S = 30.0
 #: The target for the paper CRPF step's cost per particle against the previous step's.
 STEP_TARGET_RATIO = 1.2
 
@@ -114,6 +117,11 @@ def monte_carlo_wall_time(size: str = "full", seed: int = 0, values=None) -> dic
                     "note_mc_wall_s": (f"in one process on {os.cpu_count()} cores, warmed up; 1-min load average "
                                        f"{load_before:.2f} before, {out['mc_load_average_1min_after']:.2f} after "
                                        f"(other jobs slow every figure down)")})
+        crpf = sum(float(r["seconds"]) for k, r in results.items() if "crpf" in k)
+        out.update({"target_mc_wall_s_strict": f"<= {MC_STRICT_TARGET_S:g} s", "measured_mc_wall_s_strict": wall,
+                    "met_mc_wall_s_strict": bool(wall <= MC_STRICT_TARGET_S),
+                    "note_mc_wall_s_strict": (f"the same run; the CRPF rows (paper, ablation) take {crpf:.1f} s of its "
+                                              "tasks, the 5,000-particle reference row is part of it")})
     for name in recipe.DEFAULT_FILTERS:
         out[f"mc_filter_s[{name}]"] = sum(float(r["seconds"]) for k, r in results.items()
                                           if k.startswith("mc/") and k.split("/")[2] == name)

@@ -1,0 +1,23 @@
+"""The ``report`` benchmark group measures its child's peak memory: checked on a child of known size."""
+
+import pytest
+
+from workbench_papers import report_bench
+
+FAKE = ("import sys, numpy as np; a = np.ones(300 * 2**20 // 8); a += 1; "
+        "print('paper 900: fake, 0.1 s'); print('paper 901: fake, 0.1 s'); sys.exit(int(a[0]) - 2)")
+
+
+def test_peak_memory_is_the_childs_and_the_target_is_declared(monkeypatch):
+    monkeypatch.setattr(report_bench, "_MAIN", FAKE)
+    out = report_bench.bench(quick=True)
+    # the child held a 300 MiB array: its peak is at least that, and far below the target
+    assert 300 / 1024 <= out["measured_report_peak_memory_gib"] < 1.0
+    assert out["target_report_peak_memory_gib"] == "<= 1.5" and out["met_report_peak_memory_gib"] is True
+    assert out["papers"] == "paper 900, paper 901" and out["size"] == "quick"
+
+
+def test_a_failing_report_fails_the_group(monkeypatch):
+    monkeypatch.setattr(report_bench, "_MAIN", "import sys; print('boom', file=sys.stderr); sys.exit(3)")
+    with pytest.raises(RuntimeError, match="exit 3.*boom"):
+        report_bench.bench(quick=True)
