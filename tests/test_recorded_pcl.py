@@ -12,24 +12,11 @@ from workbench.recorded.pcl import load_pcl_candidates, write_pcl_candidates
 from workbench.rng import generator
 from workbench.sensing.bistatic import doppler_to_range_rate, wavelength
 from workbench.tracking import GATE_99, NearestNeighbour, run, strongest_candidate_prior
-from workbench.types import CLUTTER, InputError, Scans
+from workbench.types import CLUTTER, InputError
+from fixtures.candidates import frames
 
 ROOT = Path(__file__).parents[1]
 LAM = wavelength(701e6)
-
-
-def _frames(cands):
-    T = len(cands)
-    M = max(1, max(len(c) for c in cands))
-    z = np.zeros((1, T, M, 2))
-    valid = np.zeros((1, T, M), bool)
-    origin = np.full((1, T, M), CLUTTER)
-    for k, c in enumerate(cands):
-        for j, (r, rd, o) in enumerate(c):
-            z[0, k, j] = r, rd
-            valid[0, k, j] = True
-            origin[0, k, j] = o
-    return Scans(z, valid, 0.5 * np.arange(T), snr=np.where(valid, 10.0, np.nan), origin=origin)
 
 
 def test_shipped_example_loads_is_labelled_synthetic_and_tracks():
@@ -50,7 +37,7 @@ def test_shipped_example_loads_is_labelled_synthetic_and_tracks():
 
 @pytest.mark.parametrize("columns", ["doppler", "range_rate", "both"])
 def test_write_load_round_trip(tmp_path, columns):
-    scans = _frames([[(445.0, -5.0, 0), (1200.0, 12.0, CLUTTER)], [], [(440.0, -5.1, 0)]])
+    scans = frames([[(445.0, -5.0, 0), (1200.0, 12.0, CLUTTER)], [], [(440.0, -5.1, 0)]])
     path = write_pcl_candidates(tmp_path / "c.csv", scans, comments=["SYNTHETIC test"], columns=columns)
     back = load_pcl_candidates(path)
     np.testing.assert_array_equal(back.valid, scans.valid)
@@ -62,7 +49,7 @@ def test_write_load_round_trip(tmp_path, columns):
 
 def test_write_rejects_an_unknown_column_choice(tmp_path):
     with pytest.raises(InputError, match="columns must be"):
-        write_pcl_candidates(tmp_path / "c.csv", _frames([[(445.0, -5.0, 0)]]), columns="speed")
+        write_pcl_candidates(tmp_path / "c.csv", frames([[(445.0, -5.0, 0)]]), columns="speed")
 
 
 GOOD = "# c\nframe,time_s,bistatic_range_m,doppler_hz,strength_db\n0,0.0,445.0,12.0,18\n0,0.0,900,-3,10\n1,0.5,,,\n"

@@ -14,6 +14,7 @@ from workbench.plugins import load_host
 from workbench.rng import generator
 from workbench.tracking import GATE_99, NearestNeighbour, nearest_candidate, run, strongest_candidate_prior
 from workbench.types import CLUTTER, Gaussian, InputError, Scans
+from fixtures.candidates import frames
 
 MODEL = linear_measurement(np.eye(2), np.diag([15.0 ** 2, 0.5 ** 2]))
 MOTION = range_rate_model(0.5, 1.0)
@@ -28,21 +29,6 @@ def host():
 def nn_track(spec, prior, scans, gate=None, prior_index=None, reinit_after=None, seed=0):
     return run(spec, scans, MOTION, MODEL, association=NearestNeighbour(gate, prior_index, reinit_after),
                prior=prior, rng=generator(seed))
-
-
-def frames(cands):
-    """Scans of one run from per-frame candidate lists ``[(R, Rdot, origin), ...]``."""
-    T = len(cands)
-    M = max(1, max(len(c) for c in cands))
-    z = np.zeros((1, T, M, 2))
-    valid = np.zeros((1, T, M), bool)
-    origin = np.full((1, T, M), CLUTTER)
-    for k, c in enumerate(cands):
-        for j, (r, rd, o) in enumerate(c):
-            z[0, k, j] = r, rd
-            valid[0, k, j] = True
-            origin[0, k, j] = o
-    return Scans(z, valid, 0.5 * np.arange(T), snr=np.where(valid, 10.0, np.nan), origin=origin)
 
 
 def test_nn_picks_nearest_by_mahalanobis_and_nis_is_its_d2(host):
