@@ -93,7 +93,7 @@ def test_scoreboard_moves_the_statistics_sentence_into_its_columns(tmp_path, dem
     board = index[index.index("id='paperdemo-scoreboard'"):index.index("id='paperdemo-differs'")]
     crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
     assert "passes if" in crit["2"]["detail"] and "passes if" not in board  # summary.json keeps it whole
-    assert "percentile bootstrap over n = 100 runs" in board and "needs &ge;" in board
+    assert "percentile bootstrap, 2000 resamples" in board and "needs &ge;" in board
     assert runs.detail.startswith("paired runs; ours ") and scoreboard_detail(runs.detail)[0] == "paired runs"
 
 
