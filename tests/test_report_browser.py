@@ -257,7 +257,9 @@ def test_report_in_headless_chromium(tmp_path, demo_host, chromium):
     # the old-style pass/fail criterion: one "n/a" cell across ours .. replication, its numbers in the detail
     assert len(by_id["1"]) == 4 and by_id["1"]["ours"].startswith("n/a: a pass/fail check")
     assert "worst 3.57" in by_id["1"]["criterion"]
-    assert by_id["2"]["n"] == "20" and by_id["2"]["published"] == "4" and by_id["2"]["threshold"] == "<= 10"
+    assert by_id["2"]["n"].split("\n") == ["20", "needs ≥ 10"]  # the runs behind ours, and the runs needed
+    assert by_id["2"]["published"] == "4" and by_id["2"]["threshold"] == "<= 10"
+    assert by_id["2"]["95 % interval"].split("\n")[1] == "percentile bootstrap, 2000 resamples"
     assert by_id["3"]["published"] == "KF 4 · EKF 4"
     assert by_id["3"]["paper's protocol, replicated"] == "holds in 4 of 4"
     # text columns read from the left, numbers from the right

@@ -79,7 +79,7 @@ table.scoreboard{width:100%}
 table.scoreboard td.statement{min-width:14rem}
 table.scoreboard td.na{color:var(--muted);font-size:.8rem;font-style:italic}
 table.scoreboard .detail{color:var(--muted);font-size:.82rem;margin-top:.15rem}
-table.scoreboard td.num .detail{white-space:normal;text-align:right;min-width:7rem}
+table.scoreboard td.num .detail{white-space:normal;text-align:right}
 .badge{display:inline-block;border-radius:999px;padding:.05rem .55rem;font-weight:650;font-size:.8rem;
   white-space:nowrap;border:1px solid transparent}
 .v-met{background:#dcf2e1;color:#17612b;border-color:#8fcf9f}
