@@ -394,6 +394,17 @@ def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) ->
                          f"{switch_on}, {switch_off}, {scale}")
 
 
+#: The two-mode prediction and the regularisation, declared alike by the particle filters of this plugin.
+MODE_PARAMETERS = (
+    Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
+          minimum=0.0, maximum=1.0),
+    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
+    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
+    Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
+          minimum=0.0),
+)
+
+
 TBD_PARAMETERS = (
     Param("particles", 600, "particles per run", "int", minimum=1, footprint=48.0),
     Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
@@ -410,12 +421,7 @@ TBD_PARAMETERS = (
     Param("sigma_vr", 15.0, "width of the Doppler kernel (the sensor's 2 m/s, widened as a tempering device)",
           unit="speed", above=0.0),
     Param("backend", "auto", "kernel backend of the weights (auto: the policy's choice)", "str", choices=BACKENDS),
-    Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
-          minimum=0.0, maximum=1.0),
-    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
-    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
-    Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
-          minimum=0.0),
+    *MODE_PARAMETERS,
     Param("tempering", 1, "progressive correction: the likelihood applied as this many equal powers, each followed by "
           "resampling and regularisation (1: off)", "int", minimum=1),
     Param("precision", "float64", "arithmetic of the weight kernel (float32: faster, normalised weights within 1e-4 "
@@ -532,12 +538,7 @@ def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: n
 SIR_JM_PARAMETERS = (
     Param("particles", 600, "particles per run", "int", minimum=1, footprint=48.0),
     Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
-    Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
-          minimum=0.0, maximum=1.0),
-    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
-    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
-    Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
-          minimum=0.0),
+    *MODE_PARAMETERS,
 )
 
 
