@@ -8,7 +8,7 @@ from workbench.models import (constant_velocity, random_walk_velocity, range_bea
                               range_rate_model)
 from workbench.rng import chunk_bounds, generator
 from workbench.trajectory import Leg, piecewise_trajectory, sample_motion
-from workbench.types import CLUTTER, Gaussian, InputError, Scan, Scans, Truth
+from workbench.types import CLUTTER, Gaussian, InputError, Scan, Scans
 
 
 # -- records ------------------------------------------------------------------------------------------

@@ -212,7 +212,7 @@ def write_tracks(path, tracks: TrackFile) -> Path:
     path = Path(path)
     n = len(tracks.names)
     iu = np.triu_indices(n)
-    header = [f"# workbench track file", f"# format: {FORMAT} {tracks.version}",
+    header = ["# workbench track file", f"# format: {FORMAT} {tracks.version}",
               "# state: " + ", ".join(f"{a} [{u}]" for a, u in zip(tracks.names, tracks.units)),
               f"# covariance: {'none' if tracks.cov is None else 'upper triangle'}",
               f"# runs: {tracks.runs}", f"# steps: {tracks.steps}"]
