@@ -7,6 +7,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 
 from workbench.bench import flatten, print_results
@@ -182,3 +183,13 @@ def test_bench_refuses_a_gpu_arch_that_is_not_here(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code, "bench", "--arch", "cuda", "--only", "core"],
                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert proc.returncode == 2 and "GPU figures are not available" in proc.stderr
+
+
+def test_a_group_process_peak_memory_is_its_own_not_its_callers():
+    # a child started from a big process: getrusage would report the caller's peak; own_peak_kib the child's
+    ballast = np.ones(800 * 2**20 // 8)
+    ballast += 1
+    code = "from workbench.bench import own_peak_kib; print(own_peak_kib())"
+    kib = float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
+    del ballast
+    assert 0 < kib < 500 * 1024

@@ -10,7 +10,7 @@ from fixtures import wrong_components as wrong
 from workbench import hookimpl
 from workbench.cli import check_plugin
 from workbench.plugins import load_host
-from workbench.testing import GENERATOR_CHECKS, REMOVER_CHECKS, checks_for, parametrize_with_checks, run_checks
+from workbench.testing import GENERATOR_CHECKS, checks_for, parametrize_with_checks, run_checks
 from workbench.testing.clutter import check_count_poisson, remover_scene
 from workbench.types import CLUTTER, Scans
 
@@ -169,4 +169,3 @@ def test_check_plugin_runs_every_kind_a_name_has_or_the_one_asked_for(capsys):
     assert check_plugin(host, "twin", kind="clutter-generator") == 0
     out = capsys.readouterr().out
     assert "twin-check_count_poisson" in out and "twin-check_centred_on_h" not in out
-    assert len(REMOVER_CHECKS) == 4

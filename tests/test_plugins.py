@@ -122,3 +122,10 @@ def test_example_plugin_once_installed_is_listed_and_joins_a_report(tmp_path):
     host = load_host(extra_plugins=[("demo", demo_plugin)])
     report = run_report(host, tmp_path, papers=["demo"], filters="+alpha-beta", progress=False)
     assert "alpha-beta" in report.papers[0].filters and not report.papers[0].errors
+
+
+def test_find_takes_a_configured_filter_label_as_check_plugin_does():
+    host = load_host()
+    [(kind, spec)] = host.find("sir(particles=300)")
+    assert kind == "filter" and spec.name == "sir(particles=300)" and spec.params["particles"] == 300
+    assert host.find("no-such-component") == []

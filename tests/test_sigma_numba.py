@@ -28,11 +28,14 @@ def _scenario(model, B=40, steps=30, seed=0):
 @pytest.mark.parametrize("model", [range_bearing(1.0, 0.1, sensor=(3.0, -2.0)),
                                    linear_measurement(np.eye(2, 4), np.diag([2.0, 3.0]))],
                          ids=["range-bearing", "linear"])
-def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model):
+@pytest.mark.parametrize("B", [40, 64], ids=["serial", "threaded"])  # below and at sigma_numba.PARALLEL_MIN
+def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model, B):
+    from workbench.kernels import sigma_numba
     from workbench.plugins import load_host
 
+    assert (B >= sigma_numba.PARALLEL_MIN) == (B == 64)
     spec = load_host().filter("ukf")
-    prior, motion, scans = _scenario(model)
+    prior, motion, scans = _scenario(model, B=B)
     fast = run_filter(spec, prior, motion, model, scans, None)
     monkeypatch.setattr(sigma_point, "_compiled", lambda: None)
     slow = run_filter(spec, prior, motion, model, scans, None)

@@ -194,3 +194,12 @@ def test_writers_refuse_bad_input(tmp_path):
         write_track_log(tmp_path / "t.csv", log, np.arange(3.0), cov=np.zeros((1, 4, 4)))
     with pytest.raises(InputError, match="state name"):
         write_track_log(tmp_path / "t.csv", log, np.arange(3.0), names=("x", "y", "v x", "vy"))
+
+
+def test_a_track_file_that_is_not_utf8_is_one_named_error(tmp_path):
+    from workbench.types import InputError
+
+    path = tmp_path / "t.csv"
+    path.write_bytes(b"\xff\xfe# workbench track file\n")
+    with pytest.raises(InputError, match="not UTF-8"):
+        read_tracks(path)

@@ -114,7 +114,10 @@ class PluginHost:
         return self._get(hooks[0], name)
 
     def find(self, name: str) -> list[tuple[str, Any]]:
-        """Every component called ``name``, whatever its kind: ``[(kind, spec), ...]``."""
+        """Every component called ``name``, whatever its kind: ``[(kind, spec), ...]``; a configured filter label
+        (``"sir(particles=300)"``) is that filter, configured (:meth:`filter`)."""
+        if "(" in name:
+            return [("filter", self.filter(name))]
         return [(KINDS[h][0], table[name]) for h, table in self.components.items() if name in table]
 
     @property

@@ -389,9 +389,10 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | N
         start = scenario.initial_state + rng.standard_normal((scenario.runs, scenario.motion.dim)) * scenario.initial_std
         truth = sample_motion(start, scenario.motion, scenario.steps, rng)
     sensor = host.sensor(scenario.sensor.plugin)
-    scans = sensor.simulate(truth, rng, **scenario.sensor.params)
-    for comp in scenario.clutter:
-        scans = scans.merge(host.clutter_generator(comp.plugin).generate(truth, rng, **comp.params))
+    # in draw order: the sensor, then each clutter generator; merged in one pass
+    scans = Scans.merge_all([sensor.simulate(truth, rng, **scenario.sensor.params)]
+                            + [host.clutter_generator(c.plugin).generate(truth, rng, **c.params)
+                               for c in scenario.clutter])
     for comp in scenario.removers:
         scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
     return truth, scans

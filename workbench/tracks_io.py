@@ -43,7 +43,7 @@ import numpy as np
 from .models import MotionModel
 from .tracking.loop import Track
 from .tracking.multi import CONFIRMED, TENTATIVE, TrackLog
-from .textfields import finite_number
+from .textfields import finite_number, read_text
 from .types import InputError
 
 __all__ = ["FORMAT", "VERSION", "TrackFile", "state_layout", "write_tracks", "write_track_log", "write_track",
@@ -299,7 +299,7 @@ def _header_block(path: Path, lines: list[str]) -> tuple[dict[str, tuple[int, st
     keys: dict[str, tuple[int, str]] = {}
     notes: list[str] = []
     for i, line in enumerate(lines):
-        text = line.lstrip("\ufeff").rstrip("\r\n")
+        text = line.rstrip("\r\n")
         if not text.strip():
             continue
         if not text.startswith("#"):
@@ -339,11 +339,7 @@ def read_tracks(path) -> TrackFile:
     :class:`~workbench.types.InputError` naming the file, the line and the column.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(f"cannot read the track file {path}: {exc.strerror or exc}") from None
-    lines = text.splitlines(keepends=True)
+    lines = read_text(path, "track file").splitlines(keepends=True)
     keys, notes, head = _header_block(path, lines)
     if "format" not in keys:
         raise InputError(f"{path}: not a workbench track file (no '# format: {FORMAT} {VERSION}' line)")

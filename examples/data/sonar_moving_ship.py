@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench import Scans, constant_velocity, generator
+from workbench.types import CLUTTER
 from workbench.recorded.sonar import OwnShip, write_sonar_csv
 
 FILE = Path(__file__).with_name("sonar_moving_ship_synthetic.csv")
@@ -73,13 +74,13 @@ def scene(seed: int = SEED) -> Scene:
         if k != 40:
             for _ in range(rng.poisson(CLUTTER_MEAN)):
                 r, b = rng.uniform(200.0, 6000.0), math.radians(heading[k] + rng.uniform(-180.0, 180.0))
-                ping.append((own[k] + r * np.array([math.cos(b), math.sin(b)]), -1))
+                ping.append((own[k] + r * np.array([math.cos(b), math.sin(b)]), CLUTTER))
         rows.append(ping)
     M = max(len(p) for p in rows)
     z = np.zeros((1, PINGS, M, 2))
     cov = np.broadcast_to(np.eye(2), (1, PINGS, M, 2, 2)).copy()
     valid = np.zeros((1, PINGS, M), dtype=bool)
-    origin = np.full((1, PINGS, M), -1)
+    origin = np.full((1, PINGS, M), CLUTTER)
     for k, ping in enumerate(rows):
         for j, (point, who) in enumerate(ping):
             d = point - own[k]

@@ -547,7 +547,7 @@ def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float =
                 name: str | None = None, regularisation: float = REGULARISATION) -> FilterSpec:
     """Method B: the bootstrap filter with the same two-mode prediction as method C; where the scan declares a
     clutter density the likelihood is the clutter mixture (:func:`sir_update`), ``regularisation > 0`` jitters
-    the resampled particles (:func:`regularise`; off by default: it widened B's cloud in the low-SNR segment)."""
+    the resampled particles (:func:`regularise`; 0 turns it off)."""
     if particles < 1 or not 0 <= threshold <= 1 or regularisation < 0:
         raise InputError(f"sir-jm: need particles >= 1, 0 <= threshold <= 1 and regularisation >= 0, got "
                          f"{particles}, {threshold}, {regularisation}")

@@ -27,13 +27,12 @@ from workbench.models import MeasurementModel
 from workbench.tracking import CONFIRMED, Track as WorkbenchTrack, TrackLog
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
-from .stonesoup_filters import AVAILABLE, REASON
+from .stonesoup_filters import AVAILABLE, EPOCH, REASON
 
 __all__ = ["EPOCH", "timestamps", "seconds", "ground_truth_paths", "detections", "track_log_tracks",
            "filter_tracks"]
 
 #: The default time of ``t = 0``.
-EPOCH = datetime(2000, 1, 1)
 
 
 def _require() -> None:

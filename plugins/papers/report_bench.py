@@ -21,9 +21,8 @@ PEAK_TARGET_GIB = 1.5
 
 _MAIN = "import sys; from workbench.cli import main; sys.exit(main(sys.argv[1:]))"
 
-#: Runs the code given as its first argument, then prints the process's own peak resident set size.  ``VmHWM`` of
-#: ``/proc/self/status`` is the high-water mark of the memory this program itself mapped: ``getrusage`` would also
-#: count the image the child was forked (or vfork-ed) from, i.e. the calling process's own peak.
+#: Runs the code given as its first argument, then prints the process's own peak resident set size
+#: (:func:`workbench.bench.own_peak_kib`: ``getrusage`` would also count the image the child was forked from).
 _WRAP = """
 import sys
 code = sys.argv.pop(1)
@@ -33,13 +32,8 @@ try:
 except SystemExit as exc:
     status = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
 finally:
-    try:
-        with open("/proc/self/status") as f:
-            kib = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
-    except (OSError, StopIteration):
-        import resource
-        kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    print("@@PEAK_KIB@@", kib, file=sys.stderr, flush=True)
+    from workbench.bench import own_peak_kib
+    print("@@PEAK_KIB@@", int(own_peak_kib()), file=sys.stderr, flush=True)
 sys.exit(status)
 """
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from .targets import collect_targets, format_targets
 
-__all__ = ["discover_groups", "run_group", "run_bench", "median_time", "flatten", "child_main"]
+__all__ = ["discover_groups", "run_group", "run_bench", "median_time", "flatten", "child_main", "own_peak_kib"]
 
 _CHILD = """
 import sys
@@ -33,10 +33,21 @@ child_main({group!r}, {quick}, {block!r}, {arch!r})
 """
 
 
+def own_peak_kib() -> float:
+    """This process's own peak resident set size (KiB): ``VmHWM`` of ``/proc/self/status``, the high-water mark of
+    the memory this program mapped.  ``getrusage(RUSAGE_SELF).ru_maxrss`` would also count the image the process
+    was forked (or vfork-ed) from, i.e. its parent's peak; it is the fallback where ``/proc`` is missing."""
+    try:
+        with open("/proc/self/status") as f:
+            return float(next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")))
+    except (OSError, StopIteration, ValueError, IndexError):
+        import resource
+
+        return float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
 def child_main(group: str, quick: bool, block=(), arch: str = "cpu") -> None:
     """The body of a group's process: run it with the kernels on ``arch`` and print its figures as one JSON line."""
-    import resource
-
     from ..kernels.backend import using
     from ..plugins import load_host
 
@@ -44,7 +55,7 @@ def child_main(group: str, quick: bool, block=(), arch: str = "cpu") -> None:
     with using(arch):
         out = dict(spec.run(quick))
     out.setdefault("kernel_arch", arch)
-    out["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    out["peak_rss_mib"] = own_peak_kib() / 1024.0
     print("@@BENCH@@" + json.dumps(out, default=float), flush=True)
 
 

@@ -720,7 +720,8 @@ def check_nan_not_hidden(spec: FilterSpec) -> str:
         else:
             raise AssertionError(f"the {record} record accepted a NaN")
     problems, raised = [], 0
-    for what, prior_, scan in _non_finite_inputs(spec, scans.scan(1).for_filter(), prior, model):
+    inputs = _non_finite_inputs(spec, scans.scan(1).for_filter(), prior, model)
+    for what, prior_, scan in inputs:
         rng = generator(0, "kit-nan")
         estimates = []
         try:
@@ -746,7 +747,7 @@ def check_nan_not_hidden(spec: FilterSpec) -> str:
         raise AssertionError(f"{len(problems)} non-finite input(s) silently became numbers or raised unclear errors: "
                              + "; ".join(problems) + " (raise an InputError naming the NaN, or let it reach the "
                              "estimate)")
-    cases = len(_non_finite_inputs(spec, scans.scan(1).for_filter(), prior, model))
+    cases = len(inputs)
     return f"{cases} non-finite inputs: {raised} raised a clear error, {cases - raised} reached the estimate"
 
 

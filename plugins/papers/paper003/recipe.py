@@ -33,6 +33,7 @@ from workbench.specs import FigureSpec, RecipeOptions, RecipeSpec, Table, TableS
 from workbench.types import InputError, Scans
 
 from . import judging
+from .judging import CRPF_FILTERS, KALMAN_TYPE, SR_PAIRS  # noqa: F401 - the filter groups the criteria use
 from .scenario import (DT, LEVELS, LOST_FACTOR, NOMINAL, P0, PAPER, READINGS, SENSOR, STREAM, X0, XHAT0,  # noqa: F401
                        case_name, filter_models, level_sigmas, lost_threshold, make_case, prior, reading_cases,
                        sigmas_of, simulate_chunk, simulate_units, units)
@@ -42,10 +43,7 @@ GRID_R = (0.1, 1.0, 10.0)
 GRID_SIGMA_A = LEVELS[NOMINAL][2]  # the grid varies the measurement noise only (radians reading)
 
 DEFAULT_FILTERS = ("ekf", "ukf", "cdkf", "sr-ukf", "sr-cdkf", "crpf-100", "crpf-300", "crpf-500")
-KALMAN_TYPE = ("ekf", "ukf", "cdkf", "sr-ukf", "sr-cdkf")
-CRPF_FILTERS = ("crpf-100", "crpf-300", "crpf-500")
 CRPF_PARTICLES = (100, 300, 500)
-SR_PAIRS = (("ukf", "sr-ukf"), ("cdkf", "sr-cdkf"))
 
 #: The near-optimal reference: the built-in bootstrap PF with 5,000 particles and the level's true models.
 REFERENCE = {"label": "pf-5000 (true noise)", "filter": "sir", "configure": {"particles": 5000}}
@@ -310,7 +308,6 @@ def tuning_label(sigma0: float, delta: float) -> str:
 
 
 GRID_CASES = tuple(make_case(grid_case(st, sr), (st, sr, GRID_SIGMA_A)) for st in GRID_THETA for sr in GRID_R)
-LEVEL_CASES = reading_cases("rad")
 CASES = {reading: reading_cases(reading) for reading in READINGS}
 
 
