@@ -360,11 +360,7 @@ def _load_recorded(scenario: Scenario) -> Scans:
     from .recorded import load_pcl_candidates, load_sonar_csv
 
     loader = load_sonar_csv if scenario.detections_format == "sonar" else load_pcl_candidates
-    try:
-        scans = loader(scenario.detections)
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{scenario.detections}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as "
-                         f"UTF-8") from None
+    scans = loader(scenario.detections)  # the readers refuse a non-UTF-8 file with one named error
     if not scans.valid.any():
         raise InputError(f"{scenario.detections}: holds no detection (a header without rows?); nothing to track")
     return scans

@@ -441,17 +441,15 @@ def _has_partner(cache: _RunCache, p: int, q: int, box: float) -> np.ndarray:
     return cache.partner[key]
 
 
-def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int, has_partner=None) -> dict:
+def _gate(cache: _RunCache, group: range, v_max: float, dt: float, gap: int) -> dict:
     """The preliminary association: the points of each ping of ``group`` with a point of another ping at
-    most ``gap`` pings away inside the box ``v_max dt |q - p|`` (``has_partner`` defaults to
-    :func:`_has_partner`; the tests pass their k-d tree reference)."""
-    has_partner = _has_partner if has_partner is None else has_partner
+    most ``gap`` pings away inside the box ``v_max dt |q - p|`` (:func:`_has_partner`)."""
     kept = {}
     for p in group:
         mask = np.zeros(len(cache.pts[p]), dtype=bool)
         for q in group:
             if q != p and abs(q - p) <= gap:
-                mask |= has_partner(cache, p, q, v_max * dt * abs(q - p))
+                mask |= _has_partner(cache, p, q, v_max * dt * abs(q - p))
         kept[p] = mask
     return kept
 
