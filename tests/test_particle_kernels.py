@@ -183,6 +183,50 @@ def test_compiled_moments_equal_to_gaussian(N):
     np.testing.assert_array_equal(got.cov, np.swapaxes(got.cov, 1, 2))
 
 
+@pytest.mark.parametrize("far_weight", ["uniform", "light"])
+def test_compiled_moments_stay_accurate_with_a_far_first_particle(far_weight):
+    # the planar one-pass moments pivot on the heaviest particle (the first, where the weights are equal); a
+    # particle k standard deviations off costs k^2 ulps of the variance, and its own weight bounds k^2 by N
+    rng = np.random.default_rng(3)
+    N = 1000
+    x = rng.normal(size=(1, N, 4)) * 1e-3 + [1e6, -2e5, 3.0, -4.0]
+    x[0, 0] += [1e3, -1e3, 5.0, 5.0]  # 31 standard deviations out with weight 1/N
+    lw = np.full((1, N), -np.log(N))
+    if far_weight == "light":
+        lw = normalise_log_weights(np.where(np.arange(N) == 0, -30.0, rng.normal(size=(1, N))))
+    state = core.ParticleState(Particles(np.ascontiguousarray(np.moveaxis(x, 2, 0)).transpose(1, 2, 0), lw))
+    got = core.estimate(state, backend="numba")
+    # reference in extended precision
+    xl, w = x.astype(np.longdouble), np.exp(lw.astype(np.longdouble))
+    mean = np.einsum("bn,bni->bi", w, xl)
+    d = xl - mean[:, None]
+    cov = np.einsum("bn,bni,bnj->bij", w, d, d)
+    np.testing.assert_allclose(got.mean, mean.astype(float), rtol=1e-14)
+    sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    err = np.max(np.abs(got.cov - cov) / (sd[:, :, None] * sd[:, None, :]))  # in units of the correlation
+    assert err < 10 * N * np.finfo(float).eps  # of order k^2 <= N ulps (measured: 5 N)
+    if far_weight == "light":  # pivoting on a heavy particle near the mean: hundreds of ulps, not thousands
+        assert err < 1e-13
+
+
+def test_compiled_moments_of_equal_weights_keep_the_twins_accuracy():
+    # equal weights (every step after resampling) take unweighted sums scaled once: summing N equal weights
+    # instead would add N correlated round-offs (7e-13 relative in the mean at N = 10^5, measured)
+    rng = np.random.default_rng(13)
+    N = 100_000
+    x = rng.normal(size=(1, N, 4)) * [30.0, 30.0, 2.0, 2.0] + [100.0, 50.0, -1.0, 1.0]
+    lw = np.full((1, N), -np.log(N))
+    state = core.ParticleState(Particles(np.ascontiguousarray(np.moveaxis(x, 2, 0)).transpose(1, 2, 0), lw))
+    got = core.estimate(state, backend="numba")
+    xl, w = x.astype(np.longdouble), np.exp(lw.astype(np.longdouble))
+    mean = np.einsum("bn,bni->bi", w, xl)
+    d = xl - mean[:, None]
+    cov = np.einsum("bn,bni,bnj->bij", w, d, d)
+    sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    assert np.max(np.abs(got.mean - mean) / np.abs(mean)) < 1e-14
+    assert np.max(np.abs(got.cov - cov) / (sd[:, :, None] * sd[:, None, :])) < 1e-13
+
+
 @pytest.mark.parametrize("threshold", [0.5, 2.0])
 def test_compiled_reweight_equals_the_numpy_path(threshold):
     rng = np.random.default_rng(11)

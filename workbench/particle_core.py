@@ -30,6 +30,7 @@ within that round-off of a whole number (about ``N 1e-16`` per particle and step
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -111,14 +112,22 @@ def compiled(backend: str) -> bool:
 
 
 def _kernels():
-    from .kernels import particle_numba
+    global _KERNELS
+    if _KERNELS is None:
+        from .kernels import particle_numba
 
-    return particle_numba
+        _KERNELS = particle_numba
+    return _KERNELS
+
+
+_KERNELS = None
 
 
 def _rows(x: np.ndarray) -> np.ndarray:
     """Particles ``(B, N, n)`` as C-contiguous component rows ``(n, B, N)`` (no copy for a component-major array)."""
-    return np.ascontiguousarray(np.moveaxis(np.asarray(x, dtype=float), -1, 0))
+    x = np.asarray(x, dtype=float)
+    rows = x.transpose(2, 0, 1) if x.ndim == 3 else np.moveaxis(x, -1, 0)
+    return rows if rows.flags.c_contiguous else np.ascontiguousarray(rows)
 
 
 @lru_cache(maxsize=64)
@@ -145,9 +154,22 @@ def init(prior: Gaussian, rng: np.random.Generator, particles: int) -> ParticleS
     return ParticleState(Particles.trusted(x, np.full((prior.batch, particles), -np.log(particles))))
 
 
-def _noise_columns(motion: MotionModel) -> np.ndarray:
-    """The non-zero columns of ``Q_sqrt`` (``Q`` may be singular): ``(n, k)``."""
-    return motion.Q_sqrt[:, np.flatnonzero(np.any(motion.Q_sqrt != 0.0, axis=0))]
+def _propagation(motion: MotionModel) -> tuple[np.ndarray, int]:
+    """``[F | G]`` for the non-zero noise columns ``G`` of ``Q_sqrt`` (read-only) and their count ``k``, computed
+    once per distinct ``(F, Q_sqrt)`` (keyed by their bytes, so a model changed in place is seen)."""
+    F = np.ascontiguousarray(motion.F, dtype=float)
+    Q = np.ascontiguousarray(motion.Q_sqrt, dtype=float)
+    return _propagation_cached(F.tobytes(), Q.tobytes(), F.shape[0], Q.shape[1])
+
+
+@lru_cache(maxsize=64)
+def _propagation_cached(f_bytes: bytes, q_bytes: bytes, n: int, q_cols: int) -> tuple[np.ndarray, int]:
+    F = np.frombuffer(f_bytes, dtype=float).reshape(n, n)
+    Q = np.frombuffer(q_bytes, dtype=float).reshape(n, q_cols)
+    g = Q[:, np.flatnonzero(np.any(Q != 0.0, axis=0))]
+    matrix = np.ascontiguousarray(np.hstack([F, g]), dtype=float)
+    matrix.flags.writeable = False
+    return matrix, g.shape[1]
 
 
 def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
@@ -156,11 +178,9 @@ def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
     ``Q_sqrt``; ``backend`` as in the module docstring (the same particles either way)."""
     x = state.cloud.particles
     B, N, n = x.shape
-    g = _noise_columns(motion)
-    matrix = np.ascontiguousarray(np.hstack([motion.F, g]), dtype=float)
+    matrix, k = _propagation(motion)
     if compiled(backend):
         out = np.empty((n, B, N))
-        k = g.shape[1]
         plan = _plan_arrays(matrix.tobytes(), *matrix.shape)
         rows = _rows(x).reshape(n, B * N)
         if k == 0 or type(rng) is np.random.Generator:
@@ -173,10 +193,24 @@ def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
     else:
         # x_i <- F x_i + Q_sqrt e_i, drawing e only for the non-zero columns of Q_sqrt
         sources = [x]
-        if g.shape[1]:
-            sources.append(rng.standard_normal((B, N, g.shape[1])))
+        if k:
+            sources.append(rng.standard_normal((B, N, k)))
         moved = combine_columns(component_major(B, N, n), matrix, *sources)
     return ParticleState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows)
+
+
+_SCRATCH = threading.local()
+
+
+def _scratch(name: str, size: int, dtype=float) -> np.ndarray:
+    """A work array of ``size`` entries that this thread reuses from call to call (its contents are garbage):
+    the compiled steps' temporaries, whose fresh allocation at every step costs page faults once they pass
+    the allocator's thresholds (at ``N = 10^5`` about a fifth of the step).  Never returned to the caller."""
+    pool = _SCRATCH.__dict__
+    buf = pool.get(name)
+    if buf is None or buf.size < size or buf.dtype != dtype:
+        buf = pool[name] = np.empty(size, dtype=dtype)
+    return buf[:size]
 
 
 def _inverse_cholesky(R: np.ndarray) -> np.ndarray:
@@ -318,6 +352,7 @@ def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, pre
         if dead.any():
             weights = np.where(dead[:, None], previous, log_w)
             top = np.max(weights, axis=1)
+        # the weights after resampling, 1/N, written once here
         out = np.where(present[:, None], -np.log(N), previous) if not present.all() else np.full((B, N), -np.log(N))
     else:
         out = np.empty((B, N))
@@ -333,9 +368,10 @@ def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, pre
     src = _rows(particles)
     n = src.shape[0]
     moved = np.empty((n, B, N))
-    k.systematic_gather(np.ascontiguousarray(weights, dtype=float), top, rows, u0[:, 0], src, moved, np.empty(N),
-                        np.empty(N + 1, dtype=np.int64))
-    out[rows] = -np.log(N)
+    k.systematic_gather(np.ascontiguousarray(weights, dtype=float), top, rows, u0[:, 0], src, moved,
+                        _scratch("cdf", N), _scratch("parent", N + 1, np.int64))
+    if threshold <= 1.0:
+        out[rows] = -np.log(N)
     return moved.transpose(1, 2, 0), out, resample, dead
 
 
@@ -348,7 +384,7 @@ def estimate(state: ParticleState, backend: str = "numpy") -> Gaussian:
     n, B, N = x.shape
     mean = np.empty((B, n))
     cov = np.empty((B, n, n))
-    _kernels().moments(x, np.ascontiguousarray(state.cloud.log_weights, dtype=float), mean, cov, np.empty(N))
+    _kernels().moments(x, np.ascontiguousarray(state.cloud.log_weights, dtype=float), mean, cov, _scratch("w", N))
     return Gaussian.trusted(mean, cov)
 
 

@@ -263,19 +263,24 @@ def _exp_shifted(row, top, out):
 
 
 @jit
-def _take_rows(dst, src, parent):
-    """``dst[c, j] = src[c, parent[j]]`` for every row ``c``: one pass over the parents."""
+def _take_first_parents(dst, src, parent):
+    """``dst[c, j] = src[c, p_j]`` for every row ``c`` with ``p_j = max(parent[:j + 1])`` (the running max fills the
+    slots :func:`systematic_gather` left unwritten), in one pass over the parents for the planar state."""
     n = dst.shape[0]
-    if n == 4:  # the common planar state, unrolled
+    p = 0
+    if n == 4:  # the common planar state, unrolled: the running max and the four gathers in one pass
         d0, d1, d2, d3 = dst[0], dst[1], dst[2], dst[3]
         s0, s1, s2, s3 = src[0], src[1], src[2], src[3]
         for j in range(parent.shape[0]):
-            p = parent[j]
+            p = max(p, parent[j])
             d0[j] = s0[p]
             d1[j] = s1[p]
             d2[j] = s2[p]
             d3[j] = s3[p]
         return
+    for j in range(parent.shape[0]):
+        p = max(p, parent[j])
+        parent[j] = p
     for c in range(n):
         d = dst[c]
         s = src[c]
@@ -315,18 +320,14 @@ def systematic_gather(log_w, top, rows, u0, x, out, cdf, parent):
             for i in range(N):
                 cdf[i] = min(max(math.ceil((cdf[i] / last) * N - u), 0.0), float(N))
             # parent[edge_{i-1}] = i for every i in order: the last writer of a slot is the particle whose draws
-            # start there (those with no draw share the slot with it and come before); then a running max fills
-            # the slots of repeated draws.  No branch on the counts.
+            # start there (those with no draw share the slot with it and come before); then a running max, taken
+            # as the particles are gathered, fills the slots of repeated draws.  No branch on the counts.
             parent[:] = 0
             start = 0
             for i in range(N):
                 parent[start] = i
                 start = int(cdf[i])
-            top_i = 0
-            for j in range(N):
-                top_i = max(top_i, parent[j])
-                parent[j] = top_i
-            _take_rows(out[:, b], x[:, b], parent[:N])
+            _take_first_parents(out[:, b], x[:, b], parent[:N])
             r += 1
         else:
             for c in range(n):
@@ -351,13 +352,92 @@ def _dot3(w, a, b):
 
 
 @reduce_jit
+def _moments_planar(x0, x1, x2, x3, row, s, uniform, mean, cov):
+    """:func:`moments` of one item of the planar state ``(x0..x3)`` in one pass: the weighted sums of
+    ``d = x - s`` and ``d d^T`` about a pivot particle ``s`` (every sum in registers), then
+    ``mean = s sum w + sum w d`` and ``cov = sum w d d^T - e a^T - a e^T + e e^T sum w`` with ``a = sum w d`` and
+    ``e = mean - s`` (the twin's ``sum w (x - mean)(x - mean)^T`` expanded).  The cancellation in ``cov`` grows
+    with ``k^2``, the pivot's squared distance from the mean in standard deviations; a pivot of weight ``w_s`` adds
+    ``w_s k^2`` to the normalised variance, so ``k^2 <= 1 / w_s``, at most ``N`` for the heaviest particle, which
+    :func:`moments` pivots on (round-off of order ``N`` ulps of the variance at worst, tested)."""
+    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+    sw = a0 = a1 = a2 = a3 = 0.0
+    c00 = c01 = c02 = c03 = c11 = c12 = c13 = c22 = c23 = c33 = 0.0
+    for i in range(row.shape[0]):
+        # equal weights (after resampling): unweighted sums, scaled once below (LLVM unswitches the loop on
+        # ``uniform``); summing the equal weights themselves would add up correlated round-off, N ulps
+        w = 1.0 if uniform else exp(row[i])
+        d0 = x0[i] - s0
+        d1 = x1[i] - s1
+        d2 = x2[i] - s2
+        d3 = x3[i] - s3
+        w0 = w * d0
+        w1 = w * d1
+        w2 = w * d2
+        w3 = w * d3
+        sw += w
+        a0 += w0
+        a1 += w1
+        a2 += w2
+        a3 += w3
+        c00 += w0 * d0
+        c01 += w0 * d1
+        c02 += w0 * d2
+        c03 += w0 * d3
+        c11 += w1 * d1
+        c12 += w1 * d2
+        c13 += w1 * d3
+        c22 += w2 * d2
+        c23 += w2 * d3
+        c33 += w3 * d3
+    if uniform:
+        w = exp(row[0])
+        sw *= w
+        a0, a1, a2, a3 = a0 * w, a1 * w, a2 * w, a3 * w
+        c00, c01, c02, c03, c11 = c00 * w, c01 * w, c02 * w, c03 * w, c11 * w
+        c12, c13, c22, c23, c33 = c12 * w, c13 * w, c22 * w, c23 * w, c33 * w
+    a = (a0, a1, a2, a3)
+    c = (c00, c01, c02, c03, c11, c12, c13, c22, c23, c33)
+    e = np.empty(4)
+    for j in range(4):
+        mean[j] = s[j] * sw + a[j]
+        e[j] = a[j] + s[j] * (sw - 1.0)  # mean - s
+    t = 0
+    for j in range(4):
+        for k in range(j, 4):
+            v = c[t] - e[j] * a[k] - a[j] * e[k] + e[j] * e[k] * sw
+            cov[j, k] = v
+            cov[k, j] = v
+            t += 1
+
+
+@reduce_jit
 def moments(x, log_w, mean, cov, w):
     """Weighted mean and covariance of each item's particles: ``mean = sum_i w_i x_i``,
     ``cov = sum_i w_i (x_i - mean)(x_i - mean)^T`` with ``w = exp(log_w)`` (``Particles.to_gaussian``).
 
+    The planar state (``n = 4``) in one pass over the particles about the heaviest particle
+    (:func:`_moments_planar`; a row with a NaN pivots on its first particle, equal weights take one ``exp``);
+    other dimensions in two (the mean, then the covariance about it).
+
     Shapes: ``x (n, B, N)``, ``log_w (B, N)``, ``mean (B, n)``, ``cov (B, n, n)``, ``w (N,)`` scratch.
     """
     n, B, N = x.shape
+    if n == 4:
+        s = np.empty(4)
+        for b in range(B):
+            row = log_w[b]
+            pivot = 0
+            uniform = True
+            first = row[0]
+            for i in range(N):
+                if row[i] > row[pivot]:
+                    pivot = i
+                uniform &= row[i] == first
+            for c in range(4):
+                s[c] = x[c, b, pivot]
+            _moments_planar(x[0, b], x[1, b], x[2, b], x[3, b], row, s, uniform, mean[b], cov[b])
+        return mean
     d = np.empty((n, TILE))
     for b in range(B):
         row = log_w[b]
