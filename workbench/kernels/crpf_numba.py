@@ -14,6 +14,7 @@ import numpy as np
 from .counter_normals_numba import row_normals
 from .crpf_step_numpy import TWO_PI
 from .particle_numba import atan2  # the select-only atan2 (Cephes' rational approximation) both kernels use
+from .vector_width import wide_vectors
 
 pi, two_pi = math.pi, TWO_PI
 # error_model="numpy": a float division by zero gives inf instead of raising, so the loops below
@@ -115,6 +116,7 @@ def one_run(xb, cb, s2b, t, F, zr, zt, key, b, u0, shape, scal, xn, cn, s2n, mea
     """The step of one run.  (Compiled as a function of its own: written inline in the prange body,
     its loops vectorised less and the kernel was 1.5x slower.)  The common state is 4-D
     ``[x, y, vx, vy]``; that case has its loops over components written out (2x faster)."""
+    wide_vectors()  # the cost, PMF, normals and moment loops: the CPU's full vector width
     N, n = xb.shape
     lam, beta, delta, q = scal[0], scal[1], scal[2], scal[3]
     arc = scal[4] != 0.0

@@ -22,7 +22,8 @@ Floating point.  No fast-math where a result is held to its twin number for numb
 particles are the same bit for bit.  The reductions (sums of exponentials, moments) are compiled with
 ``reassoc`` only (vector partial sums), which changes their last bits; ``nnan``/``ninf`` are never given, so
 the NaN and infinity checks hold.  ``exp`` is a polynomial (:func:`exp`, within 1 ulp of the library's) because
-the library call does not vectorise.  ``error_model="numpy"``: a division by zero gives ``inf``, no exception
+the library call does not vectorise.  The likelihood, exponential and moment loops vectorise with the CPU's full
+width (:mod:`.vector_width`).  ``error_model="numpy"``: a division by zero gives ``inf``, no exception
 branch.  Loops run over 1-D views from index 0, so that Numba emits no negative-index fix-ups and LLVM vectorises.
 """
 
@@ -36,6 +37,7 @@ from numba.extending import intrinsic
 
 from .crpf_step_numpy import ATAN_P, ATAN_Q, TAN_PI_8
 from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
+from .vector_width import wide_vectors
 
 jit = functools.partial(numba.njit, error_model="numpy", cache=True)
 #: Reductions and exponentials: reassociation lets LLVM keep vector partial sums, contraction fuses the
@@ -179,6 +181,7 @@ def range_bearing_log_weights(px, py, z, sensor, linv, prev, out):
     Shapes: ``px, py (B, N)`` positions, ``z (B, 2)`` ``[range, bearing]``, ``sensor (2,)``, ``linv (2, 2)``,
     ``prev, out (B, N)``.
     """
+    wide_vectors()
     B = out.shape[0]
     sx, sy = sensor[0], sensor[1]
     l00, l10, l11 = linv[0, 0], linv[1, 0], linv[1, 1]
@@ -203,6 +206,7 @@ def range_bearing_log_weights(px, py, z, sensor, linv, prev, out):
 @reduce_jit
 def _sum_exp(row, shift, scale):
     """``sum_i exp(scale row_i - shift)``."""
+    wide_vectors()
     s = 0.0
     for i in range(row.shape[0]):
         s += exp(scale * row[i] - shift)
@@ -258,6 +262,7 @@ def effective_sample_size(log_w, top, out):
 
 @reduce_jit
 def _exp_shifted(row, top, out):
+    wide_vectors()
     for i in range(out.shape[0]):
         out[i] = exp(row[i] - top)
 
@@ -360,6 +365,7 @@ def _moments_planar(x0, x1, x2, x3, row, s, uniform, mean, cov):
     with ``k^2``, the pivot's squared distance from the mean in standard deviations; a pivot of weight ``w_s`` adds
     ``w_s k^2`` to the normalised variance, so ``k^2 <= 1 / w_s``, at most ``N`` for the heaviest particle, which
     :func:`moments` pivots on (round-off of order ``N`` ulps of the variance at worst, tested)."""
+    wide_vectors()
     s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
     sw = a0 = a1 = a2 = a3 = 0.0
     c00 = c01 = c02 = c03 = c11 = c12 = c13 = c22 = c23 = c33 = 0.0
