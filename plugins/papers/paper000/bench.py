@@ -150,9 +150,16 @@ def _rate(fn, pairs: int, repeats: int) -> float:
     return pairs / _best_time(fn, repeats)
 
 
-def _interleaved_best(fns: dict, repeats: int) -> dict:
+#: Seconds to wait after a BLAS product before the next timed call: OpenBLAS's worker threads keep spinning for a
+#: while after a product returns and take the cores from whatever runs next (the float64 kernel measured 1.0e9
+#: pairs/s right after the 1500 x 1500 dgemm, 1.4-1.5e9 after a pause or after another kernel call).
+BLAS_SETTLE_S = 0.2
+
+
+def _interleaved_best(fns: dict, repeats: int, settle_after=()) -> dict:
     """Best wall time of each callable over ``repeats`` rounds, one call of each per round in turn after one
-    warm-up call each: a load that drifts during the measurement reaches every callable alike."""
+    warm-up call each: a load that drifts during the measurement reaches every callable alike.  After the calls
+    named in ``settle_after`` (BLAS products) the next call waits :data:`BLAS_SETTLE_S`, untimed."""
     for fn in fns.values():
         fn()
     best = dict.fromkeys(fns, np.inf)
@@ -161,6 +168,8 @@ def _interleaved_best(fns: dict, repeats: int) -> dict:
             start = time.perf_counter()
             fn()
             best[key] = min(best[key], time.perf_counter() - start)
+            if key in settle_after:
+                time.sleep(BLAS_SETTLE_S)
     return best
 
 
@@ -204,14 +213,15 @@ def kernel_throughput(sizes_n, sizes_m, backends, limit: float, repeats: int = 3
 def paired_target_rates(backend: str, repeats: int = 7, size=None) -> dict:
     """The target case measured for the targets: ``backend``'s float64 and float32 calls and the peak-rate
     measurement (BLAS ``dgemm`` of 1500 x 1500 on the CPU arch) timed in turn, ``repeats`` rounds, best of each, so
-    that the share of the limit and the float32 / float64 ratio compare timings taken under the same load."""
+    that the share of the limit and the float32 / float64 ratio compare timings taken under the same load (with a
+    pause after each product, :data:`BLAS_SETTLE_S`, so that BLAS's spinning threads do not slow the next call)."""
     n, m = size or TARGET_SIZE
     inputs = kernel_inputs(n, m)
     a, b = np.random.default_rng(0).random((2, 1500, 1500))
     fns = {"float64": lambda: tbd_log_weight_sums(*inputs, backend=backend, precision="float64"),
            "float32": lambda: tbd_log_weight_sums(*inputs, backend=backend, precision="float32"),
            "dgemm": lambda: a @ b}
-    best = _interleaved_best(fns, repeats)
+    best = _interleaved_best(fns, repeats, settle_after=("dgemm",))
     out = {"N": n, "M": m, "backend": backend, "rounds": repeats,
            "float64_pairs_per_s": n * m / best["float64"], "float32_pairs_per_s": n * m / best["float32"],
            "dgemm_flops": 2.0 * 1500**3 / best["dgemm"]}
