@@ -183,6 +183,18 @@ def test_compiled_moments_equal_to_gaussian(N):
     np.testing.assert_array_equal(got.cov, np.swapaxes(got.cov, 1, 2))
 
 
+def _compiled_and_extended_moments(x, lw):
+    """The compiled estimate of particles ``x (B, N, n)`` (stored component-major) with log-weights ``lw``, and the
+    reference mean, covariance and standard deviations computed in extended precision."""
+    state = core.ParticleState(Particles(np.ascontiguousarray(np.moveaxis(x, 2, 0)).transpose(1, 2, 0), lw))
+    got = core.estimate(state, backend="numba")
+    xl, w = x.astype(np.longdouble), np.exp(lw.astype(np.longdouble))
+    mean = np.einsum("bn,bni->bi", w, xl)
+    d = xl - mean[:, None]
+    cov = np.einsum("bn,bni,bnj->bij", w, d, d)
+    return got, mean, cov, np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+
+
 @pytest.mark.parametrize("far_weight", ["uniform", "light"])
 def test_compiled_moments_stay_accurate_with_a_far_first_particle(far_weight):
     # the planar one-pass moments pivot on the heaviest particle (the first, where the weights are equal); a
@@ -194,15 +206,8 @@ def test_compiled_moments_stay_accurate_with_a_far_first_particle(far_weight):
     lw = np.full((1, N), -np.log(N))
     if far_weight == "light":
         lw = normalise_log_weights(np.where(np.arange(N) == 0, -30.0, rng.normal(size=(1, N))))
-    state = core.ParticleState(Particles(np.ascontiguousarray(np.moveaxis(x, 2, 0)).transpose(1, 2, 0), lw))
-    got = core.estimate(state, backend="numba")
-    # reference in extended precision
-    xl, w = x.astype(np.longdouble), np.exp(lw.astype(np.longdouble))
-    mean = np.einsum("bn,bni->bi", w, xl)
-    d = xl - mean[:, None]
-    cov = np.einsum("bn,bni,bnj->bij", w, d, d)
+    got, mean, cov, sd = _compiled_and_extended_moments(x, lw)
     np.testing.assert_allclose(got.mean, mean.astype(float), rtol=1e-14)
-    sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     err = np.max(np.abs(got.cov - cov) / (sd[:, :, None] * sd[:, None, :]))  # in units of the correlation
     assert err < 10 * N * np.finfo(float).eps  # of order k^2 <= N ulps (measured: 5 N)
     if far_weight == "light":  # pivoting on a heavy particle near the mean: hundreds of ulps, not thousands
@@ -216,13 +221,7 @@ def test_compiled_moments_of_equal_weights_keep_the_twins_accuracy():
     N = 100_000
     x = rng.normal(size=(1, N, 4)) * [30.0, 30.0, 2.0, 2.0] + [100.0, 50.0, -1.0, 1.0]
     lw = np.full((1, N), -np.log(N))
-    state = core.ParticleState(Particles(np.ascontiguousarray(np.moveaxis(x, 2, 0)).transpose(1, 2, 0), lw))
-    got = core.estimate(state, backend="numba")
-    xl, w = x.astype(np.longdouble), np.exp(lw.astype(np.longdouble))
-    mean = np.einsum("bn,bni->bi", w, xl)
-    d = xl - mean[:, None]
-    cov = np.einsum("bn,bni,bnj->bij", w, d, d)
-    sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    got, mean, cov, sd = _compiled_and_extended_moments(x, lw)
     assert np.max(np.abs(got.mean - mean) / np.abs(mean)) < 1e-14
     assert np.max(np.abs(got.cov - cov) / (sd[:, :, None] * sd[:, None, :])) < 1e-13
 
