@@ -71,6 +71,14 @@ class Criterion:
         True in a quick report: the verdict is an indication only (never ``"met"``).
     replication : (int, int) or None
         ``(holds, of)``: in how many independent replications of the paper's own protocol the criterion held.
+    min_n : int or None
+        The fewest runs from which the criterion may be decided (below it the verdict is inconclusive).
+    method : str or None
+        How ``interval`` was computed, e.g. ``"percentile bootstrap, 2000 resamples"``.
+    statistics : str
+        The statistics sentence :func:`criterion_from_runs` / :func:`criterion_from_counts` wrote (ours, the
+        interval and its method, the passing condition, the runs needed), which ``detail`` contains; a reader that
+        shows those numbers in columns of its own takes it out of ``detail`` (the report's scoreboard).
     """
 
     id: str
@@ -84,6 +92,9 @@ class Criterion:
     threshold: str = ""
     indicative: bool = False
     replication: tuple[int, int] | None = None
+    min_n: int | None = None
+    method: str | None = None
+    statistics: str = ""
     extra: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -132,8 +143,8 @@ class Criterion:
         Returns
         -------
         dict
-            ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication,
-            detail, extra``; numpy scalars become Python numbers, tuples become lists.
+            ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication, min_n,
+            method, statistics, detail, extra``; numpy scalars become Python numbers, tuples become lists.
         """
         out = {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
         out["met"] = bool(self.met)
@@ -415,7 +426,9 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
     published : optional
         The paper's value, shown beside ours.
     detail_fmt : str
-        Format of ``detail``; fields ``ours, lo, hi, n, min_n, pct, resamples, threshold, verdict``.
+        Format of ``detail``; fields ``ours, lo, hi, n, min_n, pct, resamples, threshold, verdict``.  The record
+        also declares ``min_n``, the interval's ``method`` and its ``statistics`` sentence (:data:`RUNS_DETAIL`
+        formatted), which a ``detail_fmt`` built as ``prefix + RUNS_DETAIL`` contains.
     level, resamples, seed
         Passed to :func:`bootstrap_interval`.
     threshold_text : str, optional
@@ -434,12 +447,16 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
     interval = bootstrap_interval(samples, statistic, level=level, resamples=resamples, seed=seed)
     verdict = judge(interval, threshold, direction, n=n, min_n=min_n)
     thr = threshold_text or _threshold_text(threshold, direction)
-    if detail_fmt is RUNS_DETAIL and math.isnan(interval[0]):
-        detail_fmt = RUNS_DETAIL_NO_INTERVAL
-    detail = detail_fmt.format(ours=ours, lo=interval[0], hi=interval[1], n=n, min_n=min_n, pct=100 * level,
-                               resamples=resamples, threshold=thr, verdict=verdict)
-    return Criterion(id, text, verdict, detail, ours=ours, published=published, n=n, interval=interval,
-                     threshold=thr, replication=replication)
+    values = dict(ours=ours, lo=interval[0], hi=interval[1], n=n, min_n=min_n, pct=100 * level, resamples=resamples,
+                  threshold=thr, verdict=verdict)
+    no_interval = math.isnan(interval[0])
+    if no_interval:  # the default sentence, alone or inside a caller's format, says there is no interval
+        detail_fmt = detail_fmt.replace(RUNS_DETAIL, RUNS_DETAIL_NO_INTERVAL)
+    statistics = (RUNS_DETAIL_NO_INTERVAL if no_interval else RUNS_DETAIL).format(**values)
+    return Criterion(id, text, verdict, detail_fmt.format(**values), ours=ours, published=published, n=n,
+                     interval=interval, threshold=thr, replication=replication, min_n=min_n,
+                     method=None if no_interval else f"percentile bootstrap, {resamples} resamples",
+                     statistics=statistics)
 
 
 def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float | tuple[float, float],
@@ -457,7 +474,8 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
     threshold, direction, min_n, published, level, threshold_text, replication
         As in :func:`criterion_from_runs` (the threshold is a proportion in [0, 1]).
     detail_fmt : str
-        Format of ``detail``; fields ``k, n, ours, lo, hi, min_n, pct, threshold, verdict``.
+        Format of ``detail``; fields ``k, n, ours, lo, hi, min_n, pct, threshold, verdict``.  The record also
+        declares ``min_n``, ``method`` and its ``statistics`` sentence (:data:`COUNTS_DETAIL` formatted).
 
     Returns
     -------
@@ -468,10 +486,11 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
     ours = k / n if n else math.nan
     verdict = judge(interval, threshold, direction, n=n, min_n=min_n)
     thr = threshold_text or _threshold_text(threshold, direction)
-    detail = detail_fmt.format(k=k, n=n, ours=ours, lo=interval[0], hi=interval[1], min_n=min_n, pct=100 * level,
-                               threshold=thr, verdict=verdict)
-    return Criterion(id, text, verdict, detail, ours=ours, published=published, n=int(n), interval=interval,
-                     threshold=thr, replication=replication)
+    values = dict(k=k, n=n, ours=ours, lo=interval[0], hi=interval[1], min_n=min_n, pct=100 * level, threshold=thr,
+                  verdict=verdict)
+    return Criterion(id, text, verdict, detail_fmt.format(**values), ours=ours, published=published, n=int(n),
+                     interval=interval, threshold=thr, replication=replication, min_n=min_n,
+                     method="exact, Clopper-Pearson", statistics=COUNTS_DETAIL.format(**values))
 
 
 def replication_rate(samples: Any, protocol_runs: int, holds_fn: Callable[..., bool], replications: int = 50,

@@ -317,25 +317,21 @@ def _tally(criteria) -> dict[str, int]:
 #: The statistics sentence :mod:`workbench.criteria` ends or interrupts a criterion's detail with (ours, the
 #: interval and how it was computed, the passing condition, the runs needed).  The scoreboard shows those numbers in
 #: their own columns, so the sentence is taken out of the detail text there (``summary.json`` keeps it whole).
-_STATS_SENTENCE = re.compile(
-    r"(?:^|(?<=[;.])\s*)ours (?:\d+/\d+ = )?[^;]*?, [\d.]+ % interval \[[^\]]*\] \((?P<method>[^)]*)\); "
-    r"passes if .*?; needs n >= (?P<min_n>\d+)\.?")
-
-
-def scoreboard_detail(detail: str) -> tuple[str, str | None, str | None]:
+def scoreboard_detail(c) -> tuple[str, str | None, int | None]:
     """A criterion's detail for the scoreboard: ``(explanation, how the interval was computed, runs needed)``.
 
-    The statistics sentence of :mod:`workbench.criteria` (``ours ..., 95 % interval [...] (method); passes if ...;
-    needs n >= k``) is taken out, since the scoreboard has columns for those numbers; its method and ``k`` are
-    returned for those columns.  A detail without that sentence comes back whole, with ``None, None``.
+    The scoreboard has columns for the numbers of the statistics sentence a criterion declares
+    (``Criterion.statistics``: ours, the interval and its method, the passing condition, the runs needed), so that
+    sentence is taken out of the detail (with a full stop right after it); ``method`` and ``min_n`` are the
+    record's own fields.  A detail that does not contain the sentence (or a record without one) comes back whole.
     """
-    m = _STATS_SENTENCE.search(detail or "")
-    if m is None:
-        return detail, None, None
-    text = (detail[:m.start()].rstrip(" ;") + (" " if m.start() and detail[m.end():].strip() else "")
-            + detail[m.end():].lstrip(" ;")).strip()
-    method = re.sub(r" over n = \d+ runs", "", m.group("method"))  # n has its own column
-    return text, method, m.group("min_n")
+    detail = c.detail or ""
+    if not c.statistics or c.statistics not in detail:
+        return detail, c.method, c.min_n
+    before, _, after = detail.partition(c.statistics)
+    after = after[1:] if after.startswith(".") else after
+    text = (before.rstrip(" ;") + (" " if before.strip() and after.strip() else "") + after.lstrip(" ;")).strip()
+    return text, c.method, c.min_n
 
 
 # -- sections ------------------------------------------------------------------------------------------------
@@ -358,7 +354,7 @@ def _scoreboard(p) -> str:
             verdict += "<br><span class='ind'>indicative (quick run)</span>"
             if c.quick_verdict == "met":
                 verdict += "<div class='would'>quick-run numbers pass</div>"
-        explanation, method, min_n = scoreboard_detail(c.detail)
+        explanation, method, min_n = scoreboard_detail(c)
         statement = _esc(c.text) + (f"<div class='detail'>{_esc(explanation)}</div>" if explanation else "")
         row = [c.id, c.text, c.verdict, c.ours, c.published, c.n, interval, c.threshold or None]
         n_cell = None
