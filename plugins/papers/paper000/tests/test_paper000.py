@@ -215,7 +215,9 @@ def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
     full = RecipeOptions("full", rcp.sizes["full"], 0, rcp.default_filters + ("ukf",))
     tasks = {t.key: t for t in rcp.tasks(full)}
     assert set(tasks) == {"scenario", "table@-20dBsm", "sweep@-20dBsm", "table@-18.5dBsm", "table@-17dBsm",
-                          "replicate@-20dBsm"}
+                          "replicate@-20dBsm", "timing@-20dBsm"}
+    timing = tasks["timing@-20dBsm"].params
+    assert (timing["runs"], timing["repeats"], timing["filter"]) == (20, recipe.TIMING_REPEATS, "tbd-pf")
     combos = {tuple(c) for c in tasks["table@-20dBsm"].params["combos"]}
     assert ("ukf", 600, 1000.0) in combos and ("tbd-pf", 600, 2500.0) in combos
     assert all((m.filter, 600, 1000.0) in combos for m in methods.METHODS)
@@ -233,7 +235,7 @@ def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
 def results(host):
     rcp = host.recipe("000")
     values = {"runs": 2, "path_particles": [100, 600], "sweep_particles": [100, 600], "sensitivity": [-17.0],
-              "replicated_runs": 2}
+              "replicated_runs": 2, "timing_repeats": 2}
     options = RecipeOptions(size="test", values=values, seed=1, filters=rcp.default_filters)
     return {t.key: {k: np.asarray(v) for k, v in t.run(TaskContext(t.params, seed=1, host=host)).items()}
             for t in rcp.tasks(options)}
@@ -367,6 +369,46 @@ def test_criteria_verdicts_on_hand_made_runs():
     # A/C straddling 1.3 with a wide spread between runs: the interval decides nothing
     close = _fake_results({"A": method(130.0, 0.8), "B": method(120.0, 0.8), "C": method(100.0, 0.8)}, 100)
     assert {c.id: c for c in recipe.criteria(close)}["2"].verdict == "inconclusive"
+
+
+def test_the_timing_task_times_both_radii_in_turn(results):
+    t = results["timing@-20dBsm"]
+    assert t["cpu_wide"].shape == t["cpu_table"].shape == (2,) and int(t["runs"]) == 2
+    assert np.all(t["cpu_wide"] > 0) and np.all(t["cpu_table"] > 0)
+
+
+def test_criterion_5_judges_its_timing_on_repetitions():
+    rng = np.random.default_rng(1)
+    k = np.arange(300)
+    e = 100.0 * np.where(k <= 100, 2.0, 1.0) * (1 + 0.05 * rng.standard_normal((100, 1)))
+    base = _fake_results({"A": 3 * e, "B": 2 * e, "C": e}, 100)
+    for task, part in (("table@-20dBsm", e[:20]), ("replicate@-20dBsm", e[20:])):  # R = 2.5 km: as accurate
+        base[task]["C__N600__R2500__error"] = part
+        base[task]["C__N600__R2500__lost"] = lost_track(part)
+        base[task]["C__N600__R2500__seconds"] = np.array(1.0)
+    for r in (1000, 2500):
+        for task in ("table@-20dBsm", "replicate@-20dBsm"):
+            base[task][f"C__N600__R{r}__m_error"] = 2 * base[task][f"C__N600__R{r}__error"]
+            base[task][f"C__N600__R{r}__gated"] = np.ones_like(base[task][f"C__N600__R{r}__error"])
+
+    def crit5(wide, table):
+        res = dict(base)
+        if wide is not None:
+            res["timing@-20dBsm"] = {"runs": np.array(20), "repeats": np.array(len(wide)), "rcs": np.array(-20.0),
+                                     "cpu_wide": np.array(wide), "cpu_table": np.array(table)}
+        return {c.id: c for c in recipe.criteria(res)}["5"]
+
+    noise = 0.01 * rng.standard_normal(7)
+    slower = crit5(1.3 + noise, 1.0 + noise[::-1])
+    assert slower.verdict == "met" and slower.extra["timing"]["verdict"] == "met"
+    assert slower.replication == (5, 5)  # the replications judge the accuracy part
+    assert crit5(0.8 + noise, 1.0 + noise[::-1]).verdict == "not met"  # R = 2.5 km shown faster
+    tie = crit5(1.0 + 0.2 * rng.standard_normal(7), 1.0 + 0.2 * rng.standard_normal(7))
+    assert tie.verdict == "inconclusive" and "the accuracy part alone: met" in tie.detail
+    few = crit5(1.3 + noise[:4], 1.0 + noise[:4])  # fewer repetitions than the criterion needs
+    assert few.verdict == "inconclusive" and few.extra["timing"]["n"] == 4
+    untimed = crit5(None, None)
+    assert untimed.verdict == "inconclusive" and "timing not measured" in untimed.detail
 
 
 def test_tuning_rule_scores_lost_runs_first():
