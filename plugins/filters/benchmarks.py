@@ -44,6 +44,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.bench import median_time
+from workbench.bench.peers import filterpy_range_bearing_ukf
 from workbench.linalg import wrap_angle
 from workbench.models import random_walk_velocity, range_bearing
 from workbench.plugins import UnknownComponent, load_host
@@ -253,35 +254,8 @@ def time_ukf(host, batch: int, repeats: int = 5, seed: int = 0) -> float:
 
 
 def _filterpy_ukf(prior: Gaussian, motion, model, alpha: float, beta: float, kappa: float):
-    """FilterPy's UKF on the range-bearing problem (sensor at the origin), with a wrapped bearing residual and an
-    angle-aware measurement mean, as our UKF has."""
-    import math
-
-    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-
-    def residual_z(a, b):
-        d = np.subtract(a, b)
-        d[1] = wrap_angle(d[1])
-        return d
-
-    def z_mean(sigmas, wm):
-        # y_0 + sum w wrap(y_i - y_0) for the bearing, as MeasurementModel.mean
-        ref = sigmas[0, 1]
-        return np.array([wm @ sigmas[:, 0], wrap_angle(ref + wm @ wrap_angle(sigmas[:, 1] - ref))])
-
-    def hx(x):
-        return np.array([math.hypot(x[0], x[1]), math.atan2(x[1], x[0])])
-
-    F = np.asarray(motion.F)
-    points = MerweScaledSigmaPoints(motion.dim, alpha=alpha, beta=beta, kappa=kappa)
-    ukf = UnscentedKalmanFilter(motion.dim, model.dim, motion.dt, hx=hx, fx=lambda x, dt: F @ x, points=points,
-                                z_mean_fn=z_mean, residual_z=residual_z)
-    ukf.x = np.array(prior.mean[0], dtype=float)
-    ukf.P = np.array(prior.cov[0], dtype=float)
-    ukf.Q = np.array(motion.Q, dtype=float)
-    ukf.R = np.array(model.R, dtype=float)
-    ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # the first update comes before any predict
-    return ukf
+    """FilterPy's UKF at the first item of ``prior`` (:func:`workbench.bench.peers.filterpy_range_bearing_ukf`)."""
+    return filterpy_range_bearing_ukf(prior.mean[0], prior.cov[0], motion, model, alpha, beta, kappa)
 
 
 def filterpy_ukf_time(host, runs: int = 10, steps: int = 50, repeats: int = 5, seed: int = 0) -> float | str:

@@ -228,6 +228,14 @@ def test_filterpy_ukf_of_the_benchmark_tracks_as_our_ukf_does():
             ukf.update(scans.z[r, k, 0])
             theirs.append(ukf.x.copy())
         np.testing.assert_allclose(np.array(theirs), np.stack(ours, axis=1)[r], rtol=1e-6, atol=1e-6)
+    # the shared builder (workbench.bench.peers) refuses a sensor it does not model
+    from dataclasses import replace
+
+    from workbench.bench.peers import filterpy_range_bearing_ukf
+
+    with pytest.raises(ValueError, match="sensor at the origin"):
+        filterpy_range_bearing_ukf(prior.mean[0], prior.cov[0], motion, replace(model, sensor_position=(5.0, 0.0)),
+                                   p["alpha"], p["beta"], p["kappa"])
 
 
 def test_the_one_track_runners_compute_the_same_track_as_filterpy():

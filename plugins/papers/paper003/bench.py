@@ -21,13 +21,13 @@ Everything is returned as a flat dict of numbers (seconds, microseconds) for ``w
 
 from __future__ import annotations
 
-import math
 import os
 import time
 
 import numpy as np
 
 from workbench.bench import median_time
+from workbench.bench.peers import filterpy_range_bearing_ukf
 from workbench.plugins import load_host
 from workbench.report.engine import InProcess
 from workbench.kernels.crpf_step import crpf_step, resolve_backend
@@ -208,43 +208,6 @@ def crpf_step_cost(repeat: int = 15, seed: int = 0, budget: int = 131072) -> dic
     return out
 
 
-def _filterpy_ukf(prior_mean, prior_cov, motion, model, alpha, beta, kappa):
-    """FilterPy's UKF on the range-bearing problem, with light one-point angle-aware mean and residual."""
-    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-
-    two_pi = 2.0 * np.pi
-
-    def wrap(a):
-        return a - two_pi * np.ceil((a - np.pi) / two_pi)
-
-    def residual_z(a, b):
-        d = np.subtract(a, b)
-        d[1] = wrap(d[1])
-        return d
-
-    def z_mean(sigmas, wm):
-        # y_0 + sum w wrap(y_i - y_0) for the bearing, as MeasurementModel.mean
-        r = wm @ sigmas[:, 0]
-        ref = sigmas[0, 1]
-        return np.array([r, wrap(ref + wm @ wrap(sigmas[:, 1] - ref))])
-
-    def hx(x):  # the sensor's h (range, bearing from the origin) for one state, without array overhead
-        return np.array([math.hypot(x[0], x[1]), math.atan2(x[1], x[0])])
-
-    if (model.sensor_position or (0.0, 0.0)) != (0.0, 0.0):
-        raise ValueError("the FilterPy comparison assumes the sensor at the origin")
-    F = np.asarray(motion.F)
-    points = MerweScaledSigmaPoints(motion.dim, alpha=alpha, beta=beta, kappa=kappa)
-    ukf = UnscentedKalmanFilter(motion.dim, model.dim, motion.dt, hx=hx, fx=lambda x, dt: F @ x,
-                                points=points, z_mean_fn=z_mean, residual_z=residual_z)
-    ukf.x = np.array(prior_mean, dtype=float)
-    ukf.P = np.array(prior_cov, dtype=float)
-    ukf.Q = np.array(motion.Q, dtype=float)
-    ukf.R = np.array(model.R, dtype=float)
-    ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # the first update comes before any predict
-    return ukf
-
-
 def ukf_vs_filterpy(batch: int = 3000, filterpy_runs: int = 30, steps: int = 100, seed: int = 0,
                     repeat: int = 5) -> dict:
     """Per run-step cost (one predict + update) of our UKF over ``batch`` runs vs FilterPy's UKF, one run
@@ -281,8 +244,8 @@ def ukf_vs_filterpy(batch: int = 3000, filterpy_runs: int = 30, steps: int = 100
     def theirs(redraw: bool = False, count: int = runs):
         finals = []
         for r in range(count):
-            ukf = _filterpy_ukf(recipe.XHAT0, np.diag(recipe.P0), motion, model, params["alpha"], params["beta"],
-                                params["kappa"])
+            ukf = filterpy_range_bearing_ukf(recipe.XHAT0, np.diag(recipe.P0), motion, model, params["alpha"],
+                                             params["beta"], params["kappa"])
             ukf.update(z[r, 0])
             for k in range(1, steps):
                 ukf.predict()
