@@ -404,10 +404,10 @@ def _moments_planar(x0, x1, x2, x3, row, s, uniform, mean, cov):
         c12, c13, c22, c23, c33 = c12 * w, c13 * w, c22 * w, c23 * w, c33 * w
     a = (a0, a1, a2, a3)
     c = (c00, c01, c02, c03, c11, c12, c13, c22, c23, c33)
-    e = np.empty(4)
+    # e = mean - s
+    e = (a0 + s0 * (sw - 1.0), a1 + s1 * (sw - 1.0), a2 + s2 * (sw - 1.0), a3 + s3 * (sw - 1.0))
     for j in range(4):
         mean[j] = s[j] * sw + a[j]
-        e[j] = a[j] + s[j] * (sw - 1.0)  # mean - s
     t = 0
     for j in range(4):
         for k in range(j, 4):

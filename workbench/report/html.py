@@ -314,16 +314,14 @@ def _tally(criteria) -> dict[str, int]:
     return counts
 
 
-#: The statistics sentence :mod:`workbench.criteria` ends or interrupts a criterion's detail with (ours, the
-#: interval and how it was computed, the passing condition, the runs needed).  The scoreboard shows those numbers in
-#: their own columns, so the sentence is taken out of the detail text there (``summary.json`` keeps it whole).
 def scoreboard_detail(c) -> tuple[str, str | None, int | None]:
     """A criterion's detail for the scoreboard: ``(explanation, how the interval was computed, runs needed)``.
 
     The scoreboard has columns for the numbers of the statistics sentence a criterion declares
     (``Criterion.statistics``: ours, the interval and its method, the passing condition, the runs needed), so that
     sentence is taken out of the detail (with a full stop right after it); ``method`` and ``min_n`` are the
-    record's own fields.  A detail that does not contain the sentence (or a record without one) comes back whole.
+    record's own fields.  A detail that does not contain the sentence (or a record without one) comes back whole;
+    ``summary.json`` keeps every detail whole.
     """
     detail = c.detail or ""
     if not c.statistics or c.statistics not in detail:
