@@ -1,5 +1,7 @@
 """The compiled small-batch Kalman loops (workbench.kernels.kalman_numba) against their NumPy twin, the batched
-code of workbench.kalman_core (taken when the backend policy has no Numba, as on a GPU arch)."""
+code of workbench.kalman_core (taken when the backend policy has no Numba, as on a GPU arch), and both against the
+Kalman equations written out item by item here.  kalman_core falls back to NumPy silently, so every comparison
+asserts which code ran (kalman_core.last_backend): two runs of the same NumPy code would agree trivially."""
 
 import numpy as np
 import pytest
@@ -19,8 +21,10 @@ def _random_gaussian(rng, B, n):
 
 def _both(fn):
     compiled = fn()
+    assert kalman_core.last_backend() == "numba"  # the compiled loops ran, not the silent fallback
     with backend.using("vulkan"):  # no Numba there: the NumPy twin
         reference = fn()
+    assert kalman_core.last_backend() == "numpy"
     return compiled, reference
 
 
@@ -33,6 +37,11 @@ def test_predict_matches_the_numpy_twin(B):
     np.testing.assert_allclose(compiled.mean, reference.mean, rtol=1e-13, atol=1e-11)
     np.testing.assert_allclose(compiled.cov, reference.cov, rtol=1e-12, atol=1e-10)
     np.testing.assert_array_equal(compiled.cov, np.swapaxes(compiled.cov, 1, 2))  # exactly symmetric
+    # the prediction written out item by item: x- = F x, P- = F P F^T + Q
+    F, Q = motion.F, motion.Q
+    for b in range(B):
+        np.testing.assert_allclose(compiled.mean[b], F.dot(g.mean[b]), rtol=1e-13, atol=1e-11)
+        np.testing.assert_allclose(compiled.cov[b], F.dot(g.cov[b]).dot(F.T) + Q, rtol=1e-12, atol=1e-10)
 
 
 @pytest.mark.parametrize("B", [1, 7])
@@ -50,6 +59,18 @@ def test_ekf_update_matches_the_numpy_twin_with_wrapping_missing_items_and_own_c
         np.testing.assert_allclose(compiled.mean, reference.mean, rtol=1e-11, atol=1e-9)
         np.testing.assert_allclose(compiled.cov, reference.cov, rtol=1e-9, atol=1e-9)
         np.testing.assert_array_equal(compiled.mean[~present], g.mean[~present])  # no measurement: unchanged
+        # the EKF update written out item by item, with an explicit inverse (fine at these sizes)
+        Rs = np.broadcast_to(model.R, (B, 2, 2)) if scan.cov is None else scan.cov[:, 0]
+        for b in np.flatnonzero(present):
+            Hb, Pb = H[b], g.cov[b]
+            S = Hb.dot(Pb).dot(Hb.T) + Rs[b]
+            K = Pb.dot(Hb.T).dot(np.linalg.inv(S))
+            nu = z[b] - model.h(g.mean[b:b + 1])[0]
+            nu[1] = (nu[1] + np.pi) % (2 * np.pi) - np.pi  # the bearing residual wraps
+            IKH = np.eye(4) - K.dot(Hb)
+            np.testing.assert_allclose(compiled.mean[b], g.mean[b] + K.dot(nu), rtol=1e-10, atol=1e-8)
+            np.testing.assert_allclose(compiled.cov[b], IKH.dot(Pb).dot(IKH.T) + K.dot(Rs[b]).dot(K.T),
+                                       rtol=1e-8, atol=1e-8)
 
 
 def test_a_non_positive_definite_innovation_falls_back_to_the_numpy_path():
@@ -61,4 +82,15 @@ def test_a_non_positive_definite_innovation_falls_back_to_the_numpy_path():
     assert not fast.update_items(g.mean, g.cov, np.ones((1, 2)), np.eye(2)[None], np.eye(2)[None],
                                  np.ones(1, bool), out_x, out_p)
     result = kalman_core.kalman_update(g, Scan.single(np.ones((1, 2))), model, np.eye(2)[None], "kf")
-    assert np.all(np.isfinite(result.mean))  # the NumPy path's general solve takes over
+    assert kalman_core.last_backend() == "numpy"  # the NumPy path's general solve took over
+    assert np.all(np.isfinite(result.mean))
+
+
+def test_small_batches_take_the_compiled_loops_and_large_ones_the_numpy_code():
+    rng = np.random.default_rng(3)
+    motion = constant_velocity(2, 0.7, 1.3)
+    for B, expected in ((1, "numba"), (kalman_core.SMALL_BATCH - 1, "numba"), (kalman_core.SMALL_BATCH, "numpy")):
+        before = kalman_core.backend_counts()
+        kalman_core.linear_predict(_random_gaussian(rng, B, 4), motion)
+        after = kalman_core.backend_counts()
+        assert after.get(expected, 0) == before.get(expected, 0) + 1, B

@@ -91,7 +91,26 @@ def test_fused_range_bearing_log_weights_equal_the_model_likelihood(which):
     got = core.weighted_log_likelihood(z, x, model, prev, backend="numba")
     ref = core.weighted_log_likelihood(z, x, model, prev, backend="numpy")
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(ref, core.log_likelihood(z, x, model) + prev, rtol=0, atol=0)
+    # both against the range-bearing Gaussian written out here in extended precision (not the model's h, residual
+    # or Cholesky factor): prev - 1/2 nu^T R^-1 nu with the bearing residual wrapped into [-pi, pi)
+    exact = _range_bearing_log_weights(z, x, model.R, model.sensor_position, prev)
+    assert np.ptp(exact - prev) > 100.0  # the likelihood term is far from negligible beside the weights
+    for path in (got, ref):
+        np.testing.assert_allclose(path, exact.astype(float), rtol=1e-12, atol=1e-9)
+
+
+def _range_bearing_log_weights(z, x, R, sensor, prev):
+    """``prev_bi - 1/2 nu_bi^T R^-1 nu_bi`` with ``nu = z_b - [|p_bi - s|, atan2(p_bi - s)]`` (bearing wrapped), in
+    ``np.longdouble``, with the 2 x 2 inverse in closed form."""
+    L = np.longdouble
+    pi = L(np.pi)
+    dx, dy = x[..., 0].astype(L) - L(sensor[0]), x[..., 1].astype(L) - L(sensor[1])
+    nu_r = z[:, None, 0].astype(L) - np.sqrt(dx * dx + dy * dy)
+    nu_b = z[:, None, 1].astype(L) - np.arctan2(dy, dx)
+    nu_b = np.mod(nu_b + pi, 2 * pi) - pi
+    a, b, d = L(R[0, 0]), L(R[0, 1]), L(R[1, 1])
+    quad = (d * nu_r * nu_r - 2 * b * nu_r * nu_b + a * nu_b * nu_b) / (a * d - b * b)
+    return prev.astype(L) - quad / 2
 
 
 def test_an_infinite_particle_gets_zero_weight_not_nan():

@@ -1,4 +1,6 @@
-"""The UKF's compiled loops (workbench.kernels.sigma_numba) against the filter's NumPy code."""
+"""The UKF's compiled loops (workbench.kernels.sigma_numba) against the filter's NumPy code.  sigma_point falls back
+to NumPy silently, so each comparison asserts which code ran (sigma_point.backend_counts): two runs of the same
+NumPy code would agree trivially."""
 
 import numpy as np
 import pytest
@@ -12,6 +14,10 @@ from workbench.types import Gaussian, Scans
 from workbench_filters import sigma_point
 
 pytestmark = pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
+
+
+def _difference(after: dict, before: dict) -> dict:
+    return {k: after.get(k, 0) - before.get(k, 0) for k in set(after) | set(before)}
 
 
 def _scenario(model, B=40, steps=30, seed=0):
@@ -36,11 +42,38 @@ def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model, B):
     assert (B >= sigma_numba.PARALLEL_MIN) == (B == 64)
     spec = load_host().filter("ukf")
     prior, motion, scans = _scenario(model, B=B)
+    before = sigma_point.backend_counts()
     fast = run_filter(spec, prior, motion, model, scans, None)
+    ran = _difference(sigma_point.backend_counts(), before)
+    assert ran.get("numpy", 0) == 0 and ran.get("numba", 0) >= 2 * scans.steps - 1, ran  # every step compiled
     monkeypatch.setattr(sigma_point, "_compiled", lambda: None)
+    before = sigma_point.backend_counts()
     slow = run_filter(spec, prior, motion, model, scans, None)
+    ran = _difference(sigma_point.backend_counts(), before)
+    assert ran.get("numba", 0) == 0 and ran.get("numpy", 0) >= 2 * scans.steps - 1, ran
     assert np.allclose(fast.mean, slow.mean, rtol=1e-10, atol=1e-9)
     assert np.allclose(fast.cov, slow.cov, rtol=1e-9, atol=1e-9)
+    if model.H is not None:  # linear motion and measurement: the unscented transform is exact, the UKF is the KF
+        mean, cov = _kalman_filter(prior, motion, model, scans)
+        np.testing.assert_allclose(fast.mean, mean, rtol=1e-9, atol=1e-7)
+        np.testing.assert_allclose(fast.cov, cov, rtol=1e-8, atol=1e-8)
+
+
+def _kalman_filter(prior, motion, model, scans):
+    """The Kalman filter written out item by item (explicit inverse): update with scan 0, then predict/update."""
+    F, Q, H, R = motion.F, motion.Q, model.H, model.R
+    B, T = scans.valid.shape[:2]
+    means, covs = np.empty((B, T, 4)), np.empty((B, T, 4, 4))
+    for b in range(B):
+        x, P = prior.mean[b].copy(), prior.cov[b].copy()
+        for k in range(T):
+            if k:
+                x, P = F.dot(x), F.dot(P).dot(F.T) + Q
+            if scans.valid[b, k, 0]:
+                K = P.dot(H.T).dot(np.linalg.inv(H.dot(P).dot(H.T) + R))
+                x, P = x + K.dot(scans.z[b, k, 0] - H.dot(x)), (np.eye(4) - K.dot(H)).dot(P)
+            means[b, k], covs[b, k] = x, P
+    return means, covs
 
 
 def test_compiled_update_declines_a_covariance_that_is_not_positive_definite():

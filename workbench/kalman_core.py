@@ -28,12 +28,13 @@ from __future__ import annotations
 import numpy as np
 
 from .filtering import keep_where, single_measurement
-from .kernels.backend import resolve
+from .kernels.backend import BackendRecord, resolve
 from .linalg import joseph_update, psd_solve, symmetrise
 from .models import MeasurementModel, MotionModel
 from .types import Gaussian, InputError, Scan
 
-__all__ = ["linear_predict", "linear_update", "kalman_update", "kf_update", "ekf_update", "measurement_covariance"]
+__all__ = ["linear_predict", "linear_update", "kalman_update", "kf_update", "ekf_update", "measurement_covariance",
+           "last_backend", "backend_counts"]
 
 
 #: Batches smaller than this take the compiled item-by-item loops (:mod:`workbench.kernels.kalman_numba`) where
@@ -42,6 +43,20 @@ SMALL_BATCH = 64
 
 
 _LOOPS: list = []
+_RECORD = BackendRecord()  # which code the last linear_predict / kalman_update of this thread ran
+
+
+def last_backend() -> str | None:
+    """Which code computed this thread's last :func:`linear_predict` or :func:`kalman_update`: ``"numba"`` (the
+    compiled small-batch loops) or ``"numpy"`` (the batched NumPy code, also the fallback where the compiled
+    update declines an item); ``None`` before the first call.  For tests, which must know which path ran."""
+    return _RECORD.last()
+
+
+def backend_counts() -> dict:
+    """Calls per backend (``{"numba": k, "numpy": m}``) of this thread so far, for the same functions as
+    :func:`last_backend`."""
+    return _RECORD.counts()
 
 
 def _compiled():
@@ -61,7 +76,9 @@ def linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
         mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
         fast.predict_items(state.mean, state.cov, np.ascontiguousarray(motion.F, dtype=float),
                            np.ascontiguousarray(motion.Q, dtype=float), mean, cov)
+        _RECORD.note("numba")
         return Gaussian.trusted(mean, cov)
+    _RECORD.note("numpy")
     mean = state.mean @ motion.F.T  # x- = F x
     cov = symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q)  # P- = F P F^T + Q
     return Gaussian.trusted(mean, cov)
@@ -133,7 +150,9 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
         if fast.update_items(state.mean, state.cov, np.ascontiguousarray(nu, dtype=float),
                              np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(Rb, dtype=float), present,
                              mean, cov):
+            _RECORD.note("numba")
             return Gaussian.trusted(mean, cov)
+    _RECORD.note("numpy")
     P = state.cov
     S = symmetrise(H @ P @ np.swapaxes(H, -1, -2) + R)  # S = H P- H^T + R
     PHt = P @ np.swapaxes(H, -1, -2)

@@ -40,7 +40,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.kernels.backend import numba_available
+from workbench.kernels.backend import BackendRecord, numba_available
 from workbench.linalg import cholupdate, safe_cholesky, symmetrise, tria
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
@@ -185,6 +185,23 @@ def _gain(Pxy: np.ndarray, chol_yy: np.ndarray) -> np.ndarray:
     return np.swapaxes(_solve_upper(np.swapaxes(chol_yy, 1, 2), _solve_lower(chol_yy, np.swapaxes(Pxy, 1, 2))), 1, 2)
 
 
+_RECORD = BackendRecord()  # which code the last full-covariance predict / update of this thread ran
+
+
+def last_backend() -> str | None:
+    """Which code computed this thread's last full-covariance sigma-point predict or update: ``"numba"`` (the
+    compiled UKF loops of :mod:`workbench.kernels.sigma_numba`) or ``"numpy"`` (the NumPy code below: no Numba, the
+    CDKF, a covariance the compiled Cholesky declines); ``None`` before the first call.  For tests, which must know
+    which path ran."""
+    return _RECORD.last()
+
+
+def backend_counts() -> dict:
+    """Calls per backend (``{"numba": k, "numpy": m}``) of this thread so far, for the same functions as
+    :func:`last_backend`."""
+    return _RECORD.counts()
+
+
 def _compiled():
     """The Numba loops of the UKF (:mod:`workbench.kernels.sigma_numba`), or ``None`` without Numba."""
     if not numba_available():
@@ -213,7 +230,9 @@ def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weig
         Xf = np.ascontiguousarray(motion.f(X))
         mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
         _compiled().predicted_moments(Xf, weights.mean, weights.cov, np.asarray(motion.Q, dtype=float), mean, cov)
+        _RECORD.note("numba")
         return SigmaPointState(mean, cov, state.jitters)
+    _RECORD.note("numpy")
     S, jit = _cholesky(P)
     Xf = motion.f(sigma_points(x, S, weights.spread))  # X* = f(X)
     mean = weights.mean @ Xf  # x- = sum Wm X*
@@ -241,7 +260,9 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
         mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
         if _compiled().unscented_update(x, P, X, Y, weights.mean, weights.cov, model.angle_mask, model.R,
                                         np.ascontiguousarray(z, dtype=float), present, mean, cov):
+            _RECORD.note("numba")
             return SigmaPointState(mean, cov, state.jitters)
+    _RECORD.note("numpy")
     S, jit = _cholesky(P)
     X = sigma_points(x, S, weights.spread)  # redraw from (x-, P-)
     Y = model.h(X)

@@ -18,9 +18,11 @@ from __future__ import annotations
 import contextlib
 import functools
 import importlib.util
+import threading
+from collections import Counter
 from typing import Iterator
 
-__all__ = ["BACKENDS", "ARCHES", "numba_available", "current_arch", "using", "set_arch", "resolve"]
+__all__ = ["BACKENDS", "ARCHES", "numba_available", "current_arch", "using", "set_arch", "resolve", "BackendRecord"]
 
 #: Backend names a kernel call or a filter parameter may give.
 BACKENDS = ("auto", "numba", "taichi", "numpy")
@@ -81,3 +83,30 @@ def resolve(backend: str = "auto", arch: str | None = None) -> str:
     if backend != "auto":
         return backend
     return "numba" if arch == "cpu" and numba_available() else "taichi"
+
+
+class BackendRecord:
+    """Which code a function with a silent fallback actually ran, per thread: the last call's backend and a tally
+    of calls per backend (``"numba"``, ``"numpy"``, ...).  A module that may fall back from its compiled loops to
+    its NumPy code notes each call here, so that tests can assert which path ran rather than trust it."""
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+
+    def note(self, backend: str) -> None:
+        """Record that one call ran ``backend``."""
+        self._local.last = backend
+        self._counts()[backend] += 1
+
+    def _counts(self) -> Counter:
+        if not hasattr(self._local, "counts"):
+            self._local.counts = Counter()
+        return self._local.counts
+
+    def last(self) -> str | None:
+        """The backend of this thread's last call (``None`` before the first)."""
+        return getattr(self._local, "last", None)
+
+    def counts(self) -> dict:
+        """Calls per backend in this thread so far (a copy)."""
+        return dict(self._counts())
