@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Mapping
 
 from .types import InputError
-from .units import UNITS, parse_quantity
+from .units import DIMENSIONS, GENERIC_LIMIT, LIMITS, SI_LABELS, parse_quantity
 
 __all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults",
            "parse_reference", "check_footprint", "memory_limit"]
@@ -40,11 +40,19 @@ class Param:
         ``"float"``, ``"int"``, ``"bool"``, ``"str"``, ``"vector"`` (a tuple of floats), or ``"float?"`` /
         ``"vector?"`` (the same or ``None``).
     unit : str or None
-        The unit dimension of a quantity (``"length"``, ``"angle"``, ``"time"``, ``"speed"``, ``"acceleration"``,
-        ``"frequency"``, ``"decibel"``, ``"power"``; see :data:`workbench.units.UNITS`), or ``None`` for a pure
-        number.  Values are SI (angles in radians); a string such as ``"10 deg"`` is converted.
+        The unit dimension of the value, one of :data:`workbench.units.DIMENSIONS`: a quantity (``"length"``,
+        ``"angle"``, ``"time"``, ``"speed"``, ``"acceleration"``, ``"frequency"``, ``"decibel"``, ``"power"``,
+        ``"angular_rate"``, ``"area"``, ``"inverse_volume"``, ``"angle_deg"`` for an angle held in degrees),
+        ``"gate"`` (a Mahalanobis gate held as the chi-square value d^2; ``"3 sigma"`` reads as 9),
+        ``"state"`` (in the SI units of the filter's state components, bare numbers only) or ``"dimensionless"``
+        (a ratio, a probability, a count, a factor: bare numbers only).  ``None`` means *not declared* (a
+        third-party declaration, or one inferred by :func:`infer_params`): bare numbers only.  Every built-in
+        numeric parameter declares one.  Values are SI (angles in radians); a string such as ``"10 deg"`` is
+        converted, and a string of another dimension (``"3 km"`` for a gate) is refused naming the units allowed.
     minimum, maximum : float or None
-        Inclusive bounds of a number (of every element of a vector).
+        Inclusive bounds of a number (of every element of a vector).  Besides these, every value is held to its
+        dimension's physical limit (:data:`workbench.units.LIMITS`, e.g. 1e9 m for a length), so an extreme
+        finite number (1e200, whose square overflows) is refused where it comes in.
     above : float or None
         A strict lower bound (the value must be greater).
     choices : tuple or None
@@ -68,17 +76,24 @@ class Param:
     def __post_init__(self) -> None:
         if self.type not in TYPES:
             raise ValueError(f"Param {self.name!r}: type must be one of {TYPES}, got {self.type!r}")
-        if self.unit is not None and self.unit not in {d for d, _ in UNITS.values()}:
-            raise ValueError(f"Param {self.name!r}: unknown unit dimension {self.unit!r}")
+        if self.unit is not None and self.unit not in DIMENSIONS:
+            raise ValueError(f"Param {self.name!r}: unknown unit dimension {self.unit!r} (known: "
+                             f"{', '.join(DIMENSIONS)})")
 
     @property
     def unit_label(self) -> str:
         """The SI unit of the value, for listings (``"m"``, ``"rad"``, ``"m/s"``...)."""
-        return _SI.get(self.unit or "", "")
+        return SI_LABELS.get(self.unit or "", "")
 
-
-_SI = {"length": "m", "angle": "rad", "time": "s", "speed": "m/s", "acceleration": "m/s^2", "frequency": "Hz",
-       "decibel": "dB", "power": "W"}
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """The effective closed range ``(low, high)`` of a number (of every element of a vector): the declared
+        bounds within the dimension's physical limit (:data:`workbench.units.LIMITS`).  ``above`` counts as its
+        (excluded) lower end."""
+        limit = LIMITS.get(self.unit or "", GENERIC_LIMIT)
+        low = max(v for v in (-limit, self.minimum, self.above) if v is not None)
+        high = min(v for v in (limit, self.maximum) if v is not None)
+        return float(low), float(high)
 
 
 def _number(param: Param, value: Any, where: str, integer: bool = False) -> float | int:
@@ -88,16 +103,13 @@ def _number(param: Param, value: Any, where: str, integer: bool = False) -> floa
             raise InputError(f"{where}: expected an integer, got {value!r}")
         number: float | int = int(value)
     else:
-        if param.unit is None and isinstance(value, str):
-            from .units import _PATTERN
-
-            match = _PATTERN.match(value)
-            if match and match.group(2):
-                raise InputError(f"{where}: expected a pure number, got the quantity {value!r} (this parameter has "
-                                 f"no unit)")
         number = parse_quantity(value, param.unit, where)
     if not math.isfinite(number):
         raise InputError(f"{where}: expected a finite number, got {value!r}")
+    limit = LIMITS.get(param.unit or "", GENERIC_LIMIT)
+    if not abs(number) <= limit:  # ints (floats are held to it by parse_quantity)
+        raise InputError(f"{where}: {value!r} is beyond the physical range of this parameter (|value| <= "
+                         f"{limit:g}{_unit(param)})")
     if param.above is not None and not number > param.above:
         raise InputError(f"{where}: must be > {param.above:g}{_unit(param)}, got {number:g}")
     if param.minimum is not None and number < param.minimum:

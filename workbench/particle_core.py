@@ -39,7 +39,7 @@ import numpy as np
 from .kernels.backend import resolve
 from .linalg import safe_cholesky
 from .models import MeasurementModel, MotionModel
-from .types import Gaussian, Particles
+from .types import Gaussian, InputError, Particles
 
 __all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "log_likelihood",
            "weighted_log_likelihood", "log_likelihood_cov", "reweight", "estimate", "diagnostics", "compiled"]
@@ -145,7 +145,17 @@ def _plan_arrays(matrix_bytes: bytes, rows: int, cols: int) -> tuple[np.ndarray,
     return out
 
 
+def need_rng(rng, who: str = "this particle filter") -> None:
+    """:class:`~workbench.types.InputError` when a step that draws random numbers got no generator: there is no
+    hidden default stream (every draw comes from an explicit seed)."""
+    if rng is None:
+        raise InputError(f"{who} draws random numbers but got no generator (rng is None): pass "
+                         f"rng=wb.generator(seed, key), e.g. wb.run(filt, scans, motion, model, prior=prior, "
+                         f"rng=wb.generator(1, 'runs'))")
+
+
 def init(prior: Gaussian, rng: np.random.Generator, particles: int) -> ParticleState:
+    need_rng(rng, "particle_core.init")
     chol, _ = safe_cholesky(prior.cov)
     e = rng.standard_normal((prior.batch, particles, prior.dim))
     x = component_major(prior.batch, particles, prior.dim)
@@ -176,6 +186,7 @@ def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
             backend: str = "numpy") -> ParticleState:
     """``x_i <- F x_i + Q_sqrt e_i`` with ``e = rng.standard_normal((B, N, k))`` for the ``k`` non-zero columns of
     ``Q_sqrt``; ``backend`` as in the module docstring (the same particles either way)."""
+    need_rng(rng, "particle_core.predict")
     x = state.cloud.particles
     B, N, n = x.shape
     matrix, k = _propagation(motion)
@@ -327,6 +338,7 @@ def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, pre
     """
     from .resampling import effective_sample_size, normalise_log_weights, resample_where
 
+    need_rng(rng, "particle_core.reweight")
     B, N = np.shape(log_w)
     present = np.asarray(present, dtype=bool)
     top = np.max(log_w, axis=1)

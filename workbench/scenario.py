@@ -234,7 +234,7 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     tracker = sc.get("tracker", "direct")
     if tracker not in TRACKERS:
         raise InputError(f"{sc.where('tracker')}: expected one of {TRACKERS}, got {tracker!r}")
-    gate = sc.quantity("gate", None, None, minimum=1e-12) if "gate" in sc.table else None
+    gate = sc.quantity("gate", "gate", None, minimum=1e-12) if "gate" in sc.table else None
     sc.done()
 
     detections, det_format = None, ""
@@ -276,7 +276,7 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     for i, leg in enumerate(legs_raw):
         lr = _Reader(path, leg, f"truth.legs[{i}]")
         legs.append(Leg(lr.get("kind"), lr.quantity("duration", "time", minimum=1e-12),
-                        lr.quantity("turn_rate", None, 0.0), lr.quantity("climb_rate", "speed", 0.0)))
+                        lr.quantity("turn_rate", "angular_rate", 0.0), lr.quantity("climb_rate", "speed", 0.0)))
         lr.done()
     tr.done()
 

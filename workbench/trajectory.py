@@ -8,7 +8,7 @@ from typing import Sequence
 import numpy as np
 
 from .models import MotionModel
-from .types import InputError, Truth
+from .types import InputError, Truth, check_size
 
 __all__ = ["Leg", "piecewise_trajectory", "sample_motion"]
 
@@ -80,6 +80,7 @@ def sample_motion(x0: np.ndarray, motion: MotionModel, steps: int, rng: np.rando
     B, n = x0.shape
     if n != motion.dim:
         raise InputError(f"start states have dimension {n} but the motion model has {motion.dim}")
+    steps = check_size("sample_motion: steps", steps, 2 * 8.0 * B * n)
     noise = rng.standard_normal((B, steps - 1, n)) @ motion.Q_sqrt.T
     states = np.empty((B, steps, n))
     states[:, 0] = x0

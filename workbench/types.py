@@ -28,6 +28,7 @@ __all__ = [
     "Truth",
     "InputError",
     "check_covariance",
+    "check_size",
 ]
 
 #: Origin label of a detection that came from clutter (metrics only; filters never see it).
@@ -39,10 +40,88 @@ class InputError(ValueError):
 
 
 def _array(name: str, value, ndim: int, dtype=float) -> np.ndarray:
-    arr = np.asarray(value, dtype=dtype)
+    arr = _as_array(name, value, dtype)
     if arr.ndim != ndim:
         raise InputError(f"{name} must have {ndim} dimensions, got shape {arr.shape}")
     return arr
+
+
+def _as_array(name: str, value, dtype=float) -> np.ndarray:
+    """``value`` as an array of ``dtype`` (``float``, ``int`` or ``bool``), refusing what that dtype cannot hold
+    with a named :class:`InputError`: complex numbers (the imaginary part would be lost), ``datetime64`` /
+    ``timedelta64`` (no unit is stated: times are seconds as floats), text and objects that are not plain numbers
+    (``"False"`` would read as true), integers that are not whole numbers, masks that are not 0/1."""
+    if isinstance(value, np.ndarray) and value.dtype == np.dtype(dtype):
+        return value
+    try:
+        raw = np.asarray(value)
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"{name}: cannot read the value as an array of numbers ({exc})") from None
+    kind = raw.dtype.kind
+    if kind == "O":
+        flat = raw.ravel()
+        odd = next((v for v in flat if isinstance(v, (complex, np.complexfloating))
+                    or not isinstance(v, (int, float, bool, np.integer, np.floating, np.bool_))), _NONE)
+        if odd is not _NONE:
+            raise InputError(f"{name} holds {type(odd).__name__} {odd!r} among its values; it takes real numbers")
+        raw = raw.astype(float)
+        kind = "f"
+    if kind == "c":
+        raise InputError(f"{name} holds complex numbers (dtype {raw.dtype}); it takes real numbers: pass the real "
+                         f"and imaginary parts (or magnitude and phase) as separate components")
+    if kind in "Mm":
+        raise InputError(f"{name} holds {raw.dtype} values, whose unit the workbench does not guess; times and "
+                         f"durations are seconds as floats: convert first, e.g. (t - t[0]) / np.timedelta64(1, 's')")
+    if kind in "USV":
+        raise InputError(f"{name} holds text or raw records (dtype {raw.dtype}), not numbers")
+    if dtype is bool:
+        if kind != "b":
+            with np.errstate(invalid="ignore"):
+                if not np.all((raw == 0) | (raw == 1)):
+                    bad = raw.ravel()[~((raw.ravel() == 0) | (raw.ravel() == 1))][0]
+                    raise InputError(f"{name} is a mask: it takes booleans (or 0 and 1), got {bad.item()!r} "
+                                     f"(dtype {raw.dtype})")
+        return raw.astype(bool)
+    if dtype is int and kind == "f":
+        with np.errstate(invalid="ignore"):
+            whole = np.isfinite(raw) & (raw == np.round(raw))
+        if not np.all(whole):
+            bad = raw.ravel()[~whole.ravel()][0]
+            raise InputError(f"{name} takes whole numbers, got {bad.item()!r}")
+    return raw.astype(dtype)
+
+
+_NONE = object()
+
+
+def _real_scalar(name: str, value) -> float:
+    """A real number (not complex, text, a date or a boolean) as a float; :class:`InputError` naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            return _real_scalar(name, value[()])
+        hint = (" (times are seconds as floats: convert first, e.g. (t - t0) / np.timedelta64(1, 's'))"
+                if isinstance(value, (np.datetime64, np.timedelta64)) else "")
+        raise InputError(f"{name} must be a real number, got {type(value).__name__} {value!r}{hint}")
+    return float(value)
+
+
+def check_size(name: str, value, item_bytes: float = 8.0, minimum: int = 1, share: float = 0.5) -> int:
+    """``value`` as a count (a batch, a number of steps, a dimension) that some call allocates ``item_bytes`` per
+    unit of: a whole number ``>= minimum`` whose allocation fits in ``share`` of the machine's memory;
+    :class:`InputError` naming ``name`` otherwise (instead of NumPy's raw ``ValueError`` or ``MemoryError``)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)) or (
+            isinstance(value, (float, np.floating)) and not float(value).is_integer()):
+        raise InputError(f"{name} must be a whole number >= {minimum}, got {value!r}")
+    count = int(value)
+    if count < minimum:
+        raise InputError(f"{name} must be >= {minimum}, got {count}")
+    from .params import memory_limit
+
+    limit = share * memory_limit()
+    if count * float(item_bytes) > limit:
+        raise InputError(f"{name} = {count} needs about {count * float(item_bytes) / 2**30:.3g} GiB; this machine "
+                         f"allows {limit / 2**30:.3g} GiB ({share:.0%} of its memory): ask for less")
+    return count
 
 
 def _require_finite(name: str, arr: np.ndarray) -> None:
@@ -136,9 +215,11 @@ class Gaussian:
 
     @classmethod
     def broadcast(cls, mean, cov, batch: int) -> "Gaussian":
-        """One belief ``mean (n,)``, ``cov (n, n)`` repeated over a batch of ``batch``."""
-        mean = np.asarray(mean, dtype=float)
-        cov = np.asarray(cov, dtype=float)
+        """One belief ``mean (n,)``, ``cov (n, n)`` repeated over a batch of ``batch`` (``>= 1``, within half the
+        machine's memory)."""
+        mean = _as_array("Gaussian.broadcast: mean", mean)
+        cov = _as_array("Gaussian.broadcast: cov", cov)
+        batch = check_size("Gaussian.broadcast: batch", batch, 8.0 * (mean.size + cov.size))
         return cls(np.broadcast_to(mean, (batch, *mean.shape)).copy(),
                    np.broadcast_to(cov, (batch, *cov.shape)).copy())
 
@@ -229,7 +310,7 @@ def _scan_cov(cls_name: str, cov, z: np.ndarray, valid: np.ndarray):
     if cov is None:
         return None
     m = z.shape[-1]
-    cov = np.asarray(cov, dtype=float)
+    cov = _as_array(f"{cls_name}.cov", cov)
     if cov.shape != z.shape + (m,):
         raise InputError(f"{cls_name}.cov must have shape {z.shape + (m,)}, got {cov.shape}")
     rows = cov[valid]
@@ -262,7 +343,7 @@ def _scan_fields(cls_name: str, z, valid, extra: dict, lead: int):
             out[key] = None
             continue
         dtype = int if key == "origin" else float
-        arr = np.asarray(value, dtype=dtype)
+        arr = _as_array(f"{cls_name}.{key}", value, dtype)
         if arr.shape != valid.shape:
             raise InputError(f"{cls_name}.{key} must have shape {valid.shape}, got {arr.shape}")
         out[key] = arr
@@ -313,6 +394,7 @@ class Scan:
         for key, value in fields_.items():
             object.__setattr__(self, key, value)
         object.__setattr__(self, "cov", _scan_cov("Scan", self.cov, self.z, self.valid))
+        object.__setattr__(self, "time", _real_scalar("Scan.time", self.time))
         if not np.isfinite(self.time):
             raise InputError(f"Scan.time must be finite, got {self.time}")
 
@@ -332,17 +414,39 @@ class Scan:
 
     @classmethod
     def empty(cls, batch: int, dim: int, time: float = 0.0) -> "Scan":
+        """A scan with no detections for ``batch`` items of measurement dimension ``dim``."""
+        batch = check_size("Scan.empty: batch", batch, 1.0)
+        dim = check_size("Scan.empty: dim", dim, 1.0)
         return cls(np.zeros((batch, 0, dim)), np.zeros((batch, 0), dtype=bool), time=time)
 
     @classmethod
     def single(cls, z, present=None, time: float = 0.0, cov=None, clutter_density=None) -> "Scan":
         """One measurement per batch item, ``z (B, m)``; ``present (B,)`` marks missed detections; ``cov
-        (B, m, m)`` and ``clutter_density (B,)`` as :class:`Scan` declares them."""
-        z = np.asarray(z, dtype=float)
-        present = np.ones(z.shape[0], dtype=bool) if present is None else np.asarray(present, dtype=bool)
-        return cls(z[:, None, :], present[:, None], time=time,
-                   cov=None if cov is None else np.asarray(cov, dtype=float)[:, None],
-                   clutter_density=None if clutter_density is None else np.asarray(clutter_density)[:, None])
+        (B, m, m)`` and ``clutter_density (B,)`` as :class:`Scan` declares them.  A 1-D ``z`` is refused (it could
+        be ``B`` scalar measurements or one item's vector): write ``z[:, None]`` or ``z[None, :]``."""
+        z = _as_array("Scan.single: z", z)
+        if z.ndim != 2:
+            raise InputError(f"Scan.single: z must have shape (B, m), one measurement of m components per batch "
+                             f"item; got shape {z.shape}"
+                             + ("; write z[:, None] for B scalar measurements or z[None, :] for one item's "
+                                "measurement" if z.ndim == 1 else ""))
+        present = (np.ones(z.shape[0], dtype=bool) if present is None
+                   else _as_array("Scan.single: present", present, bool))
+        if present.shape != z.shape[:1]:
+            raise InputError(f"Scan.single: present must have shape {z.shape[:1]} to match z {z.shape}, got "
+                             f"{present.shape}")
+        if cov is not None:
+            cov = _as_array("Scan.single: cov", cov)
+            if cov.shape != (z.shape[0], z.shape[1], z.shape[1]):
+                raise InputError(f"Scan.single: cov must have shape {(z.shape[0], z.shape[1], z.shape[1])}, got "
+                                 f"{cov.shape}")
+        if clutter_density is not None:
+            clutter_density = _as_array("Scan.single: clutter_density", clutter_density)
+            if clutter_density.shape != z.shape[:1]:
+                raise InputError(f"Scan.single: clutter_density must have shape {z.shape[:1]}, got "
+                                 f"{clutter_density.shape}")
+        return cls(z[:, None, :], present[:, None], time=time, cov=None if cov is None else cov[:, None],
+                   clutter_density=None if clutter_density is None else clutter_density[:, None])
 
 
 @dataclass(frozen=True)
@@ -422,7 +526,7 @@ class Scans:
 
     def with_valid(self, valid) -> "Scans":
         """The same detections with a narrower mask (what a clutter remover returns)."""
-        valid = np.asarray(valid, dtype=bool)
+        valid = _as_array("the clutter remover's mask", valid, bool)
         if valid.shape != self.valid.shape:
             raise InputError(f"a clutter remover must return a mask of shape {self.valid.shape}, got {valid.shape}")
         return replace(self, valid=valid & self.valid)

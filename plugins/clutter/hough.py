@@ -1020,26 +1020,29 @@ def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt
 
 
 PARAMETERS = (
-    Param("window", 5, "pings per group W (groups A and B, shifted by s pings)", "int", minimum=2),
-    Param("shift", 1, "shift s between groups A and B (pings)", "int", minimum=1),
-    Param("v_max", 8.0, "largest target speed (units per ping period): the gate between pings", above=0.0),
+    Param("window", 5, "pings per group W (groups A and B, shifted by s pings)", "int", unit="dimensionless", minimum=2,
+          maximum=10**4),
+    Param("shift", 1, "shift s between groups A and B (pings)", "int", unit="dimensionless", minimum=1, maximum=10**4),
+    Param("v_max", 8.0, "largest target speed (v_max dt is the gate between pings)", unit="speed", above=0.0),
     Param("dt", 1.0, "ping period", unit="time", above=0.0),
     Param("gate_gap", 2, "a detection votes when another ping within this many pings lies within the gate", "int",
-          minimum=1),
-    Param("d_rho", 1.0, "accumulator rho bin", above=0.0),
-    Param("d_theta_deg", 1.0, "accumulator theta bin, in degrees", above=0.0),
-    Param("v_min", 3, "distinct pings a line needs to be a peak", "int", minimum=1),
-    Param("sim_rho", 3.0, "rho tolerance of similar lines (A and B)", minimum=0.0),
-    Param("sim_theta_deg", 3.0, "theta tolerance of similar lines, in degrees", minimum=0.0),
-    Param("eps", 4.0, "distance from a similar line within which a detection is kept", minimum=0.0),
+          unit="dimensionless", minimum=1, maximum=10**4),
+    Param("d_rho", 1.0, "accumulator rho bin", unit="length", above=0.0),
+    Param("d_theta_deg", 1.0, "accumulator theta bin, in degrees", unit="angle_deg", above=0.0, maximum=180.0),
+    Param("v_min", 3, "distinct pings a line needs to be a peak", "int", unit="dimensionless", minimum=1,
+          maximum=10**4),
+    Param("sim_rho", 3.0, "rho tolerance of similar lines (A and B)", unit="length", minimum=0.0),
+    Param("sim_theta_deg", 3.0, "theta tolerance of similar lines, in degrees", unit="angle_deg", minimum=0.0,
+          maximum=180.0),
+    Param("eps", 4.0, "distance from a similar line within which a detection is kept", unit="length", minimum=0.0),
     Param("support", "local", "which supports of the line keep a detection: the latest near it with a consistent "
           "velocity (local), the latest anywhere on the line (latest), or any (any)", "str", choices=SUPPORTS),
     Param("support_reach", None, "distance from a support within which a detection is kept (none: v_max dt "
-          "max(gap, 2) for local, 2 v_max dt otherwise)", "float?", above=0.0),
+          "max(gap, 2) for local, 2 v_max dt otherwise)", "float?", unit="length", above=0.0),
     Param("vel_gate", 9.21, "chi-square (2 dof) bound of the velocity-consistency check of the local rule (none: no "
-          "check)", "float?", above=0.0),
+          "check)", "float?", unit="gate", above=0.0),
     Param("sigma_pos", 2.0, "position accuracy of a detection per axis, for the velocity-consistency check",
-          above=0.0),
+          unit="length", above=0.0),
     Param("require_chain", False, "the local rule keeps a detection only when its support has an earlier local "
           "support of its own (a three-point chain) to check the velocity against", "bool"),
     Param("new_measurements", "detections", "what the tracker gets: the kept detections (the paper's extracted "

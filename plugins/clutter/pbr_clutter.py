@@ -113,20 +113,22 @@ def remove_zero_doppler(scans: Scans, **params) -> Scans:
 
 GENERATOR_PARAMETERS = (
     Param("frequency_hz", 701e6, "carrier frequency (for the Doppler of each candidate)", unit="frequency", above=0.0),
-    Param("residue_rate", 3.0, "mean zero-Doppler residue candidates per frame", minimum=0.0),
+    Param("residue_rate", 3.0, "mean zero-Doppler residue candidates per frame", unit="dimensionless", minimum=0.0,
+          maximum=1e6),
     Param("residue_sigma_range_rate", 0.3, "range-rate spread of the residue", unit="speed", minimum=0.0),
     Param("residue_strength_db", 25.0, "mean strength of a residue candidate", unit="decibel"),
     Param("residue_strength_sigma_db", 3.0, "strength spread of the residue", unit="decibel", minimum=0.0),
-    Param("false_alarm_rate", 4.0, "mean false alarms per frame", minimum=0.0),
+    Param("false_alarm_rate", 4.0, "mean false alarms per frame", unit="dimensionless", minimum=0.0, maximum=1e6),
     Param("false_alarm_range_rate_max", 20.0, "false-alarm range rates are uniform in +-this", unit="speed",
           minimum=0.0),
     Param("false_alarm_pfa", 1e-4, "the CA-CFAR's false-alarm probability (sets the false alarms' strength)",
-          above=0.0, maximum=1.0),
+          unit="dimensionless", above=0.0, maximum=1.0),
     Param("range_max", 3000.0, "range extent of the map", unit="length", above=0.0),
 )
 REMOVER_PARAMETERS = (
     Param("doppler_bin_hz", 2.0, "Doppler bin width (1 / CPI)", unit="frequency", above=0.0),
-    Param("bins", 1.0, "drop candidates with |f_D| < bins x doppler_bin_hz", minimum=0.0),
+    Param("bins", 1.0, "drop candidates with |f_D| < bins x doppler_bin_hz", unit="dimensionless", minimum=0.0,
+          maximum=1e6),
 )
 
 #: How far (in residue sigmas) the declared region reaches for the Gaussian zero-Doppler residue.

@@ -22,11 +22,13 @@ from workbench.specs import ClutterGeneratorSpec
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
 PARAMETERS = (
-    Param("rate", 1000.0, "mean number of candidates per scan in the cube (before the threshold)", minimum=0.0),
+    Param("rate", 1000.0, "mean number of candidates per scan in the cube (before the threshold)",
+          unit="dimensionless", minimum=0.0, maximum=1e7),
     Param("cube", 10_000.0, "side of the cube around the true target position", unit="length", above=0.0),
     Param("z_min", 0.0, "lowest altitude of a candidate", unit="length"),
     Param("z_max", 6000.0, "highest altitude of a candidate", unit="length"),
-    Param("mean_power", 2.0, "mean clutter-to-noise power ratio, linear (2 = 3 dB)", above=0.0),
+    Param("mean_power", 2.0, "mean clutter-to-noise power ratio, linear (2 = 3 dB)", unit="dimensionless", above=0.0,
+          maximum=1e30),
     Param("doppler_max", 300.0, "radial velocities are uniform in +-doppler_max", unit="speed", minimum=0.0),
     Param("threshold_db", 5.0, "SNR threshold (none keeps every candidate)", "float?", unit="decibel"),
 )

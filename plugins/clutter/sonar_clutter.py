@@ -86,14 +86,16 @@ def generate(truth: Truth, rng: np.random.Generator, pfa: float = 5e-4, area=(0.
 
 
 PARAMETERS = (
-    Param("pfa", 5e-4, "false-alarm probability per resolution cell", minimum=0.0, maximum=1.0),
+    Param("pfa", 5e-4, "false-alarm probability per resolution cell", unit="dimensionless", minimum=0.0, maximum=1.0),
     Param("area", (0.0, 250.0, 0.0, 250.0), "surveillance area (xmin, xmax, ymin, ymax)", "vector", unit="length",
           length=4),
-    Param("cell_area", 1.0, "area of one resolution cell", above=0.0),
+    Param("cell_area", 1.0, "area of one resolution cell", unit="area", above=0.0),
     Param("mean_snr_db", 10.0, "mean clutter level (Rayleigh amplitude)", unit="decibel"),
-    Param("rate_scale", 1.0, "factor on the clutter rate", minimum=0.0),
-    Param("persistent_sites", 0, "stationary clutter sites per run (e.g. wrecks, rocks)", "int", minimum=0),
-    Param("persistent_pd", 0.7, "probability that a site is seen per ping", minimum=0.0, maximum=1.0),
+    Param("rate_scale", 1.0, "factor on the clutter rate", unit="dimensionless", minimum=0.0, maximum=1e6),
+    Param("persistent_sites", 0, "stationary clutter sites per run (e.g. wrecks, rocks)", "int", unit="dimensionless",
+          minimum=0, maximum=10**6),
+    Param("persistent_pd", 0.7, "probability that a site is seen per ping", unit="dimensionless", minimum=0.0,
+          maximum=1.0),
     Param("persistent_sigma", 2.0, "position noise of a site's detections", unit="length", minimum=0.0),
 )
 

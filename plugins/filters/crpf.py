@@ -71,23 +71,28 @@ PAPER_SIGMA0 = 1.0
 PAPER_DELTA = 0.1
 
 PARAMETERS = (
-    Param("particles", 100, "particles per run", "int", minimum=1),
-    Param("lam", 0.95, "forgetting factor of the cost", above=0.0, maximum=1.0),
-    Param("q", 2.0, "exponent of the incremental cost ||y - h(x)||^q", minimum=1.0),
-    Param("beta", 2.0, "exponent of the selection PMF (R - min R + delta)^-beta", above=0.0),
+    Param("particles", 100, "particles per run", "int", unit="dimensionless", minimum=1, footprint=40.0),
+    Param("lam", 0.95, "forgetting factor of the cost", unit="dimensionless", above=0.0, maximum=1.0),
+    Param("q", 2.0, "exponent of the incremental cost ||y - h(x)||^q", unit="dimensionless", minimum=1.0,
+          maximum=16.0),
+    Param("beta", 2.0, "exponent of the selection PMF (R - min R + delta)^-beta", unit="dimensionless", above=0.0,
+          maximum=64.0),
     Param("delta", PAPER_DELTA, "offset of the selection PMF: a multiple of the mean gap of the risks above their "
-                                "minimum (delta_mode 'relative') or a cost (delta_mode 'absolute')", above=0.0),
+                                "minimum (delta_mode 'relative') or a cost (delta_mode 'absolute')",
+          unit="dimensionless", above=0.0),
     Param("delta_mode", "relative", "how delta is read: relative to the spread of the risks, or absolute", "str",
           choices=DELTA_MODES),
     Param("variance", "adaptive", "propagation variance: Table 6's per-particle running estimate, or fixed "
                                   "sigma^2 = kappa / N^(2/n)", "str", choices=VARIANCES),
     Param("sigma0", PAPER_SIGMA0, "initial propagation standard deviation of every particle (adaptive variance)",
+          unit="state", above=0.0),
+    Param("kappa", 1.0, "fixed propagation variance sigma^2 = kappa / N^(2/n) (variance 'fixed')", unit="state",
           above=0.0),
-    Param("kappa", 1.0, "fixed propagation variance sigma^2 = kappa / N^(2/n) (variance 'fixed')", above=0.0),
     Param("scale", None, "per-component scale of the propagation noise (length n; none: isotropic)", "vector?",
-          minimum=0.0),
+          unit="dimensionless", minimum=0.0, maximum=1e6),
     Param("cost", "arc-length", "incremental cost: the plain norm or the arc-length residual", "str", choices=COSTS),
-    Param("box", 1.0, "half-width of the uniform initial box, in prior standard deviations", above=0.0),
+    Param("box", 1.0, "half-width of the uniform initial box, in prior standard deviations", unit="dimensionless",
+          above=0.0, maximum=1e3),
     Param("backend", "auto", "kernel backend of the fused range-bearing step (auto: the policy's choice)", "str",
           choices=BACKENDS),
 )

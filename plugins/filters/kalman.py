@@ -20,7 +20,6 @@ carries each detection's own covariance (``Scan.cov``) it replaces ``R``.  The s
 
 from __future__ import annotations
 
-import numpy as np
 
 from workbench import hookimpl
 from workbench.kalman_core import ekf_update, kf_update, linear_predict

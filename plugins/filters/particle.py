@@ -36,8 +36,9 @@ from workbench.types import InputError, Particles, Scan
 SIR_BACKENDS = ("auto", "numba", "numpy")
 
 PARAMETERS = (
-    Param("particles", 500, "particles per run", "int", minimum=1, footprint=40.0),
-    Param("threshold", 0.5, "resample where N_eff < threshold N (above 1: at every update)", minimum=0.0),
+    Param("particles", 500, "particles per run", "int", unit="dimensionless", minimum=1, footprint=40.0),
+    Param("threshold", 0.5, "resample where N_eff < threshold N (above 1: at every update)", unit="dimensionless",
+          minimum=0.0, maximum=1e3),
     Param("backend", "auto", "array steps: compiled (numba) or NumPy (auto: the kernel policy's choice)", "str",
           choices=SIR_BACKENDS),
 )

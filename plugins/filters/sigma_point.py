@@ -396,13 +396,16 @@ def _diagnostics_sqrt(state: SquareRootState) -> dict:
 
 
 UKF_PARAMETERS = (
-    Param("alpha", 1.0, "spread of the sigma points", above=0.0),
-    Param("beta", 2.0, "prior-knowledge weight on the centre point (2 for a Gaussian)"),
-    Param("kappa", 0.0, "secondary scaling of the spread"),
+    Param("alpha", 1.0, "spread of the sigma points", unit="dimensionless", above=0.0, maximum=10.0),
+    Param("beta", 2.0, "prior-knowledge weight on the centre point (2 for a Gaussian)", unit="dimensionless",
+          minimum=0.0, maximum=100.0),
+    Param("kappa", 0.0, "secondary scaling of the spread (>= 0 keeps the predicted covariance semi-definite, "
+          "Julier and Uhlmann 1997)", unit="dimensionless", minimum=0.0, maximum=1e3),
     Param("square_root", False, "propagate a Cholesky factor (QR + cholupdate) instead of the covariance", "bool"),
 )
 CDKF_PARAMETERS = (
-    Param("h", float(np.sqrt(3.0)), "central-difference step (sqrt(3) is optimal for a Gaussian prior)", above=0.0),
+    Param("h", float(np.sqrt(3.0)), "central-difference step (sqrt(3) is optimal for a Gaussian prior)",
+          unit="dimensionless", above=0.0, maximum=100.0),
     Param("square_root", False, "propagate a Cholesky factor instead of the covariance", "bool"),
     Param("downdate", "cholupdate", "square-root update: the paper's rank-1 downdates or a downdate-free QR", "str",
           choices=("cholupdate", "qr")),

@@ -397,33 +397,34 @@ def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) ->
 #: The two-mode prediction and the regularisation, declared alike by the particle filters of this plugin.
 MODE_PARAMETERS = (
     Param("switch_on", SWITCH_ON, "P(quiet -> manoeuvre) per scan of the two-mode prediction (0: plain CV)",
-          minimum=0.0, maximum=1.0),
-    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", above=0.0, maximum=1.0),
-    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode", minimum=1.0),
+          unit="dimensionless", minimum=0.0, maximum=1.0),
+    Param("switch_off", SWITCH_OFF, "P(manoeuvre -> quiet) per scan", unit="dimensionless", above=0.0, maximum=1.0),
+    Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma in the manoeuvre mode",
+          unit="dimensionless", minimum=1.0, maximum=1e3),
     Param("regularisation", REGULARISATION, "post-regularisation bandwidth after resampling, x h_opt (0: off)",
-          minimum=0.0),
+          unit="dimensionless", minimum=0.0, maximum=100.0),
 )
 
 
 TBD_PARAMETERS = (
-    Param("particles", 600, "particles per run", "int", minimum=1, footprint=48.0),
-    Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
+    Param("particles", 600, "particles per run", "int", unit="dimensionless", minimum=1, footprint=48.0),
+    Param("threshold", 0.5, "resample where N_eff < threshold N", unit="dimensionless", minimum=0.0, maximum=1.0),
     Param("floor", "amplitude", "the 'target missed, every detection is clutter' floor: amplitude (the scan's clutter "
           "density, lowered by the strongest detection's amplitude likelihood ratio, times 1 - P_D of the design "
           "target; empty gates weighted by 1 - P_D), flat (floor_density, the previous floor) or none (eqs 13-15 "
           "as printed)", "str", choices=FLOORS),
     Param("floor_scale", FLOOR_SCALE, "the amplitude floor's level relative to the scan's clutter density",
-          above=0.0),
+          unit="dimensionless", above=0.0, maximum=1e12),
     Param("missed_detection", "cloud", "where the amplitude floor's 1 - P_D of the design target is taken: at the "
           "cloud's predicted position (cloud) or at every particle (particle, an ablation)", "str",
           choices=("cloud", "particle")),
-    Param("floor_density", 5e-11, "spatial density (m^-3) of the flat floor", minimum=0.0),
+    Param("floor_density", 5e-11, "spatial density (m^-3) of the flat floor", unit="inverse_volume", minimum=0.0),
     Param("sigma_vr", 15.0, "width of the Doppler kernel (the sensor's 2 m/s, widened as a tempering device)",
           unit="speed", above=0.0),
     Param("backend", "auto", "kernel backend of the weights (auto: the policy's choice)", "str", choices=BACKENDS),
     *MODE_PARAMETERS,
     Param("tempering", 1, "progressive correction: the likelihood applied as this many equal powers, each followed by "
-          "resampling and regularisation (1: off)", "int", minimum=1),
+          "resampling and regularisation (1: off)", "int", unit="dimensionless", minimum=1, maximum=1000),
     Param("precision", "float64", "arithmetic of the weight kernel (float32: faster, normalised weights within 1e-4 "
           "of float64)", "str", choices=PRECISIONS),
 )
@@ -536,8 +537,8 @@ def sir_update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: n
 
 
 SIR_JM_PARAMETERS = (
-    Param("particles", 600, "particles per run", "int", minimum=1, footprint=48.0),
-    Param("threshold", 0.5, "resample where N_eff < threshold N", minimum=0.0, maximum=1.0),
+    Param("particles", 600, "particles per run", "int", unit="dimensionless", minimum=1, footprint=48.0),
+    Param("threshold", 0.5, "resample where N_eff < threshold N", unit="dimensionless", minimum=0.0, maximum=1.0),
     *MODE_PARAMETERS,
 )
 
@@ -641,9 +642,9 @@ def nis_estimate(state: AdaptiveGaussian) -> Gaussian:
 
 EKF_NIS_PARAMETERS = (
     Param("manoeuvre_scale", MANOEUVRE_SCALE, "factor on the process-noise sigma after a manoeuvre is detected",
-          minimum=1.0),
+          unit="dimensionless", minimum=1.0, maximum=1e3),
     Param("nis_threshold", float(chi2.ppf(0.99, 4)), "NIS above which the next prediction uses the manoeuvre noise "
-          "(default: the chi-square 99 % point, 4 dof)", above=0.0),
+          "(default: the chi-square 99 % point, 4 dof)", unit="gate", above=0.0),
 )
 
 

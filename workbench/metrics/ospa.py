@@ -92,12 +92,26 @@ class GOSPA:
     p: float
 
 
+#: ``c^p`` (and the sums of up to 1e8 such terms) must stay inside the float range: ``|p log10 c| <= POWER_DECADES``.
+POWER_DECADES = 290.0
+
+
 def _check_order(c: float, p: float) -> tuple[float, float]:
+    c, p = (v[()] if isinstance(v, np.ndarray) and v.ndim == 0 else v for v in (c, p))
+    for key, value in (("the cut-off c", c), ("the order p", p)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise InputError(f"{key} must be a real number, got {type(value).__name__} {value!r}")
     c, p = float(c), float(p)
     if not (np.isfinite(c) and c > 0):
         raise InputError(f"the cut-off c must be a finite number > 0, got {c}")
     if not (np.isfinite(p) and p >= 1):
         raise InputError(f"the order p must be a finite number >= 1, got {p}")
+    decades = p * abs(np.log10(c))
+    if decades > POWER_DECADES:
+        largest = POWER_DECADES / abs(np.log10(c))
+        raise InputError(f"the order p = {p:g} with the cut-off c = {c:g} puts c^p = 10^{p * np.log10(c):.0f} "
+                         f"outside the float range (|p log10 c| <= {POWER_DECADES:g}): use p <= {largest:.4g}, or "
+                         f"state the positions in units that make c nearer 1")
     return c, p
 
 
@@ -145,6 +159,11 @@ def _assignment(x, y, x_valid, y_valid, c: float, p: float):
         pair = xv[:, :, None] & yv[:, None, :]
         close = pair & (dist < c)
         dist_p = np.where(close, dist, 0.0) ** p
+        lost = close & (dist > 0) & (dist_p == 0)  # |x - y|^p underflowed: the localisation would read as 0
+        if np.any(lost):
+            d_min = float(dist[lost].min())
+            raise InputError(f"the order p = {p:g} underflows |x - y|^p to 0 for a distance of {d_min:.3g} (cut-off "
+                             f"c = {c:g}); use a smaller p, or state the positions in other units")
         C = np.where(close, dist_p, c ** p)
         # one point on either side: the optimal injection takes the cheapest valid pair
         one = np.minimum(m, n) == 1

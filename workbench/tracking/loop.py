@@ -120,6 +120,10 @@ def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementM
     from ..params import check_footprint
 
     check_footprint(filt.declared, filt.params, scans.batch, motion.dim, f"filter {filt.name!r}")
+    if rng is None and "stochastic" in filt.capabilities:
+        raise InputError(f"filter {filt.name!r} draws random numbers but no generator was given (rng is None): pass "
+                         f"rng=wb.generator(seed, key), e.g. wb.run(filt, scans, motion, model, prior=prior, "
+                         f"rng=wb.generator(1, 'runs'))")
     T = scans.steps
     ctx = Context(filt, model, motion, scans.batch, T, scans.times, rng)
     carry = association.start(ctx, prior, scans.scan(0).for_filter() if T else Scan.empty(scans.batch,
