@@ -19,13 +19,13 @@ NAME`` or :func:`run_checks`.
 
 from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, SensorSpec
 from . import kit
-from ._common import Check, Outcome
+from ._common import Check, Outcome, Outcomes
 from .clutter import GENERATOR_CHECKS, REMOVER_CHECKS, generator_checks_for, remover_checks_for
 from .kit import CHECKS, reference_kalman
 from .sensors import SENSOR_CHECKS, sensor_checks_for
 
-__all__ = ["CHECKS", "SENSOR_CHECKS", "GENERATOR_CHECKS", "REMOVER_CHECKS", "Check", "Outcome", "checks_for",
-           "kit_checks", "run_checks", "reference_kalman", "parametrize_with_checks"]
+__all__ = ["CHECKS", "SENSOR_CHECKS", "GENERATOR_CHECKS", "REMOVER_CHECKS", "Check", "Outcome", "Outcomes",
+           "checks_for", "kit_checks", "run_checks", "reference_kalman", "parametrize_with_checks"]
 
 #: spec type -> (every check of its kit, the applicable ones)
 _KITS = {
@@ -54,9 +54,12 @@ def checks_for(spec) -> list[Check]:
     return _kit(spec)[1](spec)
 
 
-def run_checks(spec) -> list[Outcome]:
+def run_checks(spec) -> Outcomes:
     """Every check of the fitting kit on ``spec`` without pytest (``passed``, ``failed``, ``skipped`` with the
-    reason, ``xfailed`` / ``xpassed`` for a filter's declared expected failures)."""
+    reason, ``xfailed`` / ``xpassed`` for a filter's declared expected failures).  The outcomes come as a sequence
+    filled as it is read: a caller that iterates (``workbench check-plugin``) sees each as soon as its check
+    finishes; ``len()``, indexing and a second iteration see one list.  A component that calls ``sys.exit()`` in a
+    check fails that check, named, and the kit goes on."""
     from ._common import run_kit
 
     if isinstance(spec, FilterSpec):

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from collections.abc import Sequence as SequenceABC
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 from scipy import stats
@@ -20,7 +22,7 @@ from ..params import check_value
 from ..rng import generator
 from ..types import InputError, Truth
 
-__all__ = ["Check", "Outcome", "run_kit", "kit_truth", "check_parameters", "normal_p", "chi2_p", "poisson_p",
+__all__ = ["Check", "Outcome", "Outcomes", "run_kit", "iter_kit", "kit_truth", "check_parameters", "normal_p", "chi2_p", "poisson_p",
            "fail", "SPACE_DIMS", "scans_equal", "frame_problems"]
 
 
@@ -49,30 +51,101 @@ class Outcome:
     message: str = ""
 
 
-def run_kit(spec, checks: Sequence[Check]) -> list[Outcome]:
-    """Every check of ``checks`` on ``spec`` without pytest: ``passed`` (with the check's summary, if it returns
-    one), ``failed`` (with its message), ``skipped`` (does not apply, and why), ``xfailed`` / ``xpassed`` for a check
-    the component declares among its ``expected_failures``."""
-    outcomes = []
+def _exit_message(spec, exc: SystemExit) -> str:
+    """What a check that ended in ``sys.exit()`` records: the call, where it was made (file, line, function and
+    module of the innermost frame) and the component."""
+    call = "sys.exit()" if exc.code is None else f"sys.exit({exc.code!r})"
+    where, tb = "", exc.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    if tb is not None:
+        code = tb.tb_frame.f_code
+        module = tb.tb_frame.f_globals.get("__name__", "?")
+        where = f" at {Path(code.co_filename).name}:{tb.tb_lineno} (in {code.co_name}, module {module})"
+    kind = getattr(spec, "kind", "component")
+    return (f"{kind} {getattr(spec, 'name', '?')!r} called {call}{where}; a plugin must raise an exception, never "
+            f"end the process: the check is recorded as failed and the kit goes on")
+
+
+def iter_kit(spec, checks: Sequence[Check]) -> Iterator[Outcome]:
+    """Every check of ``checks`` on ``spec`` without pytest, each outcome as soon as its check finishes:
+    ``passed`` (with the check's summary, if it returns one), ``failed`` (with its message), ``skipped`` (does not
+    apply, and why), ``xfailed`` / ``xpassed`` for a check the component declares among its ``expected_failures``.
+    A component that calls ``sys.exit()`` inside a check fails that check (the message names the call, where it was
+    made and the component) and the kit goes on with the next."""
     expected_failures = getattr(spec, "expected_failures", {}) or {}
     for check in checks:
         if not check.applies(spec):
             why = f"does not apply: needs {check.requires}" if check.requires else \
                 "does not apply to the declared capabilities"
-            outcomes.append(Outcome(check.name, "skipped", why))
+            yield Outcome(check.name, "skipped", why)
             continue
         expected = expected_failures.get(check.name)
         try:
             summary = check.run(spec)
+        except SystemExit as exc:  # a plugin ending the process ends only its check
+            yield Outcome(check.name, "xfailed" if expected else "failed", _exit_message(spec, exc))
+            continue
         except Exception as exc:  # noqa: BLE001 - a check's failure is its outcome
             msg = str(exc) if isinstance(exc, AssertionError) else f"{type(exc).__name__}: {exc}"
-            outcomes.append(Outcome(check.name, "xfailed" if expected else "failed", msg))
+            yield Outcome(check.name, "xfailed" if expected else "failed", msg)
             continue
         if expected:
-            outcomes.append(Outcome(check.name, "xpassed", f"expected to fail ({expected}) but passed"))
+            yield Outcome(check.name, "xpassed", f"expected to fail ({expected}) but passed")
         else:
-            outcomes.append(Outcome(check.name, "passed", summary if isinstance(summary, str) else ""))
-    return outcomes
+            yield Outcome(check.name, "passed", summary if isinstance(summary, str) else "")
+
+
+class Outcomes(SequenceABC):
+    """The outcomes of a kit run, each computed when it is first read: a caller that iterates (``workbench
+    check-plugin`` prints a line per outcome) sees every outcome as soon as its check finishes, while indexing,
+    ``len()`` and a second iteration see one list (the checks run once).  Compares equal to a list of the same
+    outcomes."""
+
+    def __init__(self, outcomes: Iterable[Outcome]):
+        self._source: Iterator[Outcome] | None = iter(outcomes)
+        self._done: list[Outcome] = []
+
+    def _fill(self, upto: int | None = None) -> None:
+        while self._source is not None and (upto is None or len(self._done) <= upto):
+            try:
+                self._done.append(next(self._source))
+            except StopIteration:
+                self._source = None
+
+    def __iter__(self) -> Iterator[Outcome]:
+        i = 0
+        while True:
+            self._fill(i)
+            if i >= len(self._done):
+                return
+            yield self._done[i]
+            i += 1
+
+    def __len__(self) -> int:
+        self._fill()
+        return len(self._done)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice) or index < 0:
+            self._fill()
+        else:
+            self._fill(index)
+        return self._done[index]
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, (Outcomes, list, tuple)):
+            return list(self) == list(other)
+        return NotImplemented
+
+    def __repr__(self) -> str:
+        return f"Outcomes({list(self)!r})"
+
+
+def run_kit(spec, checks: Sequence[Check]) -> Outcomes:
+    """Every check of ``checks`` on ``spec`` without pytest (:func:`iter_kit`): a sequence of outcomes filled as it
+    is read, so a caller that iterates sees each outcome as soon as its check finishes."""
+    return Outcomes(iter_kit(spec, checks))
 
 
 def fail(check: str, message: str) -> AssertionError:

@@ -26,15 +26,16 @@ from dataclasses import fields, is_dataclass
 from functools import lru_cache
 
 import numpy as np
+from scipy.stats import chi2
 
-from ..metrics import chi2_band, nees
+from ..metrics import chi2_band, nees, nis
 from ..models import MeasurementModel, constant_velocity, linear_measurement, range_bearing
 from ..rng import generator
 from ..specs import FilterSpec
 from ..tracking import Direct, run
 from ..trajectory import sample_motion
 from ..types import Gaussian, Scan, Scans, Truth, _validated
-from ._common import Check, Outcome, run_kit
+from ._common import Check, Outcome, Outcomes, run_kit
 
 __all__ = ["Check", "CHECKS", "checks_for", "run_checks", "Outcome", "reference_kalman", "reference_ekf",
            "range_bearing_runs"]
@@ -371,11 +372,14 @@ def check_matches_kalman(spec: FilterSpec) -> None:
 
 
 def check_nees_consistency(spec: FilterSpec) -> None:
-    """On a matched linear-Gaussian model, the run-averaged NEES lies inside its 95 % chi-square band at
-    >= 85 % of the steps (95 % expected)."""
+    """On a matched linear-Gaussian model, the run-averaged NEES (200 runs) lies inside its 95 % chi-square band
+    (chi-square(4 x runs) / runs) at >= 85 % of the scans (95 % expected), on the consistency problem: irregular
+    time steps (0.2 s to 3 s), an anisotropic correlated R, correlated priors the truth is drawn from, and about
+    15 % empty scans."""
     runs = 200
-    truth, scans, prior, motion, model = _problem(spec, runs, seed=8, steps=30)
-    # Draw the start states from the prior so the prior itself is consistent.
+    # irregular time steps, an anisotropic correlated R, correlated priors (the truth drawn from them, so the prior
+    # itself is consistent) and some empty scans
+    truth, scans, prior, motion, model = _nis_problem(spec, runs, 30, 8)
     mean, cov = _run(spec, prior, scans, motion, model)
     e = nees(truth.states, mean, cov).mean(axis=0)
     lo, hi = chi2_band(4, runs)
@@ -751,6 +755,449 @@ def check_nan_not_hidden(spec: FilterSpec) -> str:
     return f"{cases} non-finite inputs: {raised} raised a clear error, {cases - raised} reached the estimate"
 
 
+# -- the variety real inputs have ------------------------------------------------------------------------------
+#
+# The checks above draw mostly one tidy case.  The checks below feed every filter the variety its inputs may have
+# within the declared contracts (``MotionModel.for_interval``, ``Scan``, ``Gaussian``, ``MeasurementModel``):
+# irregular, non-integer time steps; small, large, anisotropic and correlated noise; scans with padding rows (the
+# valid row anywhere, the padding holding garbage), empty scans among full ones; priors broad, tight, correlated and
+# different per item; batches of one and of mixed items.  Each case is compared with a reference written out here
+# (:func:`reference_filter`): a filter with ``exact_linear`` must equal it on a linear model (to 1e-8 relative); any
+# other ``gaussian`` filter must report an honest covariance there (NEES within a chi-square band); every other
+# filter must track within :data:`ACCURACY_FACTOR` of the reference's position RMSE.
+
+#: Irregular time steps are drawn uniformly from this range (s): non-integer, varying from scan to scan.
+IRREGULAR_DT = (0.2, 3.0)
+#: Runs and scans of each varied case.
+VARIED_RUNS, VARIED_STEPS = 8, 15
+#: Runs of each varied case for a gaussian filter that is not ``exact_linear`` (its NEES is tested instead).
+VARIED_NEES_RUNS = 64
+#: Two-sided level of the NEES band of a varied case (the grand mean over runs and scans, against the band of one
+#: scan's mean over the runs, which is conservative: averaging correlated scans only narrows the spread).
+VARIED_NEES_LEVEL = 1e-3
+#: What the padding rows of the padded scans hold (past the ``Scan`` record, which zeroes them): huge numbers and
+#: NaN, as a reader or a sensor that pads with whatever its buffer held would hand over.
+PADDING_GARBAGE = (1e300, np.nan, -7.5e5)
+
+
+def _irregular_times(steps: int, seed: int) -> np.ndarray:
+    """Scan times with steps drawn uniformly in :data:`IRREGULAR_DT`, from t = 0.37 s."""
+    rng = generator(seed, "kit-times", steps)
+    return 0.37 + np.concatenate([[0.0], np.cumsum(rng.uniform(*IRREGULAR_DT, steps - 1))])
+
+
+def _correlated(std, corr: float, d: int = 2) -> np.ndarray:
+    """A ``(2d, 2d)`` covariance with standard deviations ``std`` and correlation ``corr`` between each position and
+    its velocity."""
+    std = np.asarray(std, dtype=float)
+    C = np.eye(2 * d)
+    for i in range(d):
+        C[i, d + i] = C[d + i, i] = corr
+    return C * np.outer(std, std)
+
+
+def _varied_problem(spec: FilterSpec, batch: int, steps: int, seed: int, *, times=None, R=None, polar_std=None,
+                    sigma_a=0.5, prior_covs=None, prior_means=None, rows: int = 1, mask=None):
+    """Truth, scans, prior, motion and model of one varied case: a 2-D constant-velocity target (positions seen
+    directly, or in range and bearing for a ``range_bearing_input`` filter).
+
+    ``times (T,)``: the scan times (default every second); ``R (2, 2)``: the position noise (default diag(4, 4));
+    ``polar_std``: (sigma_r, sigma_b) of the range-bearing model (default (2, 0.02)); ``sigma_a``: the motion noise,
+    one value or one per axis; ``prior_covs (B, 4, 4)`` and ``prior_means (B, 4)``: each item's prior (truth drawn
+    from it, so the prior is consistent); ``rows``: the rows per scan (the one valid row at a random place, the rest
+    padding); ``mask (B, T)``: which scans hold a detection."""
+    rng = generator(seed, "kit-varied", batch, steps, rows)
+    times = np.arange(steps, dtype=float) if times is None else np.asarray(times, dtype=float)
+    intervals = np.diff(times)
+    motion = constant_velocity(2, float(intervals[0]) if steps > 1 else _DT, sigma_a)
+    if _uses_polar(spec):
+        model = range_bearing(*(polar_std or (2.0, 0.02)))
+    else:
+        R = np.diag([4.0, 4.0]) if R is None else np.asarray(R, dtype=float)
+        model = linear_measurement(np.eye(2, 4), R, name="kit-position", frame="cartesian-2d",
+                                   std=tuple(np.sqrt(np.diag(R))))
+    means = np.broadcast_to(np.array([300.0, 200.0, -3.0, 4.0]), (batch, 4)) if prior_means is None else \
+        np.asarray(prior_means, dtype=float)
+    covs = np.broadcast_to(_RB_P0, (batch, 4, 4)) if prior_covs is None else np.asarray(prior_covs, dtype=float)
+    x = np.empty((batch, steps, 4))
+    x[:, 0] = means + np.einsum("bij,bj->bi", np.linalg.cholesky(covs), rng.standard_normal((batch, 4)))
+    for k in range(1, steps):
+        mk = motion.for_interval(float(intervals[k - 1]))
+        x[:, k] = x[:, k - 1] @ mk.F.T + rng.standard_normal((batch, 4)) @ mk.Q_sqrt.T  # x_k = F_k x_{k-1} + w_k
+    truth = Truth(x, times)
+    z1 = model.h(x) + rng.standard_normal((batch, steps, 2)) @ np.linalg.cholesky(model.R).T
+    z1 = np.where(model.angle_mask, _wrap(z1), z1)
+    at = rng.integers(0, rows, (batch, steps))  # where the valid row sits among the rows
+    z = np.zeros((batch, steps, rows, 2))
+    valid = np.zeros((batch, steps, rows), dtype=bool)
+    b, k = np.meshgrid(np.arange(batch), np.arange(steps), indexing="ij")
+    z[b, k, at] = z1
+    valid[b, k, at] = True if mask is None else np.asarray(mask, dtype=bool)
+    scans = Scans(z, valid, times)
+    prior = Gaussian(means.copy(), covs.copy())
+    return truth, scans, prior, motion, model
+
+
+def _with_garbage(scans: Scans) -> Scans:
+    """The same scans with every padding row holding :data:`PADDING_GARBAGE` (past the record, which zeroes it)."""
+    z = scans.z.copy()
+    pad = ~scans.valid
+    fill = np.resize(np.array(PADDING_GARBAGE), pad.sum() * z.shape[-1]).reshape(-1, z.shape[-1])
+    z[pad] = fill
+    return _validated(Scans, **{**{f.name: getattr(scans, f.name) for f in fields(scans)}, "z": z})
+
+
+def reference_filter(prior: Gaussian, scans: Scans, motion, model):
+    """The kit's reference for the varied cases, written out plainly: a Kalman filter (an extended one, with
+    central-difference Jacobians, on a nonlinear model) that rebuilds the motion model for every interval
+    (``motion.for_interval``), reads each item's one valid row wherever it sits (nothing where none is valid),
+    wraps angular residuals and updates in Joseph form::
+
+        x- = F_k x,  P- = F_k P F_k^T + Q_k                     (F_k, Q_k for the interval t_k - t_{k-1})
+        S = H P- H^T + R,  K = P- H^T S^-1,  x = x- + K wrap(z - h(x-)),  P = (I - K H) P- (I - K H)^T + K R K^T
+
+    Returns the means ``(B, T, n)`` and covariances ``(B, T, n, n)``."""
+    B, T, n = scans.batch, scans.steps, prior.dim
+    m, angle, R = model.dim, model.angle_mask, model.R
+    x, P = prior.mean.copy(), prior.cov.copy()
+    means, covs = np.empty((B, T, n)), np.empty((B, T, n, n))
+    intervals = np.diff(scans.times)
+    for k in range(T):
+        if k > 0:
+            mk = motion.for_interval(float(intervals[k - 1]))
+            x = x @ mk.F.T
+            P = mk.F @ P @ mk.F.T + mk.Q
+        if model.H is not None:
+            H = np.broadcast_to(model.H, (B, m, n))
+        else:
+            H = np.empty((B, m, n))
+            for j in range(n):
+                step = 1e-5 * (1.0 + np.abs(x[:, j]))
+                up, down = x.copy(), x.copy()
+                up[:, j] += step
+                down[:, j] -= step
+                diff = model.h(up) - model.h(down)
+                diff[:, angle] = _wrap(diff[:, angle])
+                H[:, :, j] = diff / (2.0 * step[:, None])
+        valid = scans.valid[:, k]
+        present = valid.any(axis=1)
+        z = scans.z[np.arange(B), k, np.argmax(valid, axis=1)]
+        nu = z - model.h(x)
+        nu[:, angle] = _wrap(nu[:, angle])
+        Ht = np.swapaxes(H, 1, 2)
+        K = P @ Ht @ np.linalg.inv(H @ P @ Ht + R)
+        A = np.eye(n) - K @ H
+        x = np.where(present[:, None], x + np.einsum("bij,bj->bi", K, nu), x)
+        P = np.where(present[:, None, None], A @ P @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2), P)
+        P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        means[:, k], covs[:, k] = x, P
+    return means, covs
+
+
+def _exact(spec: FilterSpec, model) -> bool:
+    return "exact_linear" in spec.capabilities and model.H is not None
+
+
+def _judge(spec: FilterSpec, case: str, problem, scans=None, seed: int = 0) -> str:
+    """Run ``spec`` on one varied case and hold it to the reference: equal to it (``exact_linear`` on a linear
+    model), an honest covariance (another ``gaussian`` filter on a linear model: the grand mean NEES within its
+    chi-square band) or a position RMSE within :data:`ACCURACY_FACTOR` of the reference's (any other filter).
+    ``scans`` replaces the problem's own (e.g. with garbage in the padding).  Returns a one-line summary; raises
+    ``AssertionError`` naming the case."""
+    truth, clean, prior, motion, model = problem
+    given = clean if scans is None else scans
+    try:
+        mean, cov = _run(spec, prior, given, motion, model, seed=seed)
+    except Exception as exc:  # noqa: BLE001 - the failure is the finding, named with its case
+        raise AssertionError(f"{case}: the filter raised {type(exc).__name__}: {exc}") from None
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+        b, k = np.argwhere(~np.isfinite(mean).all(axis=-1) | ~np.isfinite(cov).all(axis=(-2, -1)))[0]
+        raise AssertionError(f"{case}: non-finite estimate at run {b}, scan {k}")
+    ref_mean, ref_cov = reference_filter(prior, clean, motion, model)
+    if _exact(spec, model):
+        dm = np.abs(mean - ref_mean) / (1.0 + np.abs(ref_mean))
+        dc = np.abs(cov - ref_cov) / (1.0 + np.abs(ref_cov))
+        if dm.max() > 1e-8 or dc.max() > 1e-8:
+            b, k = np.unravel_index(np.argmax(dm.max(axis=-1) + dc.max(axis=(-1, -2))), dm.shape[:2])
+            raise AssertionError(
+                f"{case}: differs from the reference Kalman filter, first at run {b}, scan {k} (t = "
+                f"{given.times[k]:.3g} s): max relative mean error {dm.max():.3g}, covariance error {dc.max():.3g} "
+                f"(mean {np.array2string(mean[b, k], precision=5)}, reference "
+                f"{np.array2string(ref_mean[b, k], precision=5)})")
+        return f"{case}: equals the reference Kalman filter"
+    if "gaussian" in spec.capabilities and model.H is not None:
+        runs, n = truth.batch, prior.dim
+        e = float(np.mean(nees(truth.states, mean, cov)))
+        lo, hi = (float(v) / runs for v in chi2.ppf([VARIED_NEES_LEVEL / 2, 1 - VARIED_NEES_LEVEL / 2], n * runs))
+        if not lo <= e <= hi:
+            raise AssertionError(
+                f"{case}: covariance inconsistent with the errors: mean NEES {e:.3g} over {runs} runs and "
+                f"{truth.steps} scans, outside [{lo:.3g}, {hi:.3g}] (chi-square({n * runs}) / {runs}, level "
+                f"{VARIED_NEES_LEVEL}; {n} expected)")
+        return f"{case}: mean NEES {e:.3g} in [{lo:.3g}, {hi:.3g}]"
+    rmse = float(np.sqrt(np.mean(_position_mse(truth, mean))))
+    rmse_ref = float(np.sqrt(np.mean(_position_mse(truth, ref_mean))))
+    if not rmse <= ACCURACY_FACTOR * rmse_ref:
+        raise AssertionError(f"{case}: position RMSE {rmse:.3g} m, {rmse / rmse_ref:.3g} times the reference's "
+                             f"{rmse_ref:.3g} m (bound {ACCURACY_FACTOR})")
+    return f"{case}: RMSE {rmse / rmse_ref:.2f} x reference"
+
+
+def _varied_runs(spec: FilterSpec) -> int:
+    gaussian_only = "gaussian" in spec.capabilities and "exact_linear" not in spec.capabilities and \
+        not _uses_polar(spec)
+    return VARIED_NEES_RUNS if gaussian_only else VARIED_RUNS
+
+
+def _takes_varied(spec: FilterSpec) -> bool:
+    return not _uses_3d(spec)
+
+
+_VARIED = "a filter that takes 2-D position or range-bearing measurements (not position_doppler_3d)"
+
+
+def check_irregular_time_steps(spec: FilterSpec) -> str:
+    """Scans at irregular, non-integer intervals (0.2 s to 3 s, different at every scan), a target moving at
+    about 30 m/s: the filter predicts over each interval with the motion model it is handed (the time loop rebuilds
+    it with ``motion.for_interval``).  Held to the reference (equal, an honest NEES or the accuracy bound)."""
+    runs = _varied_runs(spec)
+    means = np.broadcast_to(np.array([300.0, 200.0, -18.0, 24.0]), (runs, 4))
+    problem = _varied_problem(spec, runs, VARIED_STEPS, 31, times=_irregular_times(VARIED_STEPS, 31),
+                              prior_means=means)
+    return _judge(spec, "irregular time steps", problem)
+
+
+def _noise_cases(spec: FilterSpec):
+    """``(label, keyword arguments of _varied_problem)`` of the noise-statistics check.  The small-noise case
+    starts from a prior of matching size (0.2 m, 0.05 m/s) for a stochastic filter, whose particles cannot resolve a
+    likelihood 50 times narrower than their spread."""
+    small = dict(prior_covs=np.broadcast_to(np.diag([0.04, 0.04, 0.0025, 0.0025]), (_varied_runs(spec), 4, 4))) \
+        if "stochastic" in spec.capabilities else {}
+    if _uses_polar(spec):
+        return (("small range and bearing noise (0.2 m, 0.002 rad), small Q", dict(polar_std=(0.2, 0.002),
+                                                                                  sigma_a=0.05, **small)),
+                ("large range and bearing noise (30 m, 0.08 rad), large Q", dict(polar_std=(30.0, 0.08),
+                                                                                sigma_a=4.0)),
+                ("anisotropic Q (0.05 and 3 m/s^2)", dict(sigma_a=(0.05, 3.0))))
+    return (("small noise: R ~ 0.01 m^2, Q ~ 0.05 m/s^2", dict(R=[[0.01, 0.004], [0.004, 0.02]], sigma_a=0.05,
+                                                                **small)),
+            ("large noise: R ~ 400 m^2, Q ~ 4 m/s^2", dict(R=[[400.0, 0.0], [0.0, 900.0]], sigma_a=4.0)),
+            ("anisotropic, correlated R (std 10 m and 0.5 m, correlation 0.6)",
+             dict(R=[[100.0, 3.0], [3.0, 0.25]])),
+            ("anisotropic Q (0.05 and 3 m/s^2)", dict(sigma_a=(0.05, 3.0))))
+
+
+def check_noise_statistics(spec: FilterSpec) -> str:
+    """The filter uses the noise statistics it is handed: small (R about 0.01 m^2, sigma_a 0.05 m/s^2) and large (R
+    400-900 m^2, sigma_a 4 m/s^2) noise, an anisotropic, correlated R (standard deviations 10 m and 0.5 m,
+    correlation 0.6) and an anisotropic Q (0.05 and 3 m/s^2 on the two axes); range-bearing filters get the
+    matching range and bearing noises.  Held to the reference on each (equal, an honest NEES or the accuracy
+    bound)."""
+    runs = _varied_runs(spec)
+    return "; ".join(_judge(spec, label, _varied_problem(spec, runs, VARIED_STEPS, 32 + i, **kw))
+                     for i, (label, kw) in enumerate(_noise_cases(spec)))
+
+
+#: Which scans hold a detection in the scan-contents check (rows: items): full runs, a run of empty scans, every
+#: other scan, one coasting from scan 3; every scan mixes items with and without a detection.
+SCAN_MASK_PATTERN = np.array([
+    [1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1],
+    [1, 1, 0, 0, 0, 1, 1, 0, 1, 1, 1, 0, 0, 1, 1],
+    [1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1],
+    [1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+], dtype=bool)
+
+
+def check_scan_contents(spec: FilterSpec) -> str:
+    """Scans of three rows, the one valid detection at a random row (not always the first), the padding rows
+    holding garbage (1e300, NaN, -7.5e5, past the record that would zero them), empty scans among full ones (a run
+    of empty scans, every other scan, one item coasting after scan 3; every scan mixes items with and without a
+    detection).  The filter reads only the rows the mask marks valid: held to the reference on the same scans
+    without the garbage (equal, an honest NEES or the accuracy bound)."""
+    runs = _varied_runs(spec)
+    mask = np.resize(SCAN_MASK_PATTERN, (runs, VARIED_STEPS))
+    problem = _varied_problem(spec, runs, VARIED_STEPS, 35, rows=3, mask=mask)
+    with np.errstate(all="ignore"):
+        return _judge(spec, "three rows per scan, garbage in the padding, empty scans", problem,
+                      scans=_with_garbage(problem[1]))
+
+
+#: The broad prior of the prior check: 100 m and 10 m/s standard deviations; 20 m and 5 m/s for a stochastic
+#: filter, whose particles (500 by default) resolve a likelihood about 10 times narrower than their spread, not 50.
+BROAD_PRIOR = np.diag([1e4, 1e4, 100.0, 100.0])
+BROAD_PRIOR_STOCHASTIC = np.diag([400.0, 400.0, 25.0, 25.0])
+
+
+def _prior_mix(runs: int, stochastic: bool = False):
+    """Per-item priors: broad (:data:`BROAD_PRIOR`), tight (0.1 m, 0.01 m/s), correlated (position-velocity
+    correlation +0.9 and -0.8, unequal axes), the standard one, each at its own mean (hundreds of metres apart)."""
+    kinds = (BROAD_PRIOR_STOCHASTIC if stochastic else BROAD_PRIOR, np.diag([1e-2, 1e-2, 1e-4, 1e-4]),
+             _correlated([5.0, 5.0, 2.0, 2.0], 0.9), _correlated([20.0, 8.0, 3.0, 1.0], -0.8), _RB_P0)
+    covs = np.stack([kinds[b % len(kinds)] for b in range(runs)])
+    rng = generator(36, "kit-prior-means", runs)
+    angle = rng.uniform(0.2, 1.4, runs)
+    dist = rng.uniform(150.0, 900.0, runs)
+    means = np.stack([dist * np.cos(angle), dist * np.sin(angle), rng.uniform(-8, 8, runs),
+                      rng.uniform(-8, 8, runs)], axis=1)
+    return means, covs
+
+
+def check_prior_handling(spec: FilterSpec) -> str:
+    """Every item starts from its own prior: broad (100 m, 10 m/s standard deviations), tight (0.1 m, 0.01 m/s),
+    strongly correlated (position-velocity correlation +0.9 and -0.8, unequal axes) and the standard one, at means
+    hundreds of metres apart, each item's truth drawn from its own prior.  The filter must start each item from
+    its own mean and full covariance (correlations included): held to the reference (equal, an honest NEES or the
+    accuracy bound)."""
+    runs = max(_varied_runs(spec), 10)
+    means, covs = _prior_mix(runs, "stochastic" in spec.capabilities)
+    problem = _varied_problem(spec, runs, VARIED_STEPS, 36, prior_means=means, prior_covs=covs)
+    return _judge(spec, "broad, tight, correlated and offset priors per item", problem)
+
+
+def check_batch_composition(spec: FilterSpec) -> str:
+    """A batch of one and a batch of five mixed items (their own priors, broad to tight and correlated, their own
+    truths, their own detections: one never measured after the first scan, one every other scan) at irregular
+    time steps.  Each run gives finite estimates of the right shapes; a filter that is not stochastic gives every
+    item of the mixed batch exactly (to 1e-9) what that item gives alone, so no item leaks into another and a
+    batch of one works as well as a batch of many."""
+    B, T = 5, 10
+    means, covs = _prior_mix(B, "stochastic" in spec.capabilities)
+    mask = np.ones((B, T), dtype=bool)
+    mask[1, 1:] = False
+    mask[2, 1::2] = False
+    times = _irregular_times(T, 37)
+    truth, scans, prior, motion, model = _varied_problem(spec, B, T, 37, times=times, prior_means=means,
+                                                         prior_covs=covs, mask=mask)
+    mean, cov = _run(spec, prior, scans, motion, model)
+    n = prior.dim
+    if mean.shape != (B, T, n) or cov.shape != (B, T, n, n):
+        raise AssertionError(f"a mixed batch of {B}: estimates of shapes {mean.shape}, {cov.shape}")
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+        raise AssertionError(f"a mixed batch of {B}: non-finite estimates")
+    stochastic = "stochastic" in spec.capabilities
+    for b in range(B):
+        try:
+            m1, c1 = _run(spec, prior.take(b), scans.take(b), motion, model)
+        except Exception as exc:  # noqa: BLE001 - a filter that breaks on B = 1 is the finding
+            raise AssertionError(f"a batch of one (item {b} of the mixed batch alone) raised "
+                                 f"{type(exc).__name__}: {exc}") from None
+        if m1.shape != (1, T, n) or not (np.all(np.isfinite(m1)) and np.all(np.isfinite(c1))):
+            raise AssertionError(f"a batch of one (item {b}): estimates of shape {m1.shape}, finite: "
+                                 f"{bool(np.all(np.isfinite(m1)))}")
+        if stochastic:
+            continue
+        dm = np.max(np.abs(m1[0] - mean[b]) / (1.0 + np.abs(mean[b])))
+        dc = np.max(np.abs(c1[0] - cov[b]) / (1.0 + np.abs(cov[b])))
+        if dm > 1e-9 or dc > 1e-9:
+            k = int(np.argmax(np.max(np.abs(m1[0] - mean[b]), axis=-1) + np.max(np.abs(c1[0] - cov[b]),
+                                                                                  axis=(-2, -1)) > 0))
+            raise AssertionError(
+                f"item {b} of a mixed batch of {B} differs from the same item run alone (a batch of one), from scan "
+                f"{k}: max relative mean difference {dm:.3g}, covariance {dc:.3g}; each item must use its own prior, "
+                f"detections and covariance only")
+    return f"a batch of one and a mixed batch of {B}" + ("" if stochastic else ": every item equals its run alone")
+
+
+def _position_trace(cov: np.ndarray) -> np.ndarray:
+    return np.trace(cov[..., :2, :2], axis1=-2, axis2=-1)
+
+
+def check_information(spec: FilterSpec) -> str:
+    """The estimate moves with the information it gets (a ``gaussian`` filter): an update with a detection makes
+    each item's position covariance smaller than the predicted one (its trace drops), an empty scan leaves it as
+    predicted, and a more accurate sensor (the same detections, R / 4) gives a smaller position covariance at
+    every scan of a run."""
+    B, T = 6, 10
+    mask = np.ones((B, T), dtype=bool)
+    mask[:, 4] = False
+    mask[1::2, 6:8] = False
+    problem = _varied_problem(spec, B, T, 38, mask=mask, R=[[9.0, 2.0], [2.0, 4.0]], polar_std=(3.0, 0.03))
+    truth, scans, prior, motion, model = problem
+    track, predicted_cov = run(spec, scans, motion, model, association=_RecordPredicted(), prior=prior,
+                               rng=generator(0, "kit-filter"))
+    before, after = _position_trace(predicted_cov), _position_trace(track.cov)
+    measured = scans.valid.any(axis=-1)
+    measured[:, 0] = False  # the first scan updates the prior, not a recorded prediction
+    grew = measured & ~(after < before * (1.0 - 1e-9))
+    if grew.any():
+        b, k = (int(i) for i in np.argwhere(grew)[0])
+        raise AssertionError(
+            f"an update with a detection did not shrink the position covariance: item {b}, scan {k}: trace "
+            f"{after[b, k]:.4g} after the update against {before[b, k]:.4g} predicted ({int(grew.sum())} of "
+            f"{int(measured.sum())} updates)")
+    empty = ~scans.valid.any(axis=-1)
+    moved = empty & ~np.isclose(after, before, rtol=1e-12, atol=0.0)
+    if moved.any():
+        b, k = (int(i) for i in np.argwhere(moved)[0])
+        raise AssertionError(f"an empty scan changed the position covariance: item {b}, scan {k}: trace "
+                             f"{after[b, k]:.4g} against {before[b, k]:.4g} predicted")
+    if _uses_polar(spec):
+        sharp_model = range_bearing(1.5, 0.015)
+    else:
+        sharp_model = linear_measurement(model.H, model.R / 4.0, name="kit-position", frame="cartesian-2d",
+                                         std=tuple(np.sqrt(np.diag(model.R / 4.0))))
+    _, sharp_cov = _run(spec, prior, scans, motion, sharp_model)
+    coarse, sharp = _position_trace(track.cov), _position_trace(sharp_cov)
+    worse = ~(sharp < coarse)
+    worse[:, 0] &= scans.valid[:, 0].any(axis=-1)
+    if worse.any():
+        b, k = (int(i) for i in np.argwhere(worse)[0])
+        raise AssertionError(
+            f"a more accurate sensor (R / 4) did not give a smaller position covariance: item {b}, scan {k}: trace "
+            f"{sharp[b, k]:.4g} against {coarse[b, k]:.4g} with R")
+    return (f"{int(measured.sum())} updates shrank the position covariance, {int(empty.sum())} empty scans left it; "
+            f"R / 4 gave a smaller one at every scan")
+
+
+def _nis_problem(spec: FilterSpec, runs: int, steps: int, seed: int):
+    """The consistency checks' problem: irregular time steps, an anisotropic correlated R, correlated priors (the
+    truth drawn from them), some empty scans."""
+    cov = _correlated([5.0, 7.0, 2.0, 1.5], 0.6)
+    mask = generator(seed, "kit-nees-mask", runs, steps).uniform(size=(runs, steps)) > 0.15
+    return _varied_problem(spec, runs, steps, seed, times=_irregular_times(steps, seed),
+                           R=[[16.0, -3.0], [-3.0, 2.25]], prior_covs=np.broadcast_to(cov, (runs, 4, 4)),
+                           mask=mask)
+
+
+def check_nis_consistency(spec: FilterSpec) -> str:
+    """The normalised innovation squared ``nu^T S^-1 nu`` (``nu = z - H x-``, ``S = H P- H^T + R`` from the
+    filter's own predicted estimate) averaged over 200 runs lies inside its 95 % chi-square band (chi-square(2 x
+    runs) / runs, scipy.stats.chi2) at >= 85 % of the scans with a detection (95 % expected), on the consistency
+    problem: irregular time steps, an anisotropic correlated R, correlated priors, empty scans."""
+    runs, steps = 200, 30
+    truth, scans, prior, motion, model = _nis_problem(spec, runs, steps, 39)
+    track, predicted_cov = run(spec, scans, motion, model, association=_RecordPredicted(), prior=prior,
+                               rng=generator(0, "kit-filter"))
+    H, R = model.H, model.R
+    z = scans.z[:, :, 0]
+    present = scans.valid[:, :, 0]
+    nu = z - track.predicted_mean @ H.T
+    S = H @ predicted_cov @ H.T + R
+    q = nis(nu, S)
+    q[:, 0] = np.nan  # the first scan updates the prior (no recorded prediction)
+    inside, steps_used, worst = 0, 0, (0.0, 0, 0.0, 0.0)
+    for k in range(1, steps):
+        used = present[:, k]
+        count = int(used.sum())
+        if count < 20:
+            continue
+        mean_k = float(np.mean(q[used, k]))
+        lo, hi = (float(v) / count for v in chi2.ppf([0.025, 0.975], 2 * count))
+        steps_used += 1
+        if lo <= mean_k <= hi:
+            inside += 1
+        else:
+            worst = max(worst, (abs(np.log(mean_k / 2.0)), k, mean_k, lo if mean_k < lo else hi))
+    frac = inside / max(steps_used, 1)
+    if frac < 0.85:
+        raise AssertionError(
+            f"NIS inconsistent: the run-averaged NIS lies inside its 95 % chi-square band at only {100 * frac:.0f} % "
+            f"of {steps_used} scans (mean NIS {np.nanmean(q[present]):.3g}, expected 2; worst scan {worst[1]}: "
+            f"{worst[2]:.3g} against the band edge {worst[3]:.3g}); the predicted covariance or the innovation "
+            f"covariance the filter reports does not match its errors")
+    return f"run-averaged NIS inside its 95 % band at {100 * frac:.0f} % of {steps_used} scans"
+
+
 CHECKS: tuple[Check, ...] = (
     Check("check_shapes", check_shapes.__doc__, lambda s: True, check_shapes),
     Check("check_batch_consistency", check_batch_consistency.__doc__,
@@ -774,6 +1221,21 @@ CHECKS: tuple[Check, ...] = (
     Check("check_previous_state_unchanged", check_previous_state_unchanged.__doc__, lambda s: True,
           check_previous_state_unchanged),
     Check("check_nan_not_hidden", check_nan_not_hidden.__doc__, lambda s: True, check_nan_not_hidden),
+    Check("check_irregular_time_steps", check_irregular_time_steps.__doc__, _takes_varied,
+          check_irregular_time_steps, _VARIED),
+    Check("check_noise_statistics", check_noise_statistics.__doc__,
+          lambda s: _takes_varied(s) and "ignores_noise_statistics" not in s.capabilities, check_noise_statistics,
+          _VARIED + ", one that reads Q and R (not ignores_noise_statistics)"),
+    Check("check_scan_contents", check_scan_contents.__doc__, _takes_varied, check_scan_contents, _VARIED),
+    Check("check_prior_handling", check_prior_handling.__doc__, _takes_varied, check_prior_handling, _VARIED),
+    Check("check_batch_composition", check_batch_composition.__doc__, _takes_varied, check_batch_composition,
+          _VARIED),
+    Check("check_information", check_information.__doc__,
+          lambda s: "gaussian" in s.capabilities and _takes_varied(s), check_information,
+          "gaussian, and " + _VARIED),
+    Check("check_nis_consistency", check_nis_consistency.__doc__,
+          lambda s: "gaussian" in s.capabilities and not (_uses_polar(s) or _uses_3d(s)), check_nis_consistency,
+          "gaussian, and a filter that takes position measurements"),
 )
 
 
@@ -785,7 +1247,9 @@ def checks_for(spec: FilterSpec) -> list[Check]:
     return [c for c in CHECKS if c.applies(spec)]
 
 
-def run_checks(spec: FilterSpec) -> list[Outcome]:
-    """Run every applicable check without pytest; expected failures are honoured."""
+def run_checks(spec: FilterSpec) -> Outcomes:
+    """Run every applicable check without pytest; expected failures are honoured.  The outcomes come as a sequence
+    filled as it is read (:class:`~workbench.testing._common.Outcomes`): iterating it sees each outcome as soon as
+    its check finishes."""
     checks_for(spec)  # refuses expected failures of unknown checks
     return run_kit(spec, CHECKS)
