@@ -7,7 +7,6 @@ Exit statuses (workbench.cli.EXIT): 1 some work failed (the rest written), 2 bad
 
 import errno
 import json
-import os
 import textwrap
 from pathlib import Path
 from types import SimpleNamespace

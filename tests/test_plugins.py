@@ -129,3 +129,37 @@ def test_find_takes_a_configured_filter_label_as_check_plugin_does():
     [(kind, spec)] = host.find("sir(particles=300)")
     assert kind == "filter" and spec.name == "sir(particles=300)" and spec.params["particles"] == 300
     assert host.find("no-such-component") == []
+
+
+def test_a_name_of_another_kind_is_named_as_that_kind():
+    host = load_host()
+    with pytest.raises(UnknownComponent) as info:
+        host.filter("range-bearing(sigma_theta=0.1)")
+    assert str(info.value) == ("'range-bearing' is a sensor, not a filter (installed filters: "
+                               + ", ".join(sorted(host.filters)) + ")")
+    with pytest.raises(UnknownComponent, match="^'kf' is a filter, not a sensor"):
+        host.sensor("kf")
+    with pytest.raises(UnknownComponent, match="^no filter named 'nowhere' is installed"):
+        host.filter("nowhere")
+
+
+def test_a_plugin_names_what_it_cannot_provide_here_and_why():
+    from types import SimpleNamespace
+
+    from workbench.plugins import UNAVAILABLE_ATTRIBUTE
+
+    optional = SimpleNamespace(**{UNAVAILABLE_ATTRIBUTE: {
+        ("filter", "opt-kf"): "needs libopt: pip install libopt",
+        ("filter", "kf"): "must not hide an installed filter",
+        ("no such kind", "x"): "ignored"}})
+    host = load_host(extra_plugins=[("optional", optional)])
+    info = next(p for p in host.plugins if p.name == "optional")
+    assert info.status == "ok" and info.provides == () and not info.warnings  # quiet until asked
+    with pytest.raises(UnknownComponent, match=r"^the filter 'opt-kf' needs libopt: pip install libopt$"):
+        host.filter("opt-kf")
+    assert host.filter("kf").name == "kf"
+    mine = lambda h: {k: v for k, v in h.unavailable.items() if k[1] in ("opt-kf", "kf", "x")}  # noqa: E731
+    assert mine(host) == {("filter", "opt-kf"): "needs libopt: pip install libopt",
+                          ("filter", "kf"): "must not hide an installed filter"}
+    # a blocked plugin says nothing of what it would provide
+    assert mine(load_host(block=["optional"], extra_plugins=[("optional", optional)])) == {}

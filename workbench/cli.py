@@ -55,14 +55,28 @@ def _positive_int(text: str) -> int:
     return value
 
 
+class _Once(argparse.Action):
+    """An option that may be given once: a second ``--filters`` is refused instead of silently replacing the
+    first (a list is written comma-separated, in one option)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        earlier = getattr(namespace, self.dest, None)
+        if earlier is not None:
+            parser.error(f"{option_string} is given twice ({earlier!r} and {values!r}): give one comma-separated "
+                         f"list")
+        setattr(namespace, self.dest, values)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="workbench",
         description="Simulate, compare and accelerate target-tracking algorithms in clutter and at low SNR.")
+    parser.add_argument("--version", action="store_true",
+                        help="print the version of the workbench and of each installed plugin distribution")
     parser.add_argument("--block", action="append", default=[], metavar="PLUGIN",
                         help=f"do not load this plugin (repeatable; also the {BLOCK_ENV} environment variable)")
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command")  # required unless --version (checked in main)
 
     plg = sub.add_parser("plugins", help="list installed plugins; with a NAME, that component's parameters")
     plg.add_argument("name", nargs="?", default=None,
@@ -75,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     size.add_argument("--full", dest="size", action="store_const", const="full", help="the papers' full sizes")
     rep.set_defaults(size="quick")
     rep.add_argument("--out", default="workbench-report", help="output folder (default: ./workbench-report)")
-    rep.add_argument("--filters", default=None,
+    rep.add_argument("--filters", default=None, action=_Once,
                      help="comma-separated filters, each 'name' or 'name(key=value, ...)': '+name' adds to each "
                           "recipe's defaults, '-name' or '~name' removes one, a plain list replaces them "
                           "(e.g. --filters '+sir(particles=2000),~ekf')")
@@ -113,7 +127,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_block(block: list[str]) -> None:
+    """``--block`` follows the rules of every list: no empty name, no plugin named twice."""
+    from .references import refuse_repeats
+
+    for name in block:
+        if not name.strip():
+            raise InputError(f"--block {name!r}: expected a plugin name (see 'workbench plugins')")
+    refuse_repeats(((name, name) for name in block), "--block", "plugin")
+
+
 def _host(args) -> PluginHost:
+    _check_block(args.block)
     host = load_host(block=args.block)
     for p in host.broken:
         print(f"workbench: warning: plugin {p.name} ({p.distribution} {p.version}) is broken: {p.error}",
@@ -129,6 +154,12 @@ def _host(args) -> PluginHost:
     return host
 
 
+def _unavailable(host: PluginHost, name: str) -> str:
+    """``": the filter 'ss-ukf' needs ..."`` where a loaded plugin says why it cannot provide ``name`` here."""
+    reasons = [f"the {kind} {comp!r} {why}" for (kind, comp), why in host.unavailable.items() if comp == name]
+    return (": " + "; ".join(reasons)) if reasons else ""
+
+
 def _describe_component(host: PluginHost, name: str) -> int:
     from .params import describe
 
@@ -136,7 +167,7 @@ def _describe_component(host: PluginHost, name: str) -> int:
     if not found:
         everything = sorted({n for table in host.components.values() for n in table})
         close = difflib.get_close_matches(name, everything, n=3)
-        raise UnknownComponent(f"no component named {name!r} is installed"
+        raise UnknownComponent(f"no component named {name!r} is installed" + _unavailable(host, name)
                                + (f"; did you mean {', '.join(close)}?" if close else ""))
     for kind, spec in found:
         label = getattr(spec, "name", None) or getattr(spec, "paper", None) or getattr(spec, "group", name)
@@ -183,10 +214,27 @@ def cmd_plugins(args) -> int:
     return 0
 
 
+def _check_papers(host: PluginHost, papers: list[str]) -> None:
+    """``--paper`` follows the rules of every list: each an installed paper (refused with the installed ones),
+    none named twice; checked before any paper runs."""
+    from .references import refuse_repeats
+
+    refuse_repeats(((p, p) for p in papers), "--paper", "paper")
+    for paper in papers:
+        if paper not in host.recipes:
+            close = difflib.get_close_matches(paper, sorted(host.recipes), n=3)
+            raise InputError(f"--paper {paper!r}: no paper {paper!r} is installed (installed: "
+                             f"{', '.join(sorted(host.recipes)) or 'none'})"
+                             + (f"; did you mean {', '.join(close)}?" if close else ""))
+
+
 def cmd_report(args) -> int:
-    from .report.engine import run_report
+    from .report.engine import filter_request, run_report
 
     host = _host(args)
+    _check_papers(host, args.paper)
+    if args.filters is not None:
+        filter_request(args.filters, host)  # the whole request checked before any paper runs
     if args.arch != "cpu":
         from .kernels.runtime import TaichiUnavailable, ensure_taichi
 
@@ -263,7 +311,8 @@ def check_plugin(host: PluginHost, name: str, kind: str | None = None, out=print
     if not found:
         what = "filter, sensor, clutter generator or clutter remover" if kind is None else KIT_KINDS[kind]
         known = sorted({n for label in labels for n in _names(host, label)})
-        raise UnknownComponent(f"no {what} named {name!r} is installed (installed: {', '.join(known) or 'none'})")
+        raise UnknownComponent(f"no {what} named {name!r} is installed" + _unavailable(host, name)
+                               + f" (installed: {', '.join(known) or 'none'})")
     if len(found) > 1:
         out(f"{name!r} is a {' and a '.join(label for label, _ in found)}: running each kit (choose one with "
             f"--kind)")
@@ -289,6 +338,35 @@ def cmd_check_plugin(args) -> int:
     return check_plugin(_host(args), args.name, args.kind)
 
 
+def version_lines(host: PluginHost) -> list[str]:
+    """The workbench's version, then each installed plugin distribution with its version and its plugins (a
+    plugin not loaded says why: blocked or broken)."""
+    from . import __version__
+
+    lines = [f"workbench {__version__}"]
+    dists: dict[tuple[str, str], list[str]] = {}
+    for p in host.plugins:
+        if p.distribution == "-":
+            continue
+        dists.setdefault((p.distribution, p.version), []).append(p.name + ("" if p.status == "ok"
+                                                                          else f" ({p.status})"))
+    if dists:
+        lines.append("plugin distributions:")
+        width = max(len(f"{d} {v}") for d, v in dists)
+        for (dist, ver), names in sorted(dists.items(), key=lambda kv: (kv[0][0] != "workbench", kv[0])):
+            lines.append(f"  {f'{dist} {ver}'.ljust(width)}  plugins: {', '.join(names)}")
+    else:
+        lines.append("plugin distributions: none installed")
+    return lines
+
+
+def cmd_version(args) -> int:
+    _check_block(args.block)
+    for line in version_lines(load_host(block=args.block)):
+        print(line)
+    return 0
+
+
 def cmd_bench(args) -> int:
     from .bench import replot, run_bench
 
@@ -310,7 +388,7 @@ def cmd_bench(args) -> int:
 
 
 COMMANDS = {"plugins": cmd_plugins, "report": cmd_report, "run": cmd_run, "check-plugin": cmd_check_plugin,
-            "bench": cmd_bench}
+            "bench": cmd_bench, "version": cmd_version}
 
 
 def _normalise_argv(argv: list[str]) -> list[str]:
@@ -336,8 +414,13 @@ def _os_message(exc: OSError) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = _normalise_argv(list(sys.argv[1:] if argv is None else argv))
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
+    if args.version:
+        args.command = "version"
+    elif args.command is None:
+        parser.error("the following arguments are required: command (or --version)")
 
     def fail(kind: str, message: str) -> int:
         if debug:

@@ -67,12 +67,22 @@ class PluginHost:
     components: Mapping[str, Mapping[str, Any]]  # hook name -> component name -> spec
     owner: Mapping[tuple[str, str], str] = field(default_factory=dict)  # (hook, name) -> plugin name
     manager: pluggy.PluginManager | None = None
+    #: (kind, name) -> why a component a loaded plugin would provide is missing (an optional dependency that is
+    #: not installed): asking for it by name gives that reason instead of "not installed"
+    unavailable: Mapping[tuple[str, str], str] = field(default_factory=dict)
 
     def _get(self, hook: str, name: str):
         table = self.components[hook]
         if name not in table:
             kind = KINDS[hook][0]
             known = ", ".join(sorted(table)) or "none"
+            reason = self.unavailable.get((kind, name))
+            if reason:
+                raise UnknownComponent(f"the {kind} {name!r} {reason}")
+            others = [KINDS[h][0] for h, t in self.components.items() if h != hook and name in t]
+            if others:
+                raise UnknownComponent(f"{name!r} is a {' and a '.join(others)}, not a {kind} "
+                                       f"(installed {kind}s: {known})")
             hint = ""
             broken = [p for p in self.plugins if p.status != "ok"]
             if broken:
@@ -219,6 +229,7 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
     components: dict[str, dict[str, Any]] = {hook: {} for hook in KINDS}
     owner: dict[tuple[str, str], str] = {}
     owner_dist: dict[tuple[str, str], str] = {}
+    unavailable: dict[tuple[str, str], str] = {}
     # the built-in distribution registers first: its names are reserved (see BUILTIN_DISTRIBUTION)
     loaded.sort(key=lambda item: (item[3] != BUILTIN_DISTRIBUTION, item[0]))
     for name, obj, module, dist, ver in loaded:
@@ -288,9 +299,27 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
             owner_dist[(hook, comp)] = dist
         infos.append(PluginInfo(name, module, dist, ver, "ok", "",
                                 tuple((KINDS[h][0], c) for h, c, _ in provided), tuple(warnings)))
+        for key, why in _unavailable_of(obj):
+            unavailable.setdefault(key, why)
     pm.check_pending()
     infos.sort(key=lambda p: p.name)
-    return PluginHost(tuple(infos), components, owner, pm)
+    return PluginHost(tuple(infos), components, owner, pm, unavailable)
+
+
+#: A plugin module may name, in this attribute, the components it would provide but cannot here (an optional
+#: dependency is missing): ``{("filter", "ss-ukf"): "needs Stone Soup: pip install ..."}``, each reason a phrase
+#: that follows "the filter 'ss-ukf'".  It registers nothing for them and stays quiet; asking for one by name gives
+#: its reason instead of "not installed".
+UNAVAILABLE_ATTRIBUTE = "WORKBENCH_UNAVAILABLE"
+
+
+def _unavailable_of(obj) -> list[tuple[tuple[str, str], str]]:
+    table = getattr(obj, UNAVAILABLE_ATTRIBUTE, None)
+    if not isinstance(table, Mapping):
+        return []
+    labels = {label for label, _, _ in KINDS.values()}
+    return [((key[0], key[1]), str(why)) for key, why in table.items()
+            if isinstance(key, tuple) and len(key) == 2 and key[0] in labels and isinstance(key[1], str)]
 
 
 #: The functions each kind of component must provide (checked at load: a spec missing one is broken).

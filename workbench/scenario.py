@@ -161,34 +161,18 @@ def _component(path: Path, table: Mapping, name: str, registry: Mapping[str, Any
 
 def _filters(path: Path, table: Mapping, host: PluginHost) -> tuple[Component, ...]:
     """``names = ["kf", {name = "sir", particles = 2000}, "ukf(alpha=0.5)"]``: each checked against its filter's
-    declared parameters."""
+    declared parameters, by the same rules (and with the same messages) as ``--filters``
+    (:mod:`workbench.references`)."""
+    from .references import FILTER_FORMS, filter_list
+
     fl = _Reader(path, table, "filters")
     names = fl.get("names")
     fl.done()
-    if not isinstance(names, list) or not names:
-        raise InputError(f"{fl.where('names')}: expected a non-empty list of filters (names, or tables "
-                         f"{{name = \"sir\", particles = 2000}})")
-    out = []
-    for i, entry in enumerate(names):
-        where = f"{fl.where('names')}[{i}]"
-        if isinstance(entry, str):
-            base, values = parse_reference(entry, where)
-        elif isinstance(entry, Mapping) and isinstance(entry.get("name"), str):
-            base, values = entry["name"], {k: v for k, v in entry.items() if k != "name"}
-        else:
-            raise InputError(f"{where}: expected a filter name or a table with a 'name', got {entry!r}")
-        try:
-            spec = host.filter(base).configure(**values) if values else host.filter(base)
-        except (UnknownComponent, InputError) as exc:
-            raise InputError(f"{where}: {exc}") from None
-        changed = {k: spec.params[k] for k in values}
-        label = spec.name if values else base
-        out.append(Component(base, changed, label))
-    labels = [c.label for c in out]
-    if len(set(labels)) != len(labels):
-        raise InputError(f"{fl.where('names')}: the same filter is listed twice: "
-                         f"{sorted({x for x in labels if labels.count(x) > 1})}")
-    return tuple(out)
+    if not isinstance(names, list):
+        raise InputError(f"{fl.where('names')}: expected a list of filters ({FILTER_FORMS}, or a table "
+                         f"{{name = \"sir\", particles = 2000}}), got {names!r}")
+    refs = filter_list(host, names, fl.where("names"), lambda i, entry: f"{fl.where('names')}[{i}]")
+    return tuple(Component(r.base, dict(r.changed), r.key) for r in refs)
 
 
 def check_request_size(path: Path, runs: int, steps: int, n: int, filters: int, detections: int = 1) -> None:

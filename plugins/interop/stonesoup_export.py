@@ -27,7 +27,7 @@ from workbench.models import MeasurementModel
 from workbench.tracking import CONFIRMED, Track as WorkbenchTrack, TrackLog
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
-from .stonesoup_filters import AVAILABLE, EPOCH, REASON
+from .stonesoup_filters import AVAILABLE, EPOCH, REASON, StoneSoupMissing
 
 __all__ = ["EPOCH", "timestamps", "seconds", "ground_truth_paths", "detections", "track_log_tracks",
            "filter_tracks"]
@@ -37,7 +37,7 @@ __all__ = ["EPOCH", "timestamps", "seconds", "ground_truth_paths", "detections",
 
 def _require() -> None:
     if not AVAILABLE:
-        raise ImportError(REASON)
+        raise StoneSoupMissing(REASON)  # an ImportError, and an InputError for the command line
 
 
 def timestamps(times, start: datetime = EPOCH) -> list[datetime]:

@@ -24,7 +24,10 @@ resampling offsets from the workbench's ``rng`` argument, so a seed reproduces i
 effective sample size falls below ``ess_threshold * N`` (1: after every update).
 
 Without Stone Soup (``pip install "workbench[stonesoup]"``) this plugin registers no filter and stays quiet:
-:data:`AVAILABLE` is False and :data:`REASON` says why and how to install it.
+:data:`AVAILABLE` is False and :data:`REASON` says why and how to install it.  Asking for an ``ss-*`` filter by
+name (``--filters ss-ukf``, a scenario file) then says that it needs Stone Soup and how to install it
+(:data:`WORKBENCH_UNAVAILABLE`), and building one (:func:`make_gaussian`, :func:`make_particle`) raises
+:class:`StoneSoupMissing` saying the same, instead of a filter that fails with ``ModuleNotFoundError`` when it runs.
 """
 
 from __future__ import annotations
@@ -40,6 +43,14 @@ from workbench.params import Param
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
 
+
+
+class StoneSoupMissing(InputError, ImportError):
+    """Stone Soup is needed and not installed: the message says how to install it (``pip install
+    "workbench[stonesoup]"``).  An :class:`~workbench.types.InputError` (the command line prints one line, exit
+    2) and an ``ImportError``."""
+
+
 try:  # Stone Soup is an optional extra: without it the plugin provides nothing
     import stonesoup  # noqa: F401
 except ImportError as _exc:  # pragma: no cover - depends on the environment
@@ -50,7 +61,14 @@ else:
     AVAILABLE = True
     REASON = ""
 
-__all__ = ["AVAILABLE", "REASON", "make_gaussian", "make_particle", "filters", "workbench_filters"]
+__all__ = ["AVAILABLE", "REASON", "StoneSoupMissing", "require_stonesoup", "make_gaussian", "make_particle",
+           "filters", "workbench_filters", "WORKBENCH_UNAVAILABLE"]
+
+
+def require_stonesoup(what: str) -> None:
+    """Raise :class:`StoneSoupMissing` naming ``what`` when Stone Soup is not installed."""
+    if not AVAILABLE:
+        raise StoneSoupMissing(f"{what} needs Stone Soup: {REASON}")
 
 #: The time of every prior handed to Stone Soup (its states need time stamps; only the differences matter).
 EPOCH = datetime(2000, 1, 1)
@@ -169,6 +187,7 @@ def make_gaussian(name: str = "ss-ukf", **params) -> FilterSpec:
     :class:`~workbench.specs.FilterSpec`; ``ss-ukf`` takes ``alpha``, ``beta``, ``kappa``."""
     if name not in GAUSSIAN:
         raise InputError(f"unknown Stone Soup Gaussian filter {name!r} (known: {', '.join(GAUSSIAN)})")
+    require_stonesoup(f"filter {name!r}")
     predictor, updater, summary = GAUSSIAN[name]
     declared = UKF_PARAMETERS if name == "ss-ukf" else ()
     values = {p.name: params.get(p.name, p.default) for p in declared}
@@ -267,6 +286,7 @@ def _p_estimate(state: Particles) -> Gaussian:
 
 def make_particle(particles: int = 1000, ess_threshold: float = 0.5) -> FilterSpec:
     """Stone Soup's bootstrap particle filter (``ParticlePredictor`` / ``ParticleUpdater``) as ``ss-pf``."""
+    require_stonesoup("filter 'ss-pf'")
     return FilterSpec(
         name="ss-pf", summary="Stone Soup's bootstrap particle filter" + _BATCH_NOTE,
         init=partial(_p_init, particles=int(particles)), predict=_p_predict,
@@ -281,6 +301,12 @@ def filters() -> list[FilterSpec]:
     if not AVAILABLE:
         return []
     return [make_gaussian(name) for name in GAUSSIAN] + [make_particle()]
+
+
+#: What this plugin would provide with Stone Soup, and why it does not here (read by the plugin host: asking for
+#: one of these names says so, instead of "no filter named ... is installed").
+WORKBENCH_UNAVAILABLE = {} if AVAILABLE else {("filter", name): f"needs Stone Soup: {REASON}"
+                                               for name in (*GAUSSIAN, "ss-pf")}
 
 
 @hookimpl

@@ -15,12 +15,17 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.stats import multivariate_normal
-from stonesoup.base import Property
-from stonesoup.models.base import GaussianModel, LinearModel
-from stonesoup.models.measurement.base import MeasurementModel as StoneSoupMeasurementModel
-from stonesoup.models.transition.linear import LinearGaussianTimeInvariantTransitionModel
-from stonesoup.types.angle import Bearing
-from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors
+
+from .stonesoup_filters import require_stonesoup
+
+require_stonesoup("workbench_interop.stonesoup_models")  # a named error, not a bare ModuleNotFoundError
+
+from stonesoup.base import Property  # noqa: E402
+from stonesoup.models.base import GaussianModel, LinearModel  # noqa: E402
+from stonesoup.models.measurement.base import MeasurementModel as StoneSoupMeasurementModel  # noqa: E402
+from stonesoup.models.transition.linear import LinearGaussianTimeInvariantTransitionModel  # noqa: E402
+from stonesoup.types.angle import Bearing  # noqa: E402
+from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors  # noqa: E402
 
 from workbench.models import MeasurementModel, MotionModel
 
