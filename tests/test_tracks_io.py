@@ -11,7 +11,7 @@ from workbench.models import constant_velocity, linear_measurement
 from workbench.plugins import load_host
 from workbench.rng import generator
 from workbench.tracking import CONFIRMED, TENTATIVE, NearestNeighbour, TrackLog, run
-from workbench.tracks_io import TrackFile, read_tracks, state_layout, write_track, write_track_log, write_tracks
+from workbench.tracks_io import read_tracks, state_layout, write_track, write_track_log, write_tracks
 from workbench.trajectory import sample_motion
 from workbench.types import Gaussian, InputError, Scans
 
@@ -173,6 +173,11 @@ run,track,step,time,status,updated,x,y
     (lambda s: s.replace("# covariance: none", "# covariance: full"), "expected '# covariance: upper triangle'"),
     (lambda s: s.replace("updated,x,y", "updated,x,z"), "line 6: the column header does not match"),
     (lambda s: s.replace("# runs: 2\n", ""), "no '# runs: ...' line"),
+    # content, not only structure: one time per step, increasing with the step
+    (lambda s: s + "0,1,2,2.5,tentative,1,1.0,1.0\n", "line 9, column 'time': step 2 has time 2.0 on line 8 but 2.5 "
+                                                      "here (track 1, run 0)"),
+    (lambda s: s.replace("1,4,2,2.0", "1,4,2,-1.0"), "line 8, column 'time': step 2 has time -1.0, not after step 0's "
+                                                     "0.0 (line 7)"),
 ])
 def test_a_malformed_file_is_refused_with_its_line_and_column(tmp_path, edit, fragment):
     ok = tmp_path / "ok.csv"

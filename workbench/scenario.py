@@ -4,13 +4,19 @@ A scenario names a motion model, a truth (start state or manoeuvre legs), a sens
 clutter generators and removers, a prior and the filters to compare (each with its own parameters).  Every key
 is checked on load: an unknown key, a wrong type or unit, a NaN, a value out of its declared range, a plugin
 that is not installed, components whose measurement frames do not match, or a request that would not fit in
-memory gives an error naming the file, the key and what was expected.  See ``docs/scenarios.md``.
+memory gives an error naming the file, the key and what was expected.  With recorded detections, every key that
+the file also supplies (steps, dt, runs, the carrier, the geometry, the sensor's position) is either honoured or
+must agree with the file, else the error names both.  ``run_scenario`` lists what it wrote in ``--out`` in
+:data:`MANIFEST` and removes an earlier run's files that it does not write again.  See ``docs/scenarios.md``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
+import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -21,11 +27,12 @@ from .filtering import run_filter
 from .frames import FRAMES, check_same_frame
 from .metrics import position_sq_error
 from .models import MotionModel, constant_velocity, random_walk_velocity, range_rate_model
-from .params import memory_limit, parse_reference
-from .plugins import PluginHost, UnknownComponent
+from .params import memory_limit
+from .plugins import PluginHost
 from .rng import generator
 from .trajectory import Leg, piecewise_trajectory, sample_motion
 from .types import Gaussian, InputError, Scans, Truth
+from .textfields import ImplausibleValueWarning
 from .units import parse_quantity
 
 if sys.version_info >= (3, 11):
@@ -42,6 +49,14 @@ DETECTION_FORMATS = ("sonar", "pcl")
 FORMAT_FRAMES = {"sonar": "cartesian-2d", "pcl": "bistatic-range-rate"}
 #: A scenario may ask for at most this share of the machine's memory (truth, detections and estimates).
 MEMORY_SHARE = 0.5
+#: A recorded file that gives its own scan times: ``[scenario] dt`` must lie within its shortest and longest
+#: interval, widened by this share (``dt`` is then not used: every step's model is built from the actual interval).
+DT_TOLERANCE = 0.01
+#: ``workbench run`` lists the files it wrote in this file of its ``--out`` folder, so that a later run into the
+#: same folder removes those it does not write again (and touches nothing else).
+MANIFEST = "workbench-run.json"
+#: The names ``workbench run`` writes (besides ``tracks-<filter>.csv``).
+OUTPUT_NAMES = ("results.npz", "summary.json", "tracks.npz", "tracks.png")
 
 
 @dataclass(frozen=True)
@@ -84,6 +99,10 @@ class Scenario:
     detections: Path | None = None
     detections_format: str = ""
     frame: str = ""
+    #: the recorded file as read and checked on load (:class:`Recorded`), or None
+    recorded: Any = field(default=None, compare=False, repr=False)
+    #: warnings about the scenario's inputs (implausible recorded values), with the numbers
+    notes: tuple[str, ...] = ()
 
     @property
     def filter_names(self) -> tuple[str, ...]:
@@ -233,6 +252,16 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
         if detections.is_dir():
             raise InputError(f"{de.where('file')}: {detections} is a folder, not a detection file")
         de.done()
+        who = f"the recorded file {detections}"
+        if "truth" in raw:
+            raise InputError(f"{path}: [truth] is not used with recorded detections ([detections] file: {who} "
+                             f"replaces the simulation and has no truth); remove [truth]")
+        if raw.get("clutter"):
+            raise InputError(f"{path}: [[clutter]] adds simulated clutter, but with recorded detections nothing is "
+                             f"simulated ({who} holds the detections, clutter included); remove [[clutter]]")
+        if "runs" in sc.table and runs != 1:
+            raise InputError(f"{path}: [scenario] runs = {runs}, but {who} holds one run; remove runs (or set it "
+                             f"to 1)")
         if tracker == "direct":
             raise InputError(f"{sc.where('tracker')}: recorded detections need a tracker that associates "
                              f"('nearest-neighbour' or 'multi-target'), not 'direct'")
@@ -283,10 +312,106 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
 
     filters = _filters(path, raw["filters"], host)
     frame = _check_frames(path, host, sensor, clutter, removers, tracker, det_format)
-    if not recorded:
+    data, notes = None, ()
+    if recorded:
+        data, notes = _read_recorded(path, detections, det_format, dt, steps, host, sensor)
+        for note in notes:
+            print(f"workbench: warning: {note}", file=sys.stderr)
+    else:
         check_request_size(path, runs, steps, n, len(filters), 1 + len(clutter))
     return Scenario(path, name, seed, runs, steps, dt, motion, x0, x0_std, tuple(legs), sensor, clutter,
-                    removers, prior_mean, prior_std, filters, tracker, gate, detections, det_format, frame)
+                    removers, prior_mean, prior_std, filters, tracker, gate, detections, det_format, frame, data,
+                    tuple(notes))
+
+
+@dataclass(frozen=True)
+class Recorded:
+    """A recorded file as a scenario reads it: the detections and, for sonar files that give one, the own ship."""
+
+    scans: Scans
+    own_ship: Any = None
+
+
+def _said(path: Path, plugin: str, given: Mapping, key: str, text: str) -> str:
+    how = "given" if key in given else f"the default of sensor {plugin!r}"
+    return f"{path}: [sensor] {key} = {text} ({how})"
+
+
+def _read_recorded(path: Path, file: Path, fmt: str, dt: float, steps: int, host: PluginHost, sensor: Component
+                   ) -> tuple[Recorded, tuple[str, ...]]:
+    """Read the recorded file and hold it to the scenario: every key the file also supplies is either passed to
+    the reader (honoured) or must agree with the file, else an error names both (the scenario's key and the file's
+    value).  Returns the data and the readers' warnings about implausible values."""
+    from .recorded import load_pcl_candidates, load_sonar_recording, pcl_metadata
+    from .recorded.pcl import check_carrier
+
+    spec = host.sensor(sensor.plugin)
+    given = dict(sensor.params)
+    effective = {**dict(spec.params or {}), **given}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ImplausibleValueWarning)
+        if fmt == "sonar":
+            # a ping-numbered file takes its times from [scenario] dt (honoured); a polar file without own-ship
+            # columns is measured from the sensor's position (honoured)
+            position = effective.get("sensor")
+            rec = load_sonar_recording(file, dt=dt)
+            if rec.own_ship is None and rec.frame == "polar" and position is not None and \
+                    tuple(float(v) for v in position) != (0.0, 0.0):
+                rec = load_sonar_recording(file, dt=dt, sensor=tuple(position))
+            data, time_column, unit = Recorded(rec.scans, rec.own_ship), ("time" if rec.key == "time" else ""), "pings"
+            model = spec.measurement_model(**given)
+            fixed = model.sensor_position if model.sensor_position is not None else \
+                (position if "sensor" in given else None)
+            if rec.own_ship is not None and fixed is not None:
+                where = np.asarray(fixed, dtype=float)[:2]
+                off = np.hypot(*(rec.own_ship.position - where).T)
+                k = int(np.argmax(off))
+                if off[k] > 1e-6 * max(1.0, float(np.hypot(*where))):
+                    text = "(" + ", ".join(f"{v:g}" for v in where) + ")"
+                    at = ", ".join(f"{v:g}" for v in rec.own_ship.position[k])
+                    raise InputError(f"{_said(path, sensor.plugin, given, 'sensor', text)} places the sensor at one "
+                                     f"point, but {file} gives the own ship's position per ping, ({at}) at ping {k}: "
+                                     f"the file's own ship is used for the detections, so the sensor's position must "
+                                     f"agree with it (or use a model without one, frame = \"cartesian\")")
+        else:
+            meta = pcl_metadata(file)
+            freq = effective.get("frequency_hz")
+            if freq is not None:
+                freq = check_carrier(float(freq), f"{path}: [sensor] frequency_hz")
+                if meta.carrier_hz is not None and abs(freq - meta.carrier_hz) > 1e-9 * meta.carrier_hz:
+                    raise InputError(f"{_said(path, sensor.plugin, given, 'frequency_hz', f'{freq / 1e6:g} MHz')}, "
+                                     f"but {file} declares carrier_hz {meta.carrier_hz:g} Hz "
+                                     f"({meta.carrier_hz / 1e6:g} MHz): one of the two is wrong; make them agree")
+            for key, declared in (("tx", meta.transmitter_m), ("rx", meta.receiver_m)):
+                if key in effective and effective[key] is not None and declared is not None:
+                    mine = np.asarray(effective[key], dtype=float)
+                    m = min(mine.size, len(declared))
+                    if not np.allclose(mine[:m], declared[:m], rtol=1e-9, atol=1e-6):
+                        name = "transmitter_m" if key == "tx" else "receiver_m"
+                        text = "(" + ", ".join(f"{v:g}" for v in mine) + ") m"
+                        raise InputError(f"{_said(path, sensor.plugin, given, key, text)}, but {file} declares "
+                                         f"{name} ({', '.join(f'{v:g}' for v in declared)}) m: make them agree")
+            scans = load_pcl_candidates(file, frequency_hz=freq if meta.carrier_hz is None else None)
+            data, time_column, unit = Recorded(scans), "time_s", "frames"
+    for w in caught:
+        if not issubclass(w.category, ImplausibleValueWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    notes = tuple(str(w.message) for w in caught if issubclass(w.category, ImplausibleValueWarning))
+    scans = data.scans
+    if not scans.valid.any():
+        raise InputError(f"{file}: holds no detection (a header without rows?); nothing to track")
+    if scans.steps != steps:
+        raise InputError(f"{path}: [scenario] steps = {steps}, but {file} holds {scans.steps} {unit}: every scan "
+                         f"of the file is tracked, so steps must be {scans.steps}")
+    if time_column and scans.steps > 1:
+        gaps = np.diff(scans.times)
+        lo, hi = float(gaps.min()), float(gaps.max())
+        if not (1 - DT_TOLERANCE) * lo <= dt <= (1 + DT_TOLERANCE) * hi:
+            apart = f"{lo:g} s apart" if hi - lo <= 1e-9 * hi else f"{lo:g} to {hi:g} s apart"
+            raise InputError(f"{path}: [scenario] dt = {dt:g} s, but {file} gives its own scan times (column "
+                             f"'{time_column}'), {apart}: the file's times are used, so dt must agree with them "
+                             f"(within {DT_TOLERANCE:.0%})")
+    return data, notes
 
 
 def _check_frames(path: Path, host: PluginHost, sensor: Component, clutter, removers, tracker: str,
@@ -340,21 +465,20 @@ class ScenarioResult:
         return "\n".join(lines)
 
 
-def _load_recorded(scenario: Scenario) -> Scans:
-    from .recorded import load_pcl_candidates, load_sonar_csv
-
-    loader = load_sonar_csv if scenario.detections_format == "sonar" else load_pcl_candidates
-    scans = loader(scenario.detections)  # the readers refuse a non-UTF-8 file with one named error
-    if not scans.valid.any():
-        raise InputError(f"{scenario.detections}: holds no detection (a header without rows?); nothing to track")
-    return scans
+def _recorded(scenario: Scenario, host: PluginHost) -> Recorded:
+    """The scenario's recorded file as read on load (read and checked again when the scenario was built by hand)."""
+    if scenario.recorded is not None:
+        return scenario.recorded
+    data, _ = _read_recorded(scenario.path, scenario.detections, scenario.detections_format, scenario.dt,
+                             scenario.steps, host, scenario.sensor)
+    return data
 
 
 def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | None, Scans]:
     """Truth and detections (sensor, then clutter, then removers) for all runs; recorded detections
     (no truth) when the scenario names a file."""
     if scenario.detections is not None:
-        scans = _load_recorded(scenario)
+        scans = _recorded(scenario, host).scans
         for comp in scenario.removers:
             scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
         return None, scans
@@ -404,13 +528,63 @@ def _track_single(scenario, spec, model, scans, seed):
 
 
 def _non_finite(est) -> str:
-    """Why a filter's estimates cannot be used (NaN or inf somewhere), or ``""``."""
+    """Why a filter's estimates cannot be used (NaN or inf somewhere, or a covariance that is not positive
+    semi-definite, which no track file may hold), or ``""``."""
     for name in ("mean", "cov"):
         values = getattr(est, name)
         if not np.all(np.isfinite(values)):
             b, k = (int(i) for i in np.argwhere(~np.isfinite(values))[0][:2])
             return f"its {name} holds NaN or inf (run {b}, scan {k})"
+    from .tracks_io import covariance_problems
+
+    cov = np.asarray(est.cov, dtype=float)
+    negative, not_psd = covariance_problems(cov.reshape((-1,) + cov.shape[-2:]))
+    bad = negative | not_psd
+    if bad.any():
+        b, k = np.unravel_index(int(np.flatnonzero(bad)[0]), cov.shape[:-2])
+        low = float(np.linalg.eigvalsh(cov[b, k])[0])
+        return (f"its cov is not positive semi-definite (run {int(b)}, scan {int(k)}: smallest eigenvalue "
+                f"{low:.6g})")
     return ""
+
+
+def _output_name(name: str) -> bool:
+    """Whether ``name`` (a bare file name) is one that ``workbench run`` writes."""
+    return name in OUTPUT_NAMES or (name.startswith("tracks-") and name.endswith(".csv") and "/" not in name
+                                    and "\\" not in name and name not in (".", ".."))
+
+
+def _manifest_files(out: Path) -> set[str]:
+    """The files an earlier ``workbench run`` recorded writing into ``out`` (only names it writes; nothing when
+    there is no manifest or it cannot be read)."""
+    try:
+        listed = json.loads((out / MANIFEST).read_text(encoding="utf-8")).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        return set()
+    return {name for name in listed if isinstance(name, str) and _output_name(name)}
+
+
+def _write_manifest(out: Path, scenario: Scenario, files) -> None:
+    fd, tmp = tempfile.mkstemp(dir=out, prefix=".manifest-", suffix=".tmp")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        json.dump({"written_by": "workbench run", "scenario": scenario.name, "files": sorted(files)}, fh, indent=2)
+    os.replace(tmp, out / MANIFEST)
+
+
+def _check_out(out: Path, planned: set[str]) -> set[str]:
+    """Refuse an ``--out`` folder that holds result files this run would neither replace nor remove (files of the
+    workbench's names that no earlier run's manifest lists); return the earlier run's files."""
+    if not out.is_dir():
+        return set()
+    earlier = _manifest_files(out)
+    strangers = sorted(p.name for p in out.iterdir()
+                       if p.is_file() and _output_name(p.name) and p.name not in planned and p.name not in earlier)
+    if strangers:
+        raise InputError(f"{out}: holds {', '.join(strangers)}, which this run would not write again and no earlier "
+                         f"'workbench run' recorded writing ({MANIFEST} does not list "
+                         f"{'it' if len(strangers) == 1 else 'them'}): they would lie beside the new results as if "
+                         f"they were part of them; move them away or choose another --out")
+    return earlier
 
 
 def _plot_data(scenario: Scenario, model, scans: Scans, truth: Truth | None, estimates: dict, logs: dict
@@ -437,7 +611,8 @@ def _plot_data(scenario: Scenario, model, scans: Scans, truth: Truth | None, est
     if planar and scenario.detections is not None and scenario.detections_format == "sonar":
         from .recorded.sonar import load_sonar_recording
 
-        own = load_sonar_recording(scenario.detections).own_ship
+        own = scenario.recorded.own_ship if scenario.recorded is not None else \
+            load_sonar_recording(scenario.detections, dt=scenario.dt).own_ship
         if own is not None:  # the recording's own ship: where its detections were measured from
             data["own_ship_xy"] = own.position
     for name, est in estimates.items():
@@ -509,13 +684,15 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
     from .report.cache import save_arrays
 
     seed = scenario.seed if seed is None else seed
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder; choose another --out")
+    planned = set(OUTPUT_NAMES) | {f"tracks-{_file_label(c.label)}.csv" for c in scenario.filters}
+    earlier = _check_out(out, planned)  # before any work: a folder that would mix results is refused at once
     truth, scans = simulate(scenario, host, seed)
     sensor = host.sensor(scenario.sensor.plugin)
     model = sensor.measurement_model(**scenario.sensor.params)
     dims = scenario.motion.position_dims
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a folder; choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, np.ndarray] = {"times": scans.times, "z": scans.z, "valid": scans.valid}
     if truth is not None:
@@ -555,6 +732,9 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
             err = position_sq_error(truth.states, est.mean, dims)
             arrays[f"sq_error_{fname}"] = err
             rmse[fname] = float(np.sqrt(err.mean(axis=0)).mean())
+    # claim every file this run may write or remove before writing any, so an interrupted run leaves a manifest
+    # that still names them all
+    _write_manifest(out, scenario, earlier | planned)
     save_arrays(out / "results.npz", arrays)
     from .tracks_io import write_track, write_track_log
 
@@ -568,11 +748,16 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
         "scenario": scenario.name, "seed": seed, "runs": scans.batch, "steps": scans.steps,
         "tracker": scenario.tracker, "detections": str(scenario.detections or "simulated"), "frame": scenario.frame,
         "filters": {c.label: {"plugin": c.plugin, "params": dict(c.params)} for c in scenario.filters},
-        "position_rmse": rmse, "position_rmse_unit": "m", "diagnostics": diag, "failed": failed, "notes": lines}, indent=2, default=str),
-        encoding="utf-8")
+        "position_rmse": rmse, "position_rmse_unit": "m", "diagnostics": diag, "failed": failed, "notes": lines,
+        "input_warnings": list(scenario.notes)}, indent=2, default=str), encoding="utf-8")
     plot = _plot_data(scenario, model, scans, truth, estimates, logs)
     save_arrays(out / "tracks.npz", plot)
     fig = Figure(figsize=(10, 4.5), layout="constrained")
     _draw(plot, fig)
     fig.savefig(out / "tracks.png", dpi=110)
+    written = set(OUTPUT_NAMES) | {f"tracks-{_file_label(f)}.csv" for f in (*estimates, *logs)}
+    # an earlier run's files (and a failed filter's old track file) that this run did not write again
+    for name in sorted((earlier | planned) - written):
+        (out / name).unlink(missing_ok=True)
+    _write_manifest(out, scenario, written)
     return ScenarioResult(out, scenario.name, rmse, diag, tuple(lines), failed, plot)

@@ -8,7 +8,12 @@ from pathlib import Path
 
 from .types import InputError
 
-__all__ = ["finite_number", "read_text"]
+__all__ = ["finite_number", "read_text", "ImplausibleValueWarning"]
+
+
+class ImplausibleValueWarning(UserWarning):
+    """A recorded value that is well formed but physically unlikely (a unit slip?), with the numbers; the value
+    is used as given."""
 
 
 def finite_number(text: str, where: str) -> float:

@@ -23,7 +23,9 @@
 
 Numbers are written with Python's ``repr`` (the shortest text that reads back to the same double), so a file reads
 back exactly.  The file is written and read with the standard :mod:`csv` module; :func:`read_tracks` refuses a
-malformed file with a :class:`~workbench.types.InputError` naming the file, the line and the column.
+malformed file with a :class:`~workbench.types.InputError` naming the file, the line and the column, and checks
+content as well as structure: one time per step, times that increase with the step, variances >= 0 and
+positive semi-definite covariances (:func:`covariance_problems`; the writers refuse what it would refuse).
 
 Writers: :func:`write_track_log` (a multi-target :class:`~workbench.tracking.TrackLog`), :func:`write_track` (a
 single-target :class:`~workbench.tracking.Track`, mean and covariance per run and step) and :func:`write_tracks`
@@ -46,8 +48,8 @@ from .tracking.multi import CONFIRMED, TENTATIVE, TrackLog
 from .textfields import finite_number, read_text
 from .types import InputError
 
-__all__ = ["FORMAT", "VERSION", "TrackFile", "state_layout", "write_tracks", "write_track_log", "write_track",
-           "read_tracks"]
+__all__ = ["FORMAT", "VERSION", "PSD_TOLERANCE", "covariance_problems", "TrackFile", "state_layout", "write_tracks",
+           "write_track_log", "write_track", "read_tracks"]
 
 #: The format's name, on the ``format`` line of every track file.
 FORMAT = "workbench-tracks"
@@ -59,6 +61,29 @@ STATUS = {TENTATIVE: "tentative", CONFIRMED: "confirmed"}
 _STATUS_CODE = {v: k for k, v in STATUS.items()}
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _COMPONENT = re.compile(r"^([A-Za-z][A-Za-z0-9_]*) \[([^\[\],]*)\]$")
+#: A covariance is accepted as positive semi-definite when its correlation form (``D^-1/2 C D^-1/2``, ``D`` its
+#: diagonal) has no eigenvalue below ``-PSD_TOLERANCE``: round-off of a filter's arithmetic passes, a sign error or
+#: a correlation beyond +-1 does not.
+PSD_TOLERANCE = 1e-8
+
+
+def covariance_problems(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For covariances ``cov (R, n, n)`` (symmetric): ``(negative_variance (R,) bool, not_psd (R,) bool)``.
+
+    ``not_psd`` is judged on the correlation form, so states whose components have very different scales (metres
+    and metres per second) are held to the same relative tolerance :data:`PSD_TOLERANCE`.
+    """
+    cov = np.asarray(cov, dtype=float)
+    R = cov.shape[0]
+    if R == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
+    var = np.diagonal(cov, axis1=1, axis2=2)
+    negative = np.any(var < 0, axis=1)
+    scale = np.sqrt(np.where(var > 0, var, 1.0))
+    corr = cov / (scale[:, :, None] * scale[:, None, :])
+    corr = 0.5 * (corr + np.swapaxes(corr, 1, 2))
+    not_psd = np.linalg.eigvalsh(corr)[:, 0] < -PSD_TOLERANCE
+    return negative, not_psd & ~negative
 
 
 @dataclass(frozen=True)
@@ -218,6 +243,14 @@ def write_tracks(path, tracks: TrackFile) -> Path:
               f"# runs: {tracks.runs}", f"# steps: {tracks.steps}"]
     header += [f"# note: {line}" for note in tracks.notes for line in str(note).splitlines() or [""]]
     columns = list(LEADING) + list(tracks.names) + ([] if tracks.cov is None else _cov_names(tracks.names))
+    if tracks.cov is not None:  # a file the reader would refuse is not written
+        negative, not_psd = covariance_problems(tracks.cov)
+        if negative.any() or not_psd.any():
+            r = int(np.flatnonzero(negative | not_psd)[0])
+            what = "has a negative variance" if negative[r] else "is not positive semi-definite"
+            raise InputError(f"{path}: the covariance of track {int(tracks.track[r])} (run {int(tracks.run[r])}, step "
+                             f"{int(tracks.step[r])}) {what} (smallest eigenvalue "
+                             f"{float(np.linalg.eigvalsh(tracks.cov[r])[0]):.6g}); not written")
     with path.open("w", newline="", encoding="utf-8") as fh:
         fh.write("\n".join(header) + "\n")
         writer = csv.writer(fh, lineterminator="\n")
@@ -335,8 +368,10 @@ def read_tracks(path) -> TrackFile:
     The header block must give the ``format`` (``workbench-tracks 1``), the ``state`` components with their
     units, the ``covariance`` (``upper triangle`` or ``none``), ``runs`` and ``steps``; the column header must be
     exactly the columns these imply.  Any other problem (a wrong field count, a value that is not a number, a
-    non-finite number, an unknown status, a run or step out of range, a track listed twice at one step) raises
-    :class:`~workbench.types.InputError` naming the file, the line and the column.
+    non-finite number, an unknown status, a run or step out of range, a track listed twice at one step, one step
+    with two times, times that do not increase with the step, a negative variance or a covariance that is not
+    positive semi-definite) raises :class:`~workbench.types.InputError` naming the file and the line (and the
+    column where one field is at fault).
     """
     path = Path(path)
     lines = read_text(path, "track file").splitlines(keepends=True)
@@ -379,6 +414,8 @@ def read_tracks(path) -> TrackFile:
     iu = np.triu_indices(n)
     rows: dict[str, list] = {k: [] for k in ("run", "track", "step", "time", "status", "updated", "mean", "cov")}
     seen: dict[tuple[int, int, int], int] = {}
+    step_time: dict[int, tuple[float, int]] = {}  # step -> (its time, the first line that gave it)
+    lines_of: list[int] = []
     for fields in reader:
         lineno = head + reader.line_num
         if not fields or (len(fields) == 1 and not fields[0].strip()):
@@ -407,7 +444,13 @@ def read_tracks(path) -> TrackFile:
         rows["run"].append(run)
         rows["track"].append(track)
         rows["step"].append(step)
-        rows["time"].append(finite_number(fields[3], where("time")))
+        t = finite_number(fields[3], where("time"))
+        first = step_time.setdefault(step, (t, lineno))
+        if t != first[0]:
+            raise InputError(f"{where('time')}: step {step} has time {first[0]!r} on line {first[1]} but {t!r} here "
+                             f"(track {track}, run {run}); a step is one scan, at one time")
+        lines_of.append(lineno)
+        rows["time"].append(t)
         rows["status"].append(_STATUS_CODE[status])
         rows["updated"].append(int(upd) if upd else -1)
         rows["mean"].append([finite_number(fields[6 + i], where(names[i])) for i in range(n)])
@@ -416,8 +459,27 @@ def read_tracks(path) -> TrackFile:
             c = np.zeros((n, n))
             c[iu] = tri
             c.T[iu] = tri
+            for i in range(n):
+                if c[i, i] < 0:
+                    col = f"cov_{names[i]}_{names[i]}"
+                    raise InputError(f"{where(col)}: {float(c[i, i])!r} is the variance of {names[i]} of track "
+                                     f"{track} (run {run}, step {step}) and must be >= 0")
             rows["cov"].append(c)
     R = len(rows["run"])
+    ordered = sorted(step_time)
+    for a, b in zip(ordered, ordered[1:]):
+        if not step_time[b][0] > step_time[a][0]:
+            raise InputError(f"{path} line {step_time[b][1]}, column 'time': step {b} has time {step_time[b][0]!r}, "
+                             f"not after step {a}'s {step_time[a][0]!r} (line {step_time[a][1]}); the times of a track "
+                             f"file increase with the step")
+    if with_cov and R:
+        _, not_psd = covariance_problems(np.array(rows["cov"]))
+        if not_psd.any():
+            r = int(np.flatnonzero(not_psd)[0])
+            low = float(np.linalg.eigvalsh(rows["cov"][r])[0])
+            raise InputError(f"{path} line {lines_of[r]}: the covariance of track {rows['track'][r]} (run "
+                             f"{rows['run'][r]}, step {rows['step'][r]}) is not positive semi-definite (smallest "
+                             f"eigenvalue {low:.6g}; a correlation beyond +-1?)")
     return TrackFile(tuple(names), tuple(units), runs, steps, np.array(rows["run"], dtype=np.int64),
                      np.array(rows["track"], dtype=np.int64), np.array(rows["step"], dtype=np.int64),
                      np.array(rows["time"], dtype=float), np.array(rows["status"], dtype=np.int64),

@@ -25,7 +25,8 @@ Metadata lines (comments that start with ``#!``) declare the geometry and the ca
     #! receiver_m: 0, 0, 60
 
 The carrier converts between Doppler and range-rate (an explicit ``frequency_hz`` argument must agree with it);
-:func:`pcl_metadata` reads the three.
+:func:`pcl_metadata` reads the three.  A carrier outside :data:`CARRIER_RANGE_HZ` (1 MHz .. 100 GHz) is refused
+as a unit slip, with the numbers.
 
 The loader returns :class:`~workbench.types.Scans` with ``z (1, T, M, 2) = [R, Rdot]``, ``doppler`` (Hz),
 ``snr`` (strength), ``cov`` where the file gives accuracies, and no ``origin`` (recorded data has no truth).  Any
@@ -46,7 +47,8 @@ from ..sensing.bistatic import doppler_to_range_rate, range_rate_to_doppler, wav
 from ..textfields import finite_number, read_text
 from ..types import InputError, Scans
 
-__all__ = ["COLUMNS", "PCLMetadata", "pcl_metadata", "load_pcl_candidates", "write_pcl_candidates"]
+__all__ = ["COLUMNS", "CARRIER_RANGE_HZ", "check_carrier", "PCLMetadata", "pcl_metadata", "load_pcl_candidates",
+           "write_pcl_candidates"]
 
 #: column -> required?  (doppler_hz / range_rate_mps: at least one of the two)
 COLUMNS = {"frame": True, "time_s": True, "bistatic_range_m": True, "doppler_hz": False, "range_rate_mps": False,
@@ -56,6 +58,30 @@ CANDIDATE_FIELDS = ("bistatic_range_m", "doppler_hz", "range_rate_mps", "strengt
 AGREE_MPS = 0.01
 #: The carrier assumed when neither the file nor the caller gives one (Hz).
 DEFAULT_CARRIER_HZ = 701e6
+#: The carriers a passive radar's illuminator can have (Hz): from HF broadcasting (a few MHz) through FM, DAB,
+#: DVB-T and mobile networks to satellite TV (about 12 GHz), with a margin; a carrier outside is a unit slip
+#: (701 given for 701 MHz is off by 10^6) and is refused.
+CARRIER_RANGE_HZ = (1e6, 1e11)
+
+
+def check_carrier(value: float, where: str) -> float:
+    """``value`` (Hz) if it is a plausible illuminator carrier (:data:`CARRIER_RANGE_HZ`), else a named error
+    with the numbers and the likely slip."""
+    lo, hi = CARRIER_RANGE_HZ
+    if lo <= value <= hi:
+        return value
+    hint = ""
+    for factor, unit in ((1e6, "MHz"), (1e3, "kHz"), (1e9, "GHz")):
+        if lo <= value * factor <= hi:
+            hint = f"; given in {unit}? {value:g} {unit} is {value * factor:g} Hz"
+            break
+    else:
+        for factor, unit in ((1e6, "micro"), (1e3, "milli")):
+            if lo <= value / factor <= hi:
+                hint = f"; off by a factor {factor:g}? {value / factor:g} Hz would be plausible"
+                break
+    raise InputError(f"{where}: carrier {value:g} Hz is not a passive-radar illuminator's carrier (expected "
+                     f"{lo:g} .. {hi:g} Hz, e.g. 701e6 for a 701 MHz DTV channel){hint}")
 
 
 @dataclass(frozen=True)
@@ -90,7 +116,7 @@ def _metadata(path: Path, text: str) -> PCLMetadata:
         if key == "carrier_hz":
             if len(numbers) != 1 or not numbers[0] > 0:
                 raise InputError(f"{where}: carrier_hz must be one number > 0, got {raw.strip()!r}")
-            values[key] = numbers[0]
+            values[key] = check_carrier(numbers[0], f"{where}, carrier_hz")
         else:
             if len(numbers) not in (2, 3):
                 raise InputError(f"{where}: {key} must be 2 or 3 coordinates, got {raw.strip()!r}")
@@ -128,6 +154,8 @@ def load_pcl_candidates(path, frequency_hz: float | None = None) -> Scans:
     path = Path(path)
     text = _read_text(path)
     meta = _metadata(path, text)
+    if frequency_hz is not None:
+        check_carrier(float(frequency_hz), f"load_pcl_candidates({path}): frequency_hz")
     if frequency_hz is not None and meta.carrier_hz is not None and abs(frequency_hz - meta.carrier_hz) > 1e-9 * \
             meta.carrier_hz:
         raise InputError(f"{path}: the file declares carrier_hz {meta.carrier_hz:g}, but {frequency_hz:g} Hz was asked for")
@@ -241,6 +269,7 @@ def write_pcl_candidates(path, scans: Scans, run: int = 0, *, comments: Iterable
     """
     if columns not in ("doppler", "range_rate", "both"):
         raise InputError(f"write_pcl_candidates: columns must be 'doppler', 'range_rate' or 'both', got {columns!r}")
+    check_carrier(float(frequency_hz), "write_pcl_candidates: frequency_hz")  # no file the reader would refuse
     lam = wavelength(frequency_hz)
     path = Path(path)
     head = ["frame", "time_s", "bistatic_range_m"]

@@ -24,8 +24,11 @@
 
 :func:`load_sonar_recording` returns the detections as :class:`~workbench.types.Scans` with Cartesian
 ``z (1, T, M, 2)`` and the own ship's track (:class:`OwnShip`); :func:`load_sonar_csv` returns the scans alone.
-Any malformed content raises :class:`~workbench.types.InputError` naming the file, the line and the column.  A
-UTF-8 byte-order mark is accepted.
+Any malformed content raises :class:`~workbench.types.InputError` naming the file, the line and the column
+(bearings and headings beyond +-360 degrees and bearing accuracies of 180 degrees or more included).  Values that
+are well formed but physically unlikely (an own ship faster than :data:`MAX_OWN_SHIP_SPEED`, a heading far from the
+course over ground, bearings that look like radians) give an :class:`ImplausibleValueWarning` with the numbers.
+A UTF-8 byte-order mark is accepted.
 """
 
 from __future__ import annotations
@@ -38,7 +41,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..textfields import finite_number, read_text
+import warnings
+
+from ..textfields import ImplausibleValueWarning, finite_number, read_text
 from ..types import InputError, Scans
 
 __all__ = ["SONAR_COLUMNS", "OwnShip", "SonarRecording", "load_sonar_recording", "load_sonar_csv",
@@ -55,6 +60,20 @@ BEARING_REFERENCES = ("true", "relative")
 #: (and more than MAX_EMPTY_PINGS pings) is refused as a probable typo unless ``pings=`` asks for that many.
 SPARSE_FACTOR = 100
 MAX_EMPTY_PINGS = 1000
+#: Bearings and headings are degrees: beyond +-MAX_ANGLE_DEG a value is refused (radians, or a slip).
+MAX_ANGLE_DEG = 360.0
+#: A bearing accuracy (degrees) must be below this: a wider spread leaves no bearing at all.
+MAX_SIGMA_BEARING_DEG = 180.0
+#: An own ship faster than this (position units per time unit; m/s for SI files, about 190 knots) is reported
+#: with a warning: positions or times in the wrong unit?
+MAX_OWN_SHIP_SPEED = 100.0
+#: A heading whose median difference from the own ship's course over ground exceeds this (degrees) is reported
+#: with a warning: a compass heading where the format wants the mathematical convention?
+HEADING_COURSE_LIMIT_DEG = 45.0
+#: Slower legs (position units per time unit) say too little about the course to judge a heading.
+MIN_COURSE_SPEED = 0.5
+#: With at least this many polar detections all within +-2 pi, a warning asks whether the bearings are radians.
+RADIAN_SUSPICION_COUNT = 10
 
 
 @dataclass(frozen=True)
@@ -77,6 +96,8 @@ class SonarRecording:
     scans: Scans
     own_ship: OwnShip | None
     bearing: str = "true"
+    key: str = "ping"  #: ``"ping"`` (scan times ``ping * dt``) or ``"time"`` (the file's own times)
+    frame: str = "xy"  #: ``"xy"`` or ``"polar"`` (``range, bearing`` rows)
 
 
 def _where(path: Path, line: int, column: str | None = None) -> str:
@@ -183,7 +204,7 @@ def load_sonar_recording(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 
         raise InputError(f"{path}: the file gives the own ship's position per ping; sensor= applies to files "
                          f"without it")
     det_cols = [c for c in DETECTION_COLUMNS if c in col]
-    when, line_of, pos, level, covs, det_row = [], [], [], [], [], []
+    when, line_of, pos, level, covs, det_row, bearings = [], [], [], [], [], [], []
     ship: dict[float, tuple[int, tuple[float, ...]]] = {}
     for lineno, fields in rows:
         raw_key = fields[col[key]]
@@ -193,6 +214,9 @@ def load_sonar_recording(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 
         if own:
             values = tuple(finite_number(fields[col[c]], _where(path, lineno, c)) for c in OWN_SHIP_COLUMNS
                            if c in col)
+            if len(values) > 2 and abs(values[2]) > MAX_ANGLE_DEG:
+                raise InputError(f"{_where(path, lineno, 'heading')}: a heading in degrees lies within "
+                                 f"+-{MAX_ANGLE_DEG:g}, got {fields[col['heading']]!r}")
             first = ship.setdefault(k, (lineno, values))
             if first[1] != values:
                 raise InputError(f"{_where(path, lineno)}: the own ship's position or heading of {key} {raw_key} "
@@ -210,6 +234,15 @@ def load_sonar_recording(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 
             if c in value and not value[c] > 0:
                 raise InputError(f"{_where(path, lineno, c)}: an accuracy is a standard deviation > 0, got "
                                  f"{fields[col[c]]!r}")
+        if "bearing" in value and abs(value["bearing"]) > MAX_ANGLE_DEG:
+            raise InputError(f"{_where(path, lineno, 'bearing')}: a bearing in degrees lies within "
+                             f"+-{MAX_ANGLE_DEG:g}, got {fields[col['bearing']]!r}")
+        if "sigma_bearing" in value and not value["sigma_bearing"] < MAX_SIGMA_BEARING_DEG:
+            raise InputError(f"{_where(path, lineno, 'sigma_bearing')}: a bearing accuracy in degrees must be below "
+                             f"{MAX_SIGMA_BEARING_DEG:g} (wider leaves no bearing), got "
+                             f"{fields[col['sigma_bearing']]!r}")
+        if "bearing" in value:
+            bearings.append((lineno, value["bearing"]))
         cov = None
         if frame == "polar":
             if value["range"] < 0:
@@ -285,7 +318,55 @@ def load_sonar_recording(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 
         keys = sorted(ship)
         table = np.array([ship[k][1] for k in keys], dtype=float)
         own_ship = OwnShip(times.copy(), table[:, :2].copy(), table[:, 2].copy() if table.shape[1] > 2 else None)
-    return SonarRecording(Scans(z, valid, times, snr=snr, cov=cov), own_ship, reference)
+        _check_own_ship(path, own_ship, [ship[k][0] for k in keys])
+    _check_bearings(path, bearings)
+    return SonarRecording(Scans(z, valid, times, snr=snr, cov=cov), own_ship, reference, key, frame)
+
+
+def _check_own_ship(path: Path, own: OwnShip, lines: list[int]) -> None:
+    """Warnings, with the numbers, for an own ship faster than :data:`MAX_OWN_SHIP_SPEED` or whose heading does not
+    follow its course over ground (:data:`HEADING_COURSE_LIMIT_DEG`)."""
+    if own.times.size < 2:
+        return
+    step = np.diff(own.position, axis=0)
+    dt = np.diff(own.times)
+    speed = np.hypot(step[:, 0], step[:, 1]) / dt
+    k = int(np.argmax(speed))
+    if speed[k] > MAX_OWN_SHIP_SPEED:
+        warnings.warn(f"{path} line {lines[k + 1]}: the own ship moves {np.hypot(*step[k]):.6g} in "
+                      f"{dt[k]:.6g} time units (from line {lines[k]}), a speed of {speed[k]:.6g} (over "
+                      f"{MAX_OWN_SHIP_SPEED:g} m/s, about 190 knots, for positions in metres and times in seconds): "
+                      f"positions or times in another unit?", ImplausibleValueWarning, stacklevel=3)
+    if own.heading_deg is None:
+        return
+    moving = np.flatnonzero(speed >= MIN_COURSE_SPEED)
+    if moving.size < 3:
+        return
+    course = np.degrees(np.arctan2(step[moving, 1], step[moving, 0]))
+    h = np.radians(own.heading_deg)
+    # the heading over a leg: the circular mean of its two ends
+    mean_heading = np.degrees(np.arctan2(np.sin(h[moving]) + np.sin(h[moving + 1]),
+                                         np.cos(h[moving]) + np.cos(h[moving + 1])))
+    off = np.abs((course - mean_heading + 180.0) % 360.0 - 180.0)
+    median = float(np.median(off))
+    if median > HEADING_COURSE_LIMIT_DEG:
+        i = int(moving[np.argsort(off)[off.size // 2]])
+        j = int(np.flatnonzero(moving == i)[0])
+        warnings.warn(f"{path}: the own ship's heading differs from its course over ground (own_x, own_y) by a "
+                      f"median of {median:.1f} degrees over {moving.size} legs (line {lines[i]}: heading "
+                      f"{own.heading_deg[i]:g}, course {course[j]:.1f}); a compass heading? The format wants the "
+                      f"mathematical convention (90 - compass heading)", ImplausibleValueWarning, stacklevel=3)
+
+
+def _check_bearings(path: Path, bearings: list[tuple[int, float]]) -> None:
+    """A warning when many bearings all lie within +-2 pi: radians where the format wants degrees?"""
+    if len(bearings) < RADIAN_SUSPICION_COUNT:
+        return
+    largest = max(abs(b) for _, b in bearings)
+    if largest <= 2 * math.pi:
+        warnings.warn(f"{path}: all {len(bearings)} bearings lie within +-2 pi (largest |bearing| {largest:.4g}, "
+                      f"line {max(bearings, key=lambda lb: abs(lb[1]))[0]}): radians? The format wants degrees",
+                      ImplausibleValueWarning, stacklevel=3)
 
 
 def load_sonar_csv(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 0.0), pings: int | None = None) -> Scans:
