@@ -10,7 +10,14 @@ Output folder layout::
     OUT/paperNNN/outcome.json      the paper's rendered outcome (tables, figure paths, criteria, tasks, notes,
                                    published values, errors, timings), so that ``--paper X`` into this folder
                                    keeps the other papers' sections
-    OUT/cache/...                  finished task results (reused by the next run)
+    OUT/cache/...                  finished task results (reused by the next run; an unreadable entry is
+                                   renamed ``*.corrupt``, named in the report's warnings and recomputed)
+    OUT/.workbench-report.lock     while a report runs: who holds the folder (pid, host, command, start);
+                                   a second report into the same folder is refused, naming the holder
+
+A component that fails inside a task shared with others (one filter among several run on the same
+detections) does not take the task down when the task isolates it: the task returns its other results and
+a string array ``error/<what>`` (:func:`component_failure`), which the report names in the paper's errors.
 
 Only the full size gives firm verdicts: the criteria of any other size (the quick report) are marked
 indicative (:meth:`workbench.criteria.Criterion.as_indicative`), so a quick report never says *met*.
@@ -19,14 +26,18 @@ indicative (:meth:`workbench.criteria.Criterion.as_indicative`), so a quick repo
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
+import os
+import socket
 import sys
 import time
 import traceback
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -34,33 +45,75 @@ from ..plugins import PluginHost, UnknownComponent
 from ..criteria import Criterion
 from ..specs import RecipeOptions, RecipeSpec, Table, TaskContext
 from ..types import InputError
-from .cache import TaskCache, code_version, save_arrays, task_key, write_text_atomic
+if TYPE_CHECKING:
+    from ..references import FilterReference
+from .cache import (CacheEntryUnreadable, TaskCache, code_version, components_digest, save_arrays, task_key,
+                    write_text_atomic)
 
 __all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
-           "dask_executor"]
+           "dask_executor", "component_failure", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
+           "report_lock", "recording_host"]
 
 #: The file, inside ``OUT/paperNNN``, that keeps a paper's rendered outcome.
 OUTCOME_FILE = "outcome.json"
 #: The size whose verdicts are firm; every other size's criteria are marked indicative.
 FIRM_SIZE = "full"
+#: A task's result arrays named ``error/<what>`` name a component that failed inside the task (its other results
+#: are kept): see :func:`component_failure`.
+COMPONENT_ERROR_PREFIX = "error/"
+#: The lock file, inside the report folder, held while a report writes into it.
+LOCK_FILE = ".workbench-report.lock"
+
+
+def component_failure(what: str, exc: BaseException) -> dict[str, np.ndarray]:
+    """The result arrays that record that ``what`` (e.g. ``"filter:ukf"``) raised ``exc`` inside a task.
+
+    A task that runs several components on shared inputs catches each one's exception, drops that component's
+    partial results and adds these arrays to its result; the task's other results are kept, and the report
+    names the failure in the paper's errors (``task 'sim/0': filter:ukf failed: RuntimeError: ...``).
+    """
+    return {f"{COMPONENT_ERROR_PREFIX}{what}": np.array(f"{type(exc).__name__}: {exc}")}
+
+
+def component_errors(arrays: Mapping[str, np.ndarray]) -> list[tuple[str, str]]:
+    """``[(what, message), ...]`` of the component failures recorded in a task's result."""
+    return [(name[len(COMPONENT_ERROR_PREFIX):], str(np.asarray(value).reshape(-1)[0]) if np.size(value) else "")
+            for name, value in arrays.items() if name.startswith(COMPONENT_ERROR_PREFIX)]
 
 
 def split_references(text: str) -> list[str]:
-    """Split a comma-separated list of component references, keeping ``name(a=1, b=2)`` whole."""
-    parts, depth, current = [], 0, ""
-    for ch in text:
-        if ch in "([":
-            depth += 1
-        elif ch in ")]":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            parts.append(current.strip())
-            current = ""
-            continue
-        current += ch
-    parts.append(current.strip())
-    return [p for p in parts if p]
+    """Split a comma-separated list of component references, keeping ``name(a=1, b=2)`` whole; empty entries
+    are kept (as ``""``) so that :func:`filter_request` can refuse them."""
+    from ..references import split_list
+
+    return split_list(text)
+
+
+def filter_request(request: str, host: PluginHost) -> list[tuple[str, "FilterReference"]]:
+    """``--filters`` read and checked on its own (before any recipe's defaults): ``[(sign, reference), ...]``
+    with ``sign`` one of ``""``, ``"+"``, ``"-"`` (``~`` reads as ``-``).
+
+    The same rules as a scenario file's ``[filters] names``, with the same messages
+    (:mod:`workbench.references`): not empty, no empty entry, every name an installed filter (a sensor's name is
+    refused as a sensor), values checked against its declarations, no filter added twice or removed twice (in any
+    spelling; ``ekf,-ekf`` adds and then removes it).
+    """
+    from ..references import FILTER_FORMS, filter_reference, refuse_repeats, require_entries
+
+    parts = split_references(request)
+    require_entries(parts, "--filters", "filter", FILTER_FORMS)
+    out = []
+    for i, part in enumerate(parts):
+        sign = {"+": "+", "-": "-", "~": "-"}.get(part[:1], "")
+        text = part[1:].strip() if sign else part
+        if sign and not text:
+            raise InputError(f"--filters: entry {i + 1} of {request!r} ({part!r}) has no filter name after "
+                             f"{part[0]!r}")
+        out.append((sign, filter_reference(host, text, f"--filters {text!r}")))
+    refuse_repeats(((ref.text, ref.key) for sign, ref in out if sign != "-"), "--filters", "filter")
+    refuse_repeats(((sign + ref.text, ref.key) for sign, ref in out if sign == "-"), "--filters", "filter")
+    return out
 
 
 def resolve_filters(default: Sequence[str], request: str | None, host: PluginHost) -> tuple[str, ...]:
@@ -68,26 +121,36 @@ def resolve_filters(default: Sequence[str], request: str | None, host: PluginHos
 
     ``request`` is a comma-separated list of filter references (``name`` or ``name(key=value, ...)``, a configured
     filter); entries starting with ``+`` are added to the defaults, and ``-name`` (or ``~name``, which a shell
-    cannot mistake for an option) removes one; if any entry has no sign, the list replaces the defaults.  Every
-    name must be an installed filter, every removed one must be in the list, and the result must not be empty.
+    cannot mistake for an option) removes one; if any entry has no sign, the list replaces the defaults.  The
+    request follows a scenario file's rules (:func:`filter_request`); every removed filter must be in the list,
+    and the result must not be empty.  A filter is matched by what it is, not how it is spelled: ``+sir`` adds
+    nothing to a list that holds ``sir`` already, and ``-sir(particles=100)`` removes ``sir( particles=100 )``.
     """
-    if not request:
+    from ..references import filter_reference
+
+    if request is None:
         return tuple(default)
-    parts = split_references(request)
-    plain = [p for p in parts if p[0] not in "+-~"]
-    chosen = list(plain) if plain else list(default)
-    for p in parts:
-        if p.startswith("+") and p[1:] not in chosen:
-            chosen.append(p[1:])
-        elif p[0] in "-~":
-            if p[1:] not in chosen:
-                raise InputError(f"--filters: cannot remove {p[1:]!r}: it is not among {', '.join(chosen) or 'none'}")
-            chosen.remove(p[1:])
+    entries = filter_request(request, host)
+    plain = [ref for sign, ref in entries if not sign]
+    if plain:
+        chosen = [(ref.text, ref.key) for ref in plain]
+    else:
+        chosen = []
+        for name in default:
+            ref = filter_reference(host, name, f"the recipe's default filter {name!r}")
+            chosen.append((ref.text, ref.key))
+    for sign, ref in entries:
+        keys = [key for _, key in chosen]
+        if sign == "+" and ref.key not in keys:
+            chosen.append((ref.text, ref.key))
+        elif sign == "-":
+            if ref.key not in keys:
+                raise InputError(f"--filters: cannot remove {ref.text!r}: it is not among "
+                                 f"{', '.join(text for text, _ in chosen) or 'none'}")
+            del chosen[keys.index(ref.key)]
     if not chosen:
         raise InputError(f"--filters {request!r} leaves no filter to compare")
-    for name in chosen:
-        host.filter(name)  # raises UnknownComponent naming what is installed, or InputError for bad parameters
-    return tuple(chosen)
+    return tuple(text for text, _ in chosen)
 
 
 @dataclass
@@ -110,6 +173,7 @@ class PaperOutcome:
     criteria: list[Criterion] = field(default_factory=list)
     tasks: list[dict] = field(default_factory=list)  # key, seconds, cached, error
     errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # e.g. a cache entry that could not be read
     seconds: float = 0.0
     seed: int | None = None
     command: str = ""
@@ -179,7 +243,7 @@ def outcome_dict(outcome: PaperOutcome, out: Path) -> dict:
         "paper": outcome.paper, "title": outcome.title, "size": outcome.size, "filters": list(outcome.filters),
         "notes": outcome.notes, "published": _jsonable(outcome.published),
         "seed": outcome.seed, "command": outcome.command, "finished": outcome.finished,
-        "seconds": outcome.seconds, "errors": list(outcome.errors),
+        "seconds": outcome.seconds, "errors": list(outcome.errors), "warnings": list(outcome.warnings),
         "figures": [{"id": f["id"], "caption": f["caption"],
                      **{k: _rel(f.get(k), out) for k in ("png", "svg", "data")}} for f in outcome.figures],
         "tables": [{"id": t["id"], "caption": t["caption"], "columns": _jsonable(t["columns"]),
@@ -219,6 +283,7 @@ def load_outcome(path: Path, out: Path) -> PaperOutcome:
                  "rows": [list(r) for r in t["rows"]], "csv": at(t.get("csv"))} for t in data.get("tables", [])],
         criteria=[Criterion.from_dict(c) for c in data.get("criteria", [])],
         tasks=list(data.get("tasks", [])), errors=list(data.get("errors", [])),
+        warnings=list(data.get("warnings", [])),
         seconds=float(data.get("seconds", 0.0)), seed=data.get("seed"), command=str(data.get("command", "")),
         finished=str(data.get("finished", "")), saved=True)
 
@@ -292,20 +357,27 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     paper_dir = out / f"paper{recipe.paper}"
     paper_dir.mkdir(parents=True, exist_ok=True)
     cache = TaskCache(out / "cache")
-    modules = {recipe.tasks.__module__} | {p.module.split(":")[0] for p in host.plugins if p.status == "ok"}
-    module_files = tuple(sorted(f for m in modules if (f := getattr(sys.modules.get(m), "__file__", None))))
-    version = code_version(module_files)
 
     tasks = list(recipe.tasks(options))
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
         raise InputError(f"recipe {recipe.paper} declares duplicate task keys: {sorted({k for k in keys if keys.count(k) > 1})}")
+    # A task's key covers the core and the recipe's own code, never the host's whole plugin list: the components a
+    # task asks the host for are recorded when it runs and checked when its entry is read (TaskCache.get), so a
+    # plugin the task does not use can come, go or be blocked without discarding its result.
+    modules = {recipe.tasks.__module__} | {getattr(t.run, "__module__", None) for t in tasks}
+    module_files = tuple(sorted(f for m in modules if m and (f := getattr(sys.modules.get(m), "__file__", None))))
+    version = code_version(module_files)
     results: dict[str, dict[str, np.ndarray]] = {}
     bar = _progress_bar(len(tasks), f"paper {recipe.paper} ({size})", progress)
     pending = []
     for task in tasks:
-        digest = task_key(recipe.paper, task.key, task.params, seed, version)
-        cached = cache.get(recipe.paper, task.key, digest)
+        digest = task_key(recipe.paper, task.key, task.params, seed, version, size=size, arch=arch)
+        try:
+            cached = cache.get(recipe.paper, task.key, digest, host)
+        except CacheEntryUnreadable as exc:
+            outcome.warnings.append(f"paper {recipe.paper}, task {task.key!r}: {exc}")
+            cached = None
         if cached is not None:
             results[task.key] = cached
             outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": ""})
@@ -316,7 +388,11 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     for task, arrays, seconds, error in run.execute([t for t, _ in pending], seed, arch, on_task):
         digest = next(d for t, d in pending if t.key == task.key)
         if error is None:
-            cache.put(recipe.paper, task.key, digest, arrays)  # saved the moment it finishes
+            used = getattr(run, "used", {}).get(task.key)
+            if used is None:  # an executor that does not say what the task used: every component counts
+                used = {(hook, "*") for hook in host.components}
+            # saved the moment it finishes, with the fingerprints of the components it used
+            cache.put(recipe.paper, task.key, digest, arrays, components_digest(host, used))
             results[task.key] = {k: np.asarray(v) for k, v in arrays.items()}
             outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": ""})
         else:
@@ -327,6 +403,12 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
         bar.update(1)
     bar.close()
     outcome.tasks.sort(key=lambda t: keys.index(t["key"]))
+    for entry in outcome.tasks:  # components that failed inside a task whose other results were kept
+        failed = component_errors(results.get(entry["key"], {}))
+        if failed:
+            entry["partial"] = [f"{what} failed: {msg}" for what, msg in failed]
+            outcome.errors.extend(f"task {entry['key']!r}: {what} failed: {msg} (the task's other results are kept)"
+                                  for what, msg in failed)
 
     for spec in recipe.figures:
         try:
@@ -362,13 +444,59 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     return outcome
 
 
-def _call_task(run, params, seed, host, arch) -> dict:
-    """Run one task with the kernels on ``arch`` (the one backend policy, :mod:`workbench.kernels.backend`)."""
+class _UsageTable(Mapping):
+    """One hook's components, recording every name asked for (``"*"`` for a look at the whole table)."""
+
+    def __init__(self, hook: str, table: Mapping, used: set):
+        self._hook, self._table, self._used = hook, table, used
+
+    def __getitem__(self, name):
+        self._used.add((self._hook, name))
+        return self._table[name]
+
+    def __contains__(self, name):
+        self._used.add((self._hook, name))
+        return name in self._table
+
+    def __iter__(self):
+        self._used.add((self._hook, "*"))
+        return iter(self._table)
+
+    def __len__(self):
+        self._used.add((self._hook, "*"))
+        return len(self._table)
+
+
+@dataclass(frozen=True)
+class _RecordingHost(PluginHost):
+    """A :class:`PluginHost` that records which components are asked for (``used``: ``(hook, name)`` pairs)."""
+
+    used: set = field(default_factory=set, compare=False, hash=False)
+
+    def filter(self, name: str):
+        if "(" in name:  # a configured filter: its label (with its values) is part of what the task used
+            self.used.add(("workbench_filters", name))
+        return super().filter(name)
+
+
+def recording_host(host: PluginHost) -> tuple[PluginHost, set]:
+    """``host`` as seen by one task, and the set that collects the ``(hook, name)`` of every component it asks
+    for (the report cache keys the task's result on those components only)."""
+    used: set = set()
+    fields = {f.name: getattr(host, f.name) for f in dataclasses.fields(PluginHost)}
+    fields["components"] = {hook: _UsageTable(hook, table, used) for hook, table in host.components.items()}
+    return _RecordingHost(**fields, used=used), used
+
+
+def _call_task(run, params, seed, host, arch) -> tuple[dict, set]:
+    """Run one task with the kernels on ``arch`` (the one backend policy, :mod:`workbench.kernels.backend`);
+    returns its arrays and the ``(hook, name)`` of the components it asked the host for."""
     from ..kernels.backend import using
 
+    seen, used = recording_host(host)
     with using(arch):
-        result = run(TaskContext(params=params, seed=seed, host=host, arch=arch))
-    return {k: np.asarray(v) for k, v in dict(result).items()}
+        result = run(TaskContext(params=params, seed=seed, host=seen, arch=arch))
+    return {k: np.asarray(v) for k, v in dict(result).items()}, set(used)
 
 
 class InProcess:
@@ -379,6 +507,7 @@ class InProcess:
 
     def __init__(self, host: PluginHost, retries: int = 1):
         self.host, self.retries = host, retries
+        self.used: dict[str, set] = {}  # task key -> the (hook, name) of the components it used
 
     def execute(self, tasks, seed, arch, on_task=None):
         for task in tasks:
@@ -387,7 +516,7 @@ class InProcess:
             t0 = time.perf_counter()
             for attempt in range(self.retries + 1):
                 try:
-                    arrays = _call_task(task.run, task.params, seed, self.host, arch)
+                    arrays, self.used[task.key] = _call_task(task.run, task.params, seed, self.host, arch)
                     yield task, arrays, time.perf_counter() - t0, None
                     break
                 except (KeyboardInterrupt, SystemExit):
@@ -409,8 +538,8 @@ def _remote_task(run, params, seed, arch, block):
     if key not in _WORKER_HOSTS:
         _WORKER_HOSTS[key] = load_host(block=block)
     t0 = time.perf_counter()
-    arrays = _call_task(run, params, seed, _WORKER_HOSTS[key], arch)
-    return arrays, time.perf_counter() - t0
+    arrays, used = _call_task(run, params, seed, _WORKER_HOSTS[key], arch)
+    return arrays, time.perf_counter() - t0, sorted(used)
 
 
 class DaskExecutor:
@@ -423,6 +552,7 @@ class DaskExecutor:
 
     def __init__(self, client, block: Sequence[str] = (), retries: int = 1, cluster=None):
         self.client, self.block, self.retries, self.cluster = client, tuple(block), retries, cluster
+        self.used: dict[str, set] = {}  # task key -> the (hook, name) of the components it used
 
     def close(self) -> None:
         self.client.close()
@@ -443,7 +573,8 @@ class DaskExecutor:
         for fut in as_completed(list(futures)):
             task = futures[fut]
             try:
-                arrays, seconds = fut.result()
+                arrays, seconds, used = fut.result()
+                self.used[task.key] = {tuple(u) for u in used}
                 yield task, arrays, seconds, None
             except (KeyboardInterrupt, SystemExit):
                 raise
@@ -504,32 +635,137 @@ def _progress_bar(total: int, desc: str, enabled: bool):
     return tqdm(total=total, desc=desc, unit="task", leave=False, file=sys.stderr)
 
 
+class ReportFolderBusy(InputError):
+    """Another report holds the report folder's lock; the message names it (pid, host, command, start)."""
+
+    def __init__(self, message: str, holder: Mapping):
+        super().__init__(message)
+        self.holder = dict(holder)
+
+
+def _holder_text(holder: Mapping) -> str:
+    return (f"pid {holder.get('pid', '?')} on host {holder.get('host', '?')}, started {holder.get('started', '?')}, "
+            f"command: {holder.get('command') or '?'}")
+
+
+def _read_holder(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _pid_alive(pid) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError, ValueError, TypeError, OverflowError):
+        return True  # someone else's process, or a pid we cannot check: assume it runs
+    return True
+
+
+@contextmanager
+def report_lock(out: Path, command: str = "", wait: float = 0.0, poll: float = 0.2):
+    """Hold the lock of the report folder ``out`` (the file :data:`LOCK_FILE`, naming this process).
+
+    Two reports into one folder would mix their tables; the second one waits up to ``wait`` seconds for the
+    first, then raises :class:`ReportFolderBusy` naming the holder (pid, host, command, start).  The lock is an
+    OS lock on the file (``flock``), released when its process ends however it ends, so a lock file left by a
+    process that is gone is taken over (yields the list of notes saying so); without ``flock`` (Windows) the
+    file is created exclusively and a lock of a dead pid on this host is taken over.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / LOCK_FILE
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "command": command or " ".join(sys.argv),
+          "started": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")}
+    deadline = time.monotonic() + max(float(wait), 0.0)
+    notes: list[str] = []
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        fcntl = None
+    while True:
+        if fcntl is not None:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(fd)
+                holder = _read_holder(path)
+            else:
+                try:
+                    same = os.fstat(fd).st_ino == os.stat(path).st_ino
+                except FileNotFoundError:
+                    same = False
+                if not same:  # the holder removed the file as we opened it: try again on the new one
+                    os.close(fd)
+                    continue
+                old = _read_holder(path)
+                if old.get("pid") not in (None, me["pid"]):
+                    notes.append(f"took over the report folder's lock {path} left by a process that is gone "
+                                 f"({_holder_text(old)})")
+                os.ftruncate(fd, 0)
+                os.write(fd, json.dumps(me).encode())
+                break
+        else:  # pragma: no cover - Windows
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+                os.write(fd, json.dumps(me).encode())
+                break
+            except FileExistsError:
+                holder = _read_holder(path)
+                if holder.get("host") == me["host"] and not _pid_alive(holder.get("pid")):
+                    notes.append(f"took over the report folder's lock {path} left by a process that is gone "
+                                 f"({_holder_text(holder)})")
+                    path.unlink(missing_ok=True)
+                    continue
+        if time.monotonic() >= deadline:
+            raise ReportFolderBusy(f"the report folder {out} is in use by another report ({_holder_text(holder)}); "
+                                   f"wait for it to finish or write into another --out (its lock: {path})", holder)
+        time.sleep(poll)
+    try:
+        yield notes
+    finally:
+        try:
+            path.unlink(missing_ok=True)  # removed while still held, so no one locks a file about to vanish
+        finally:
+            os.close(fd)
+
+
 def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = None, size: str = "quick",
                seed: int = 0, filters: str | None = None, arch: str = "cpu", progress: bool = True,
-               command: str = "", executor: "Executor | None" = None) -> ReportOutcome:
+               command: str = "", executor: "Executor | None" = None, wait: float = 0.0) -> ReportOutcome:
     """Run the chosen recipes (default: every registered one) and write ``index.html`` and ``summary.json``.
 
     The page and the summary show every paper of ``out``: the ones run now, and the others from their
-    saved ``outcome.json`` (an unreadable one is skipped with a warning on stderr).
+    saved ``outcome.json`` (an unreadable one is skipped with a warning on stderr).  The folder is locked
+    while the report runs (:func:`report_lock`): a second report into it waits up to ``wait`` seconds, then
+    is refused with a message naming the report that holds it.
     """
     from .html import write_index, write_summary
 
-    start = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     wanted = sorted(host.recipes) if not papers else list(papers)
-    outcomes = []
+    recipes = []
     for paper in wanted:
         try:
-            recipe = host.recipe(paper)
+            recipes.append(host.recipe(paper))
         except UnknownComponent as exc:
             raise InputError(str(exc)) from None
-        outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
-                                   progress=progress, executor=executor, command=command))
-    saved, warnings = saved_outcomes(out, skip=[o.paper for o in outcomes])
-    for line in warnings:
-        print(f"workbench report: warning: {line}", file=sys.stderr)
-    report = ReportOutcome(out, outcomes, time.perf_counter() - start, command, seed, size, saved, warnings)
-    write_index(report, host)
-    write_summary(report, host)
+    with report_lock(out, command, wait) as notes:
+        start = time.perf_counter()
+        outcomes = []
+        for recipe in recipes:
+            outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
+                                       progress=progress, executor=executor, command=command))
+        saved, warnings = saved_outcomes(out, skip=[o.paper for o in outcomes])
+        warnings = [*notes, *(w for o in outcomes for w in o.warnings), *warnings]
+        for line in warnings:
+            print(f"workbench report: warning: {line}", file=sys.stderr)
+        report = ReportOutcome(out, outcomes, time.perf_counter() - start, command, seed, size, saved, warnings)
+        write_index(report, host)
+        write_summary(report, host)
     return report

@@ -24,6 +24,7 @@ from typing import Mapping
 import numpy as np
 
 from workbench.criteria import criterion_from_runs, replication_rate
+from workbench.report.engine import component_failure
 from workbench.sensing.radar import RadarParameters, aspect_rcs_db, clutter_pass_fraction, db, from_db, radar_snr
 from workbench.specs import Criterion, FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
 from workbench.types import InputError
@@ -157,10 +158,16 @@ def _runs_task(ctx: TaskContext) -> dict[str, np.ndarray]:
     model = tracking_model(ctx.host, rcs, TRACK_THRESHOLD_DB)
     out = {"rcs": np.array(rcs), "stream": np.array(stream), "runs": np.array(runs)}
     for ref, particles, radius in p["combos"]:
-        spec = ctx.host.filter(ref)
-        method = method_for(ref, spec.capabilities)
-        res = run_method(ctx.host, method, scans, truth.states, model, radius=float(radius), particles=int(particles),
-                         seed=ctx.seed, rng_key=(stream,) if stream else ())
+        # each row alone: a filter that raises loses its own row (named in the report: error/<row>), never the
+        # other rows run on the same scans
+        try:
+            spec = ctx.host.filter(ref)
+            method = method_for(ref, spec.capabilities)
+            res = run_method(ctx.host, method, scans, truth.states, model, radius=float(radius),
+                             particles=int(particles), seed=ctx.seed, rng_key=(stream,) if stream else ())
+        except Exception as exc:  # noqa: BLE001 - isolated: reported by the report engine, the other rows kept
+            out.update(component_failure(f"filter:{ref} (N={int(particles)}, R={float(radius):g} m)", exc))
+            continue
         for field in FIELDS:
             out[f"{_combo(method.key, int(particles), float(radius))}__{field}"] = res[field]
     return out

@@ -42,6 +42,7 @@ from workbench.metrics import (TrackCounts, continuity, pooled_rmse, removal_rat
                                track_counts, track_truth_match)
 from workbench.models import MeasurementModel, constant_velocity
 from workbench.plugins import PluginHost
+from workbench.report.engine import COMPONENT_ERROR_PREFIX, component_failure
 from workbench.recorded.sonar import load_sonar_csv, write_sonar_csv
 from workbench.rng import generator
 from workbench.specs import Criterion, FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
@@ -357,15 +358,23 @@ def _sim_task(ctx: TaskContext) -> dict:
     arms = [("paper", PAPER_FILTER, after), ("stated", PAPER_FILTER, after), ("previous", PAPER_FILTER, previous)]
     arms += [(f"filter:{name}", name, after) for name in p["filters"] if name != PAPER_FILTER]
     for arm, filt, removed in arms:
-        cfg = _tracker_config(host, "paper" if arm.startswith("filter:") else arm)
-        for phase, data in (("before", scans), ("after", removed)):
-            log, counts, used = _track(host, data, filt, cfg, seed, (arm, phase))
-            out.update(_counts_arrays(f"{arm}/{phase}/", counts))
-            out.update(_gospa_arrays(f"{arm}/{phase}/", log, truth_pos))
-            out[f"{arm}/model_used"] = np.array([used])
-            if arm == "paper" and int(p["block"]) == 0:
-                out.update(_run_zero(f"fig/{phase}/", scans, removed.valid if phase == "after" else scans.valid,
-                                     log, truth_pos))
+        # Each arm alone: a filter that raises loses its own rows (named in the report: error/<arm>), never the
+        # other arms' rows, tables, figures and criteria computed on the same detections.
+        rows = {}
+        try:
+            cfg = _tracker_config(host, "paper" if arm.startswith("filter:") else arm)
+            for phase, data in (("before", scans), ("after", removed)):
+                log, counts, used = _track(host, data, filt, cfg, seed, (arm, phase))
+                rows.update(_counts_arrays(f"{arm}/{phase}/", counts))
+                rows.update(_gospa_arrays(f"{arm}/{phase}/", log, truth_pos))
+                rows[f"{arm}/model_used"] = np.array([used])
+                if arm == "paper" and int(p["block"]) == 0:
+                    rows.update(_run_zero(f"fig/{phase}/", scans, removed.valid if phase == "after" else scans.valid,
+                                          log, truth_pos))
+        except Exception as exc:  # noqa: BLE001 - isolated: reported by the report engine, the other arms kept
+            out.update(component_failure(arm if arm.startswith("filter:") else f"{arm} arm ({filt})", exc))
+            continue
+        out.update(rows)
     out["detections_per_ping"] = after.valid.sum(axis=2).mean(axis=0)
     return out
 
@@ -822,6 +831,24 @@ def _arms_in(results: Mapping) -> list[str]:
     return arms
 
 
+def _failed_arms(results: Mapping) -> dict[str, str]:
+    """``{arm: "RuntimeError: ..."}`` of the arms whose filter raised in a simulation block (their rows are left
+    out; the report names the failure in the paper's errors too)."""
+    failed: dict[str, str] = {}
+    for key in (k for k in results if k.startswith("sim/")):
+        for name, value in results[key].items():
+            if name.startswith(COMPONENT_ERROR_PREFIX):
+                arm = name[len(COMPONENT_ERROR_PREFIX):]
+                failed.setdefault(arm, f"{key}: {np.asarray(value).reshape(-1)[0]}")
+    return failed
+
+
+def _failed_rows(results: Mapping, width: int, lead: tuple = ()) -> list[tuple]:
+    """One marked row per failed arm: ``lead``, the arm, ``FAILED: <error>``, blanks up to ``width`` columns."""
+    return [(*lead, arm, f"FAILED, no rows: {msg}", *([""] * (width - len(lead) - 2)))
+            for arm, msg in sorted(_failed_arms(results).items())]
+
+
 def _tuned_label(results: Mapping) -> str:
     t = results.get("tuning")
     if t is None:
@@ -842,6 +869,7 @@ def _removal_table(results) -> Table:
         rows.append(("simulation", label, f"{100 * PUBLISHED['removal_rate_simulation']:.0f} %", _rate_text(s["rate"]),
                      _rate_text(s["rate_all"]), _rate_text(s["rate_total"]), _f(s["false_before"], 1),
                      _f(s["false_after"], 1), s["runs"]))
+    rows += _failed_rows(results, 9, ("simulation",))
     for task, label in (("surrogate", "sea-trial surrogate, Monte Carlo (SYNTHETIC)"),
                         ("file", "sea-trial surrogate file, one run (SYNTHETIC)")):
         if task not in results:
@@ -890,6 +918,7 @@ def _rows_table(results) -> Table:
                      f"{_f(s['rmse_before'])} / {_f(s['rmse_after'])}",
                      f"{_f(s['rmse_after'] - s['rmse_before'])} [{_f(diff_ci[0])}, {_f(diff_ci[1])}]",
                      s["pairs"], s["runs"]))
+    rows += _failed_rows(results, 8)
     return Table(("row", "removal rate r_k [95 % CI]", "runs holding the target >= 80 %, before [CI]",
                   "after removal [CI] (criterion 2)", "RMSE before / after (paired pings)",
                   "RMSE after - before [CI] (criterion 3)", "paired pings", "runs"), tuple(rows))
