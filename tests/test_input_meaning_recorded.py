@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fixtures.candidates import IRREGULAR
+
 from workbench.cli import EXIT, main
 from workbench.recorded import (ImplausibleValueWarning, load_pcl_candidates, load_sonar_recording,
                                 write_pcl_candidates)
@@ -274,20 +276,12 @@ def test_a_track_file_is_not_written_with_a_covariance_no_reader_would_accept(tm
 
 
 @pytest.mark.parametrize("old, new, fragment", [
-    ("2,1.3,993.6", "2,1.6,993.6", "line 6, column 'time_s': frame 3 time 1.5 is not after frame 2's 1.6"),
-    ("3,1.5,992.4", "2,1.5,992.4", "line 6, column 'time_s': frame 2 has time 1.3 on line 5 but 1.5 here"),
-    ("20,15,0.6", "20,0,0.6", "line 7, column 'sigma_range_m': each candidate needs its accuracy, a number > 0"),
+    ("2,1.3,993.6", "2,1.6,993.6", "line 9, column 'time_s': frame 3 time 1.5 is not after frame 2's 1.6"),
+    ("3,1.5,992.4", "2,1.5,992.4", "line 9, column 'time_s': frame 2 has time 1.3 on line 8 but 1.5 here"),
+    ("20,15,0.6", "20,0,0.6", "line 10, column 'sigma_range_m': each candidate needs its accuracy, a number > 0"),
 ])
 def test_a_candidate_file_with_impossible_content_is_refused(tmp_path, old, new, fragment):
-    text = """\
-#! carrier_hz: 701e6
-frame,time_s,bistatic_range_m,range_rate_mps,strength_db,sigma_range_m,sigma_range_rate_mps
-0,0.0,1000.0,-5.0,20,10,0.5
-1,0.4,998.1,-5.0,20,10,0.5
-2,1.3,993.6,-5.0,20,30,0.4
-3,1.5,992.4,-5.1,20,10,0.5
-4,2.6,987.0,-4.9,20,15,0.6
-"""
+    text = IRREGULAR
     ok = tmp_path / "ok.csv"
     ok.write_text(text)
     assert load_pcl_candidates(ok).steps == 5

@@ -311,6 +311,7 @@ def test_check_plugin_survives_a_plugin_that_calls_sys_exit(monkeypatch, capsys)
     code = main(["check-plugin", "kf-exits"])
     out = capsys.readouterr().out.splitlines()
     assert code == 1
+    assert out[0].startswith("-- filter kf-exits (plugin exiting, ")  # the plugin is named before any check
     lines = [line for line in out if line.split(" ", 1)[0] in {"PASSED", "FAILED", "SKIPPED", "XFAIL", "XPASS"}]
     # one line per check of the kit, then the summary
     assert [line.split()[1].split(":")[0] for line in lines] == [f"kf-exits-{c.name}" for c in kit.CHECKS]

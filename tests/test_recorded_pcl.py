@@ -13,7 +13,7 @@ from workbench.rng import generator
 from workbench.sensing.bistatic import doppler_to_range_rate, wavelength
 from workbench.tracking import GATE_99, NearestNeighbour, run, strongest_candidate_prior
 from workbench.types import CLUTTER, InputError
-from fixtures.candidates import frames
+from fixtures.candidates import IRREGULAR, frames
 
 ROOT = Path(__file__).parents[1]
 LAM = wavelength(701e6)
@@ -115,18 +115,6 @@ def _write(tmp_path, text, name="c.csv", bom=False):
     return path
 
 
-IRREGULAR = """\
-# a recorded file: irregular frame times, each candidate's own accuracy, the geometry declared
-#! carrier_hz: 701e6
-#! transmitter_m: 0, -8400, 420
-#! receiver_m: 0, 0, 60
-frame,time_s,bistatic_range_m,range_rate_mps,strength_db,sigma_range_m,sigma_range_rate_mps
-0,0.0,1000.0,-5.0,20,10,0.5
-1,0.4,998.1,-5.0,20,10,0.5
-2,1.3,993.6,-5.0,20,30,0.4
-3,1.5,992.4,-5.1,20,10,0.5
-4,2.6,987.0,-4.9,20,15,0.6
-"""
 
 
 def test_metadata_accuracy_and_a_byte_order_mark_are_read(tmp_path):

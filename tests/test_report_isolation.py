@@ -2,7 +2,6 @@
 and two reports into one folder."""
 
 import json
-import os
 import socket
 import subprocess
 import sys
@@ -14,6 +13,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from fixtures import demo_distribution_env
+
 from workbench import hookimpl
 from workbench.plugins import load_host
 from workbench.report.cache import DEPS_ARRAY, load_arrays
@@ -21,7 +22,6 @@ from workbench.report.engine import LOCK_FILE, ReportFolderBusy, run_recipe, run
 from workbench.specs import TaskContext
 from workbench.types import InputError
 
-TESTS = Path(__file__).parent
 _BASE = load_host()
 KF = _BASE.filter("kf")
 
@@ -223,6 +223,26 @@ def test_a_second_report_into_a_busy_folder_is_refused_naming_the_holder_then_wa
     assert not (tmp_path / LOCK_FILE).exists() and not report.warnings
 
 
+def test_the_command_line_waits_as_long_as_wait_says_then_names_the_holder(tmp_path, capsys):
+    from workbench.cli import EXIT, main
+
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(tmp_path)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        t0 = time.monotonic()
+        code = main(["report", "--paper", "000", "--out", str(tmp_path), "--no-progress", "--wait", "0.5"])
+        waited = time.monotonic() - t0
+    finally:
+        holder.kill()
+        holder.wait()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == EXIT["input"] and len(err) == 1 and err[0].startswith("workbench: error: the report folder")
+    assert f"pid {holder.pid}" in err[0]
+    assert waited >= 0.5  # a lower bound only: it waited at least as long as asked
+    assert not (tmp_path / "paper000").exists()
+
+
 def test_a_lock_left_by_a_process_that_is_gone_is_taken_over(tmp_path, demo_host):
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     pid = int(gone.stdout)
@@ -236,19 +256,14 @@ def test_a_lock_left_by_a_process_that_is_gone_is_taken_over(tmp_path, demo_host
 
 def test_two_report_processes_into_one_folder_never_mix_their_tables(tmp_path):
     """Two command-line reports with different --filters at once: one runs, the other is refused by name."""
-    site = tmp_path / "site"
-    info = site / "demo_fixture-1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-fixture\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[workbench]\ndemo = fixtures.demo_plugin\n")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))
+    env = demo_distribution_env(tmp_path)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "workbench.cli", "report", "--paper", "demo", "--out", str(out), "--no-progress"]
     # the first one sleeps inside its ekf task, holding the folder, until it is killed
     slow = subprocess.Popen([*cmd, "--filters", "kf,ekf"], env=dict(env, WORKBENCH_TEST_SLOW_TASK="ekf"),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        for _ in range(600):  # until it has finished its first task (or has ended, which the assert reports)
+        for _ in range(6000):  # until it has finished its first task (or has ended, which the assert reports)
             if list((out / "cache" / "paperdemo").glob("mse-kf-*.npz")) or slow.poll() is not None:
                 break
             time.sleep(0.1)

@@ -66,6 +66,7 @@ def test_good_scenario_runs_and_writes_results(tmp_path, demo_host):
     ('sigma = 2.0', 'sigma = nan', r"\[sensor\] sensor 'demo-position': sigma: expected a finite number"),
     ('sigma = 2.0', 'sigma = [1, 2]', r"\[sensor\] sensor 'demo-position': sigma: expected a number"),
     ('plugin = "demo-position"', 'plugin = "sonar-9000"', r"\[sensor\] plugin: no sensor named 'sonar-9000'"),
+    ('plugin = "demo-position"', 'plugin = "kf"', r"\[sensor\] plugin: 'kf' is a filter, not a sensor \(installed sensors: "),
     ('std = [2.0, 2.0, 0.2, 0.2]', 'std = [2.0, -1.0, 0.2, 0.2]', r"\[prior\] std: standard deviations must be >= 0"),
     ('std = [2.0, 2.0, 0.2, 0.2]', 'std = [1.0, 1.0]', r"\[prior\] std: expected 4 values"),
     ('names = ["kf", "ekf"]', 'names = ["kf", "ufk"]', r"\[filters\] names\[1\]: no filter named 'ufk'"),

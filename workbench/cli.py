@@ -67,6 +67,16 @@ class _Once(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}") from None
+    if not 0.0 <= value <= 86400.0:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds from 0 to 86400, got {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="workbench",
@@ -97,6 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "auto"],
                      help="Taichi backend for kernels (default cpu; auto falls back to cpu)")
     rep.add_argument("--no-progress", action="store_true", help="no progress bars")
+    rep.add_argument("--wait", type=_seconds, default=0.0, metavar="SECONDS",
+                     help="if another report is writing into --out, wait up to this long for it (default: refuse at "
+                          "once, naming it)")
     rep.add_argument("--scheduler", default=None, metavar="ADDRESS",
                      help="send the tasks to this Dask distributed scheduler (pip install -e '.[dask]')")
     rep.add_argument("--workers", type=_positive_int, default=None, metavar="N",
@@ -179,7 +192,7 @@ def _describe_component(host: PluginHost, name: str) -> int:
         if frame:
             print(f"  frame of its detections: {frame}")
         if hasattr(spec, "declared"):
-            rows = describe(spec.declared, spec.params)
+            rows = [r[:4] + (r[4] + (f" [{p.role}]" if p.role else ""),) for r, p in zip(describe(spec.declared, spec.params), spec.declared)]
             if rows:
                 head = ("parameter", "type", "unit", "value", "meaning")
                 widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(4)]
@@ -257,7 +270,7 @@ def cmd_report(args) -> int:
     try:
         report = run_report(host, Path(args.out), papers=args.paper or None, size=args.size, seed=args.seed,
                             filters=args.filters, arch=args.arch, progress=not args.no_progress, command=command,
-                            executor=executor)
+                            executor=executor, wait=args.wait)
     finally:
         if executor is not None:
             executor.close()
@@ -318,8 +331,9 @@ def check_plugin(host: PluginHost, name: str, kind: str | None = None, out=print
             f"--kind)")
     counts = {status: 0 for status in _STATUS}
     for label, spec in found:
-        if len(found) > 1:
-            out(f"-- {label} {name}")
+        owner = next((p for p in getattr(host, "plugins", ()) if (label, spec.name) in p.provides), None)
+        out(f"-- {label} {spec.name}" + (f" (plugin {owner.name}, {owner.distribution} {owner.version})"
+                                          if owner is not None else ""))
         for o in run_checks(spec):
             out(f"{_STATUS[o.status]:8s} {spec.name}-{o.check}" + (f": {o.message}" if o.message else ""))
             counts[o.status] += 1

@@ -18,7 +18,7 @@ from .types import InputError
 from .units import DIMENSIONS, GENERIC_LIMIT, LIMITS, SI_LABELS, parse_quantity
 
 __all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults",
-           "parse_reference", "check_footprint", "memory_limit"]
+           "parse_reference", "split_list", "check_footprint", "memory_limit"]
 
 #: The value types a parameter may declare.
 TYPES = ("float", "int", "bool", "str", "vector", "float?", "vector?")
@@ -227,6 +227,28 @@ def describe(params: Iterable[Param], values: Mapping[str, Any] | None = None) -
     return rows
 
 
+def split_list(text: str) -> list[str]:
+    """Split a comma-separated list, keeping ``name(a=1, b=[2, 3], c="x,y")`` whole; entries are stripped and
+    empty ones are kept (as ``""``) for the caller to refuse."""
+    parts, depth, quote, current = [], 0, "", ""
+    for ch in text:
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "([":
+            depth += 1
+        elif ch in ")]":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append(current.strip())
+            current = ""
+            continue
+        current += ch
+    parts.append(current.strip())
+    return parts
+
+
 def parse_reference(text: str, where: str = "component") -> tuple[str, dict[str, Any]]:
     """Split a component reference ``"name"`` or ``"name(key=value, ...)"`` into the name and its raw values.
 
@@ -247,23 +269,9 @@ def parse_reference(text: str, where: str = "component") -> tuple[str, dict[str,
     name, inner = text[: text.index("(")].strip(), text[text.index("(") + 1: -1]
     if not name:
         raise InputError(f"{where}: {text!r} has no component name before '('")
-    parts, depth, quote, current = [], 0, "", ""
-    for ch in inner:
-        if quote:
-            quote = "" if ch == quote else quote
-        elif ch in "\"'":
-            quote = ch
-        elif ch in "[(":
-            depth += 1
-        elif ch in "])":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            parts.append(current)
-            current = ""
-            continue
-        current += ch
-    if current.strip():
-        parts.append(current)
+    parts = split_list(inner)
+    if parts and not parts[-1]:  # a trailing comma: name(a=1, )
+        parts.pop()
     values: dict[str, Any] = {}
     for part in parts:
         if "=" not in part:

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
-from .params import parse_reference
+from .params import parse_reference, split_list
 from .plugins import UnknownComponent
 from .types import InputError
 
@@ -47,28 +47,6 @@ class FilterReference:
     base: str
     key: str
     changed: Mapping[str, Any] = field(default_factory=dict)
-
-
-def split_list(text: str) -> list[str]:
-    """Split a comma-separated list, keeping ``name(a=1, b=[2, 3], c="x,y")`` whole; entries are stripped and
-    empty ones are kept (as ``""``) for the caller to refuse."""
-    parts, depth, quote, current = [], 0, "", ""
-    for ch in text:
-        if quote:
-            quote = "" if ch == quote else quote
-        elif ch in "\"'":
-            quote = ch
-        elif ch in "([":
-            depth += 1
-        elif ch in ")]":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            parts.append(current.strip())
-            current = ""
-            continue
-        current += ch
-    parts.append(current.strip())
-    return parts
 
 
 def require_entries(entries: Sequence, where: str, what: str, forms: str = "") -> None:

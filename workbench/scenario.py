@@ -19,7 +19,7 @@ import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -160,16 +160,20 @@ class _Reader:
                              f"(expected: {', '.join(sorted(self.used))})")
 
 
-def _component(path: Path, table: Mapping, name: str, registry: Mapping[str, Any], kind: str) -> Component:
-    """``plugin = "..."`` and that component's parameters, checked against its declarations (type, unit, range)."""
+def _component(path: Path, table: Mapping, name: str, lookup: Callable[[str], Any], kind: str) -> Component:
+    """``plugin = "..."`` and that component's parameters, checked against its declarations (type, unit, range).
+    ``lookup`` is the host's getter for the kind (``host.sensor``): the name is found, or refused, as on the command
+    line (a filter named as a sensor is called a filter)."""
+    from .plugins import UnknownComponent
+
     reader = _Reader(path, table, name)
     plugin = reader.get("plugin")
     if not isinstance(plugin, str):
         raise InputError(f"{reader.where('plugin')}: expected a {kind} name, got {plugin!r}")
-    if plugin not in registry:
-        raise InputError(f"{path}: [{name}] plugin: no {kind} named {plugin!r} is installed "
-                         f"(installed: {', '.join(sorted(registry)) or 'none'})")
-    spec = registry[plugin]
+    try:
+        spec = lookup(plugin)
+    except UnknownComponent as exc:
+        raise InputError(f"{path}: [{name}] plugin: {exc}") from None
     values = {key: value for key, value in table.items() if key != "plugin"}
     try:
         params = spec.check(**values)
@@ -294,10 +298,10 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     tr.done()
 
     sensor_raw = raw["sensor"]
-    sensor = _component(path, sensor_raw, "sensor", host.components["workbench_sensors"], "sensor")
-    clutter = tuple(_component(path, c, f"clutter[{i}]", host.components["workbench_clutter_generators"],
+    sensor = _component(path, sensor_raw, "sensor", host.sensor, "sensor")
+    clutter = tuple(_component(path, c, f"clutter[{i}]", host.clutter_generator,
                                "clutter generator") for i, c in enumerate(raw.get("clutter", [])))
-    removers = tuple(_component(path, c, f"remover[{i}]", host.components["workbench_clutter_removers"],
+    removers = tuple(_component(path, c, f"remover[{i}]", host.clutter_remover,
                                 "clutter remover") for i, c in enumerate(raw.get("remover", [])))
 
     pr = _Reader(path, raw.get("prior", {}), "prior")

@@ -202,6 +202,22 @@ def range_bearing_runs(start, runs: int, steps: int, seed: int, rotate: bool = F
     return truth, scans, prior, motion, model
 
 
+def _jacobian(model, x: np.ndarray) -> np.ndarray:
+    """``(B, m, n)``: the measurement function's Jacobian at each ``x`` by central differences (angle rows
+    wrapped)."""
+    B, n = x.shape
+    H = np.empty((B, model.dim, n))
+    for j in range(n):
+        step = 1e-5 * (1.0 + np.abs(x[:, j]))
+        up, down = x.copy(), x.copy()
+        up[:, j] += step
+        down[:, j] -= step
+        diff = model.h(up) - model.h(down)
+        diff[:, model.angle_mask] = _wrap(diff[:, model.angle_mask])
+        H[:, :, j] = diff / (2.0 * step[:, None])
+    return H
+
+
 def reference_ekf(prior: Gaussian, scans: Scans, motion, model) -> np.ndarray:
     """An extended Kalman filter written out plainly, sharing no code with any plugin (nor the model's published
     Jacobian): the kit's near-optimal reference on a mildly nonlinear model.  On the range-bearing problem of
@@ -218,7 +234,7 @@ def reference_ekf(prior: Gaussian, scans: Scans, motion, model) -> np.ndarray:
     Shapes: ``prior (B, n)``, ``scans.z (B, T, 1, m)``; returns the means ``(B, T, n)``.
     """
     B, T, n = scans.batch, scans.steps, prior.dim
-    m, angle = model.dim, model.angle_mask
+    angle = model.angle_mask
     F, Q, R = motion.F, motion.Q, model.R
     x, P = prior.mean.copy(), prior.cov.copy()
     means = np.empty((B, T, n))
@@ -226,15 +242,7 @@ def reference_ekf(prior: Gaussian, scans: Scans, motion, model) -> np.ndarray:
         if k > 0:
             x = x @ F.T  # x- = F x
             P = F @ P @ F.T + Q  # P- = F P F^T + Q
-        H = np.empty((B, m, n))
-        for j in range(n):
-            step = 1e-5 * (1.0 + np.abs(x[:, j]))
-            up, down = x.copy(), x.copy()
-            up[:, j] += step
-            down[:, j] -= step
-            diff = model.h(up) - model.h(down)
-            diff[:, angle] = _wrap(diff[:, angle])
-            H[:, :, j] = diff / (2.0 * step[:, None])  # central difference
+        H = _jacobian(model, x)
         nu = scans.z[:, k, 0] - model.h(x)
         nu[:, angle] = _wrap(nu[:, angle])  # wrap(z - h(x-))
         Ht = np.swapaxes(H, 1, 2)
@@ -870,15 +878,7 @@ def reference_filter(prior: Gaussian, scans: Scans, motion, model):
         if model.H is not None:
             H = np.broadcast_to(model.H, (B, m, n))
         else:
-            H = np.empty((B, m, n))
-            for j in range(n):
-                step = 1e-5 * (1.0 + np.abs(x[:, j]))
-                up, down = x.copy(), x.copy()
-                up[:, j] += step
-                down[:, j] -= step
-                diff = model.h(up) - model.h(down)
-                diff[:, angle] = _wrap(diff[:, angle])
-                H[:, :, j] = diff / (2.0 * step[:, None])
+            H = _jacobian(model, x)
         valid = scans.valid[:, k]
         present = valid.any(axis=1)
         z = scans.z[np.arange(B), k, np.argmax(valid, axis=1)]
