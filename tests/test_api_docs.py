@@ -64,7 +64,8 @@ def test_the_reference_builds_strictly_and_documents_every_public_name(site):
 
 @pytest.mark.parametrize("page, module", [
     ("types", "workbench.types"), ("models", "workbench.models"), ("models", "workbench.frames"),
-    ("params", "workbench.params"), ("specs", "workbench.specs"), ("tracking", "workbench.tracking"),
+    ("params", "workbench.params"), ("params", "workbench.units"), ("references", "workbench.references"),
+    ("specs", "workbench.specs"), ("tracking", "workbench.tracking"),
     ("metrics", "workbench.metrics"), ("metrics", "workbench.metrics.ospa"), ("criteria", "workbench.criteria"),
     ("tracks_io", "workbench.tracks_io"), ("recorded", "workbench.recorded.sonar"),
     ("recorded", "workbench.recorded.pcl"), ("hookspecs", "workbench.hookspecs"), ("testing", "workbench.testing"),

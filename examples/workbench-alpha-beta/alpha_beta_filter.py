@@ -66,8 +66,9 @@ def update(state, scan, model, rng=None, alpha=0.5, beta=0.2, dt=1.0):
 
 
 PARAMETERS = (
-    Param("alpha", 0.5, "position gain", above=0.0, maximum=1.0),
-    Param("beta", 0.2, "velocity gain (times T)", above=0.0),
+    Param("alpha", 0.5, "position gain", unit="dimensionless", above=0.0, maximum=1.0),
+    Param("beta", 0.2, "velocity gain (times T); stable for beta < 4 - 2 alpha", unit="dimensionless", above=0.0,
+          maximum=2.0),
     Param("dt", 1.0, "sampling time T the velocity gain is scaled by", unit="time", above=0.0),
 )
 
