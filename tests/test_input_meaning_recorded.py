@@ -330,3 +330,178 @@ def test_a_result_file_no_run_recorded_writing_is_named_and_kept(tmp_path, capsy
     assert _run(path, out) == EXIT["input"]
     _error(capsys, str(out), "holds tracks-pda.csv", "workbench-run.json does not list it")
     assert stray.read_text() == "someone else's" and sorted(p.name for p in out.iterdir()) == ["tracks-pda.csv"]
+
+
+# -- class 2: [sensor] keys that only shape a simulation the recorded file replaces ---------------------------
+
+SONAR = str(DATA / "sonar_sea_trial_surrogate.csv")
+MOVING = str(DATA / "sonar_moving_ship_synthetic.csv")
+
+
+def _pcl_text(drop: str = "", accuracy: bool = False) -> str:
+    """The shipped candidate file without its ``#!`` lines that start with ``drop``; ``accuracy`` adds each
+    candidate's own standard deviations (12 m, 0.7 m/s) as the two accuracy columns."""
+    out = []
+    for line in (DATA / "pcl_candidates_synthetic.csv").read_text().splitlines():
+        if drop and line.startswith(drop):
+            continue
+        if accuracy and line.startswith("frame,"):
+            line += ",sigma_range_m,sigma_range_rate_mps"
+        elif accuracy and line[:1].isdigit():
+            line += ",," if line.split(",")[2] == "" else ",12,0.7"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("example, edit, fragments", [
+    ("pcl_recorded", ('plugin = "dtv-pbr"', 'plugin = "dtv-pbr"\npd = 0.5\nstrength_db = 12'),
+     ["[sensor] pd = 0.5, strength_db = 12 dB only shape simulated detections", "declares them simulation-only",
+      f"the recorded file {PCL} replaces the simulation"]),
+    # the simulated candidates' noise, not the filters' R (model_sigma_range)
+    ("pcl_recorded", ('plugin = "dtv-pbr"', 'plugin = "dtv-pbr"\nsigma_range = "30 m"'),
+     ["[sensor] sigma_range = 30 m only shapes simulated detections", f"the recorded file {PCL}"]),
+    ("sonar_recorded", ('frame = "polar"', 'frame = "polar"\nlevel_db = 10'),
+     ["[sensor] level_db = 10 dB only shapes simulated detections", f"the recorded file {SONAR}"]),
+    # the polar model's R is sigma_r, sigma_b_deg: sigma_pos would only shape the (replaced) simulation
+    ("sonar_recorded", ('frame = "polar"', 'frame = "polar"\nsigma_pos = 3.0'),
+     ["[sensor] sigma_pos = 3 m enters the measurement model of sensor 'active-sonar' only if frame = cartesian, "
+      "sigma_xy = none (here frame = polar)", f"the recorded file {SONAR} replaces"]),
+    # an x-y file without own ship: neither the reader nor the Cartesian model has a sensor position
+    ("sonar_recorded", ('frame = "polar"', 'frame = "cartesian"\nsensor = [10.0, 20.0]'),
+     ["[sensor] sensor = (10, 20) m enters the measurement model", "only if frame = polar (here frame = cartesian)",
+      SONAR]),
+    # the file's per-detection accuracy replaces R: a sigma for R beside it would be ignored
+    ("sonar_moving_ship", ('frame = "cartesian"', 'frame = "cartesian"\nsigma_xy = 3.0'),
+     ["[sensor] sigma_xy = 3 m sets the filters' measurement noise R", f"the recorded file {MOVING} gives each "
+      "detection its own accuracy (columns sigma_range, sigma_bearing)"]),
+])
+def test_a_sensor_key_the_recorded_run_would_not_use_is_refused_naming_both(tmp_path, capsys, example, edit,
+                                                                              fragments):
+    path = _scenario(tmp_path, example, edit)
+    assert _run(path, tmp_path / "o") == EXIT["input"]
+    _error(capsys, str(path), *fragments)
+    assert not (tmp_path / "o").exists()
+    # the same scenario without the key runs
+    assert _run(_scenario(tmp_path, example, name="plain.toml"), tmp_path / "plain") == 0
+
+
+def test_the_filters_r_beside_a_candidate_files_own_accuracy_is_refused_naming_both(tmp_path, capsys):
+    data = tmp_path / "cands.csv"
+    data.write_text(_pcl_text(accuracy=True))
+    sigma = ('plugin = "dtv-pbr"', 'plugin = "dtv-pbr"\nmodel_sigma_range = 20.0\nmodel_sigma_range_rate = 0.6')
+    path = _scenario(tmp_path, "pcl_recorded", sigma, data=data)
+    assert _run(path, tmp_path / "o") == EXIT["input"]
+    _error(capsys, str(path), "[sensor] model_sigma_range = 20 m, model_sigma_range_rate = 0.6 m/s set the filters' "
+           f"measurement noise R, but the recorded file {data} gives each detection its own accuracy (columns "
+           "sigma_range_m, sigma_range_rate_mps)")
+    # without the file's accuracy columns the same keys set R (below), and without the keys the file's accuracy
+    # is used
+    assert _run(_scenario(tmp_path, "pcl_recorded", data=data, name="plain.toml"), tmp_path / "plain") == 0
+
+
+def test_tx_and_rx_pass_where_the_file_declares_them_and_are_refused_where_nothing_uses_them(tmp_path, capsys):
+    tx = ('plugin = "dtv-pbr"', 'plugin = "dtv-pbr"\ntx = [0.0, -8400.0, 420.0]')
+    # the file declares transmitter_m: the scenario's tx is held to it (and agrees)
+    assert _run(_scenario(tmp_path, "pcl_recorded", tx), tmp_path / "a") == 0
+    # a file without it: the model takes no geometry, so nothing would use tx
+    data = tmp_path / "cands.csv"
+    data.write_text(_pcl_text(drop="#! transmitter_m"))
+    path = _scenario(tmp_path, "pcl_recorded", tx, data=data, name="b.toml")
+    assert _run(path, tmp_path / "b") == EXIT["input"]
+    _error(capsys, str(path), "[sensor] tx = (0, -8400, 420) m only shapes simulated detections", str(data))
+
+
+def test_a_sensor_sigma_for_r_is_honoured_with_recorded_detections(tmp_path):
+    # the Kalman update in information form, P+^-1 = P-^-1 + R^-1 (H = I): two runs that differ only in the
+    # range sigma of R share P- at frame 1 (the prior and the motion are the same), so their P+^-1 differ by
+    # diag(1/a^2 - 1/b^2, 0) exactly when the filter used the scenario's sigma (both wide enough for the target's
+    # candidate of frame 1 to fall in the 99 % gate, so that both runs update there)
+    covs = {}
+    for sigma in (30.0, 60.0):
+        path = _scenario(tmp_path, "pcl_recorded", ('plugin = "dtv-pbr"', f'plugin = "dtv-pbr"\nmodel_sigma_range = '
+                                                    f'"{sigma} m"'), name=f"s{sigma:g}.toml")
+        assert _run(path, tmp_path / f"o{sigma:g}") == 0
+        covs[sigma] = np.load(tmp_path / f"o{sigma:g}" / "results.npz")["cov_kf"][0, 1]
+    diff = np.linalg.inv(covs[30.0]) - np.linalg.inv(covs[60.0])
+    np.testing.assert_allclose(diff, np.diag([1 / 30.0**2 - 1 / 60.0**2, 0.0]), rtol=1e-9, atol=1e-12)
+
+
+# The declarations themselves, held to what each built-in sensor's measurement model does with the value.
+
+STATE_DIM = {"range-bearing": 4, "active-sonar": 4, "dtv-pbr": 2, "lband-radar": 6}
+
+
+def _other(param, value):
+    """A valid value of ``param`` other than ``value``."""
+    if param.choices:
+        return next(c for c in param.choices if c != value)
+    if value is None:
+        return 3.0
+    if param.type in ("vector", "vector?"):
+        return tuple(v + 1.0 for v in value)
+    if param.type == "int":
+        return value + 1
+    new = 1.5 * value + 1.0
+    return new if new <= param.bounds[1] else 0.5 * (value + param.bounds[1])
+
+
+def _model_view(model, n: int) -> dict:
+    """Everything a filter can read from a measurement model, evaluated at fixed points; ``R`` and ``std`` apart."""
+    x = np.array([[1200.0, -800.0, 30.0, 5.0, 100.0, 2.0], [-300.0, 2500.0, -7.0, 1.0, 40.0, -3.0]])[:, :n]
+    view = {"name": model.name, "frame": model.frame, "h": model.h(x), "sensor": model.sensor_position,
+            "R": model.R, "std": model.std}
+    if model.jacobian is not None:
+        view["jacobian"] = model.jacobian(x)
+    d = model.detection
+    if d is not None:
+        snr, nominal = np.array([8.0, 15.0]), np.array([10.0, 12.0])
+        view.update(log_pd=d.log_pd(snr), position_sigma=d.position_sigma(snr, np.array([5e3, 2e4])),
+                    doppler_sigma=d.doppler_sigma, pfa=d.pfa)
+        for name, args in (("nominal_snr_db", (x[:, :3],)), ("log_detection", (nominal,)),
+                           ("log_snr_density", (snr, nominal))):
+            if getattr(d, name) is not None:
+                view[name] = getattr(d, name)(*args)
+    return view
+
+
+def _changed(a: dict, b: dict) -> set:
+    """The entries of two model views that differ."""
+    def same(x, y):
+        if x is None or y is None or isinstance(x, str) or isinstance(y, str):
+            return x == y
+        return np.array_equal(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+
+    return {key for key in a.keys() | b.keys() if key not in a or key not in b or not same(a[key], b[key])}
+
+
+@pytest.mark.parametrize("sensor", sorted(STATE_DIM))
+def test_each_sensor_parameter_affects_what_it_declares(sensor):
+    # every parameter is changed in the defaults and in each configuration that another parameter chooses (a
+    # frame, a value or none): a "simulation" one never changes the model, a "noise" one changes R (and std) only,
+    # a "model" one something besides, each where its declared conditions hold, and nothing where they do not
+    from workbench.plugins import load_host
+
+    spec = load_host().sensor(sensor)
+    declared = {p.name: p for p in spec.declared}
+    assert declared and all(key in declared for p in declared.values() for key, _ in p.when)
+    configs = [dict(spec.params)] + [
+        {**spec.params, q.name: value} for q in declared.values() if q.choices or q.type.endswith("?")
+        for value in ([c for c in q.choices if c != spec.params[q.name]] if q.choices else
+                      [None if spec.params[q.name] is not None else _other(q, None)])]
+
+    def view(values):
+        return _model_view(spec.measurement_model(**values), STATE_DIM[sensor])
+
+    for p in declared.values():
+        reached = False
+        for config in configs:
+            changed = _changed(view(config), view({**config, p.name: _other(p, config[p.name])}))
+            where = (sensor, p.name, {k: config[k] for k in config if config[k] != spec.params[k]}, changed)
+            if not p.reaches_model(config):
+                assert not changed, where
+            elif p.affects == "noise":
+                assert "R" in changed and changed <= {"R", "std"}, where
+            else:
+                assert changed - {"R", "std"}, where
+            reached |= p.reaches_model(config)
+        assert reached or p.affects == "simulation", (sensor, p.name, "never reaches the model in any configuration")

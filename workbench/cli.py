@@ -192,7 +192,8 @@ def _describe_component(host: PluginHost, name: str) -> int:
         if frame:
             print(f"  frame of its detections: {frame}")
         if hasattr(spec, "declared"):
-            rows = [r[:4] + (r[4] + (f" [{p.role}]" if p.role else ""),) for r, p in zip(describe(spec.declared, spec.params), spec.declared)]
+            rows = [(*r[:4], r[4] + (f" [{p.role}]" if p.role else ""))  # what a sensor's parameter reaches
+                    for r, p in zip(describe(spec.declared, spec.params), spec.declared)]
             if rows:
                 head = ("parameter", "type", "unit", "value", "meaning")
                 widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(4)]

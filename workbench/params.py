@@ -59,6 +59,26 @@ class Param:
         The allowed values of a ``"str"`` parameter.
     length : int or None
         The required length of a ``"vector"``.
+    affects : str
+        What the value of a sensor's parameter reaches (one of :attr:`AFFECTS`), which decides what a scenario
+        with recorded detections does with it (``workbench run`` refuses a ``[sensor]`` key that nothing would
+        use, naming the key and the recorded file):
+
+        - ``"model"`` (the default, and the only role of other components' parameters): the measurement model
+          the filters get (its function, frame, geometry or declared detection law); honoured with recorded
+          detections as with simulated ones.
+        - ``"noise"``: the model's noise covariance ``R`` only; honoured with recorded detections, unless the
+          file gives each detection its own accuracy, which the filters use instead of ``R`` (then refused,
+          naming both).
+        - ``"simulation"``: only the simulated detections (a detection probability, a strength, a noise the
+          filters' ``R`` does not use, the map's extent); with recorded detections the file replaces the
+          simulation, so the key is refused (unless the file's reader itself uses or checks it, such as a
+          carrier or a transmitter the file also declares).
+    when : tuple of (name, value) pairs
+        For ``"model"`` and ``"noise"``: the values of the component's other parameters under which this one
+        reaches the model (all must hold; a mapping is accepted); otherwise it affects only the simulation, e.g.
+        ``when={"frame": "polar"}`` for the range sigma of a polar model that a ``frame`` parameter chooses.
+        Empty: always.
     """
 
     name: str
@@ -72,6 +92,11 @@ class Param:
     length: int | None = None
     above: float | None = None
     footprint: float | None = None
+    affects: str = "model"
+    when: tuple = ()
+
+    #: The roles of :attr:`affects`.
+    AFFECTS = ("model", "noise", "simulation")
 
     def __post_init__(self) -> None:
         if self.type not in TYPES:
@@ -79,6 +104,47 @@ class Param:
         if self.unit is not None and self.unit not in DIMENSIONS:
             raise ValueError(f"Param {self.name!r}: unknown unit dimension {self.unit!r} (known: "
                              f"{', '.join(DIMENSIONS)})")
+        if self.affects not in Param.AFFECTS:
+            raise ValueError(f"Param {self.name!r}: affects must be one of {Param.AFFECTS}, got {self.affects!r}")
+        when = tuple(self.when.items()) if isinstance(self.when, Mapping) else tuple(tuple(c) for c in self.when)
+        if any(len(c) != 2 or not isinstance(c[0], str) or c[0] == self.name for c in when):
+            raise ValueError(f"Param {self.name!r}: when must pair other parameters' names with values, got "
+                             f"{self.when!r}")
+        if when and self.affects == "simulation":
+            raise ValueError(f"Param {self.name!r}: when applies to 'model' and 'noise' parameters; a 'simulation' "
+                             f"one never reaches the model")
+        object.__setattr__(self, "when", when)
+
+    def reaches_model(self, values: Mapping[str, Any]) -> bool:
+        """Whether this parameter enters the measurement model the filters get when the component's parameters
+        are ``values`` (every value, defaults included): its role is ``"model"`` or ``"noise"`` and every
+        condition of :attr:`when` holds."""
+        return self.affects != "simulation" and not self.unmet(values)
+
+    def unmet(self, values: Mapping[str, Any]) -> tuple[tuple[str, Any], ...]:
+        """The conditions of :attr:`when` that ``values`` do not meet, as ``(name, required value)``."""
+        return tuple((key, want) for key, want in self.when if not Param._same(values.get(key), want))
+
+    @staticmethod
+    def _same(value: Any, want: Any) -> bool:
+        """Whether a value meets a :attr:`when` condition (``None`` only by ``None``; sequences element by
+        element)."""
+        if want is None or value is None:
+            return value is None and want is None
+        if isinstance(want, (list, tuple)):
+            return isinstance(value, (list, tuple)) and len(value) == len(want) and all(map(Param._same, value, want))
+        return bool(value == want)
+
+    @property
+    def role(self) -> str:
+        """What the parameter reaches, for listings: ``""`` for a plain model parameter, else e.g.
+        ``"simulation only"``, ``"model R"`` or ``"model R if frame = polar"``."""
+        if self.affects == "model" and not self.when:
+            return ""
+        text = {"model": "model", "noise": "model R", "simulation": "simulation only"}[self.affects]
+        if self.when:
+            text += " if " + ", ".join(f"{key} = {format_value(want)}" for key, want in self.when)
+        return text
 
     @property
     def unit_label(self) -> str:

@@ -6,8 +6,10 @@ is checked on load: an unknown key, a wrong type or unit, a NaN, a value out of 
 that is not installed, components whose measurement frames do not match, or a request that would not fit in
 memory gives an error naming the file, the key and what was expected.  With recorded detections, every key that
 the file also supplies (steps, dt, runs, the carrier, the geometry, the sensor's position) is either honoured or
-must agree with the file, else the error names both.  ``run_scenario`` lists what it wrote in ``--out`` in
-:data:`MANIFEST` and removes an earlier run's files that it does not write again.  See ``docs/scenarios.md``.
+must agree with the file, else the error names both; any other ``[sensor]`` key that the recorded run would not
+use (by the sensor's declared :attr:`~workbench.params.Param.affects`) is refused.  ``run_scenario`` lists what it
+wrote in ``--out`` in :data:`MANIFEST` and removes an earlier run's files that it does not write again.  See
+``docs/scenarios.md``.
 """
 
 from __future__ import annotations
@@ -345,7 +347,8 @@ def _read_recorded(path: Path, file: Path, fmt: str, dt: float, steps: int, host
                    ) -> tuple[Recorded, tuple[str, ...]]:
     """Read the recorded file and hold it to the scenario: every key the file also supplies is either passed to
     the reader (honoured) or must agree with the file, else an error names both (the scenario's key and the file's
-    value).  Returns the data and the readers' warnings about implausible values."""
+    value), and a ``[sensor]`` key that nothing would use is refused (:func:`_check_sensor_keys`).  Returns the data
+    and the readers' warnings about implausible values."""
     from .recorded import load_pcl_candidates, load_sonar_recording, pcl_metadata
     from .recorded.pcl import check_carrier
 
@@ -363,6 +366,9 @@ def _read_recorded(path: Path, file: Path, fmt: str, dt: float, steps: int, host
                     tuple(float(v) for v in position) != (0.0, 0.0):
                 rec = load_sonar_recording(file, dt=dt, sensor=tuple(position))
             data, time_column, unit = Recorded(rec.scans, rec.own_ship), ("time" if rec.key == "time" else ""), "pings"
+            # the reader places a polar file's detections from the sensor's position, or holds it to the own ship
+            reader_keys = {"sensor"} if rec.own_ship is not None or rec.frame == "polar" else set()
+            accuracy = ("sigma_x", "sigma_y") if rec.frame == "xy" else ("sigma_range", "sigma_bearing")
             model = spec.measurement_model(**given)
             fixed = model.sensor_position if model.sensor_position is not None else \
                 (position if "sensor" in given else None)
@@ -397,6 +403,10 @@ def _read_recorded(path: Path, file: Path, fmt: str, dt: float, steps: int, host
                                          f"{name} ({', '.join(f'{v:g}' for v in declared)}) m: make them agree")
             scans = load_pcl_candidates(file, frequency_hz=freq if meta.carrier_hz is None else None)
             data, time_column, unit = Recorded(scans), "time_s", "frames"
+            # the reader converts Doppler with the carrier (or holds it to the file's), and holds tx, rx to the file's
+            reader_keys = {"frequency_hz"} | {key for key, declared in (("tx", meta.transmitter_m),
+                                                                        ("rx", meta.receiver_m)) if declared}
+            accuracy = ("sigma_range_m", "sigma_range_rate_mps")
     for w in caught:
         if not issubclass(w.category, ImplausibleValueWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -415,7 +425,49 @@ def _read_recorded(path: Path, file: Path, fmt: str, dt: float, steps: int, host
             raise InputError(f"{path}: [scenario] dt = {dt:g} s, but {file} gives its own scan times (column "
                              f"'{time_column}'), {apart}: the file's times are used, so dt must agree with them "
                              f"(within {DT_TOLERANCE:.0%})")
+    _check_sensor_keys(path, file, spec, sensor.plugin, given, effective, reader_keys,
+                       accuracy if scans.cov is not None else ())
     return data, notes
+
+
+def _check_sensor_keys(path: Path, file: Path, spec, plugin: str, given: Mapping, effective: Mapping,
+                       reader_keys: set, accuracy: tuple[str, ...]) -> None:
+    """Refuse a ``[sensor]`` key that a run on recorded detections would not use, by the sensor's declarations
+    (:attr:`workbench.params.Param.affects`): a key that only shapes simulated detections (the file replaces the
+    simulation), one whose ``when`` conditions keep it out of the measurement model, and one that sets the model's
+    ``R`` where the file gives each detection its own accuracy (``accuracy``: the file's columns; the filters use
+    them instead of ``R``).  Keys in ``reader_keys`` are used or checked by the file's reader and pass.  Each
+    error names the key, the scenario file and the recorded file."""
+    from .params import format_value
+
+    declared = {p.name: p for p in spec.declared}
+
+    def said(params) -> str:
+        return ", ".join(f"{p.name} = {format_value(given[p.name])}{' ' + p.unit_label if p.unit_label else ''}"
+                         for p in params)
+
+    chosen = [declared[key] for key in given if key in declared and key not in reader_keys]
+    simulated = [p for p in chosen if p.affects == "simulation"]
+    if simulated:
+        them = "them" if len(simulated) > 1 else "it"
+        raise InputError(f"{path}: [sensor] {said(simulated)} only shape{'' if len(simulated) > 1 else 's'} "
+                         f"simulated detections (sensor {plugin!r} declares {them} simulation-only), but the "
+                         f"recorded file {file} replaces the simulation: nothing would use {them}; remove {them}")
+    for p in chosen:
+        unmet = p.unmet(effective)
+        if unmet:
+            needs = ", ".join(f"{key} = {format_value(want)}" for key, want in p.when)
+            now = ", ".join(f"{key} = {format_value(effective.get(key))}" for key, _ in unmet)
+            raise InputError(f"{path}: [sensor] {said([p])} enters the measurement model of sensor {plugin!r} only "
+                             f"if {needs} (here {now}), else it only shapes simulated detections, which the recorded "
+                             f"file {file} replaces: nothing would use it; remove it")
+    noise = [p for p in chosen if p.affects == "noise"] if accuracy else []
+    if noise:
+        them = "them" if len(noise) > 1 else "it"
+        raise InputError(f"{path}: [sensor] {said(noise)} set{'' if len(noise) > 1 else 's'} the filters' "
+                         f"measurement noise R, but the recorded file {file} gives each detection its own accuracy "
+                         f"(columns {', '.join(accuracy)}), which the filters use instead of R: one of the two would "
+                         f"be ignored; remove {them} (or the file's accuracy columns)")
 
 
 def _check_frames(path: Path, host: PluginHost, sensor: Component, clutter, removers, tracker: str,

@@ -95,18 +95,22 @@ def simulate(truth: Truth, rng: np.random.Generator, pd: float = 0.8, sigma_pos:
 
 
 PARAMETERS = (
-    Param("pd", 0.8, "probability of detection per ping", unit="dimensionless", minimum=0.0, maximum=1.0),
-    Param("sigma_pos", 2.0, "position noise of a detection, per axis", unit="length", minimum=0.0),
-    Param("level_db", 20.0, "mean detection level", unit="decibel"),
-    Param("sigma_level", 0.1, "level noise", unit="decibel", minimum=0.0),
+    Param("pd", 0.8, "probability of detection per ping", unit="dimensionless", minimum=0.0, maximum=1.0,
+          affects="simulation"),
+    Param("sigma_pos", 2.0, "position noise of a detection, per axis", unit="length", minimum=0.0, affects="noise",
+          when={"frame": "cartesian", "sigma_xy": None}),
+    Param("level_db", 20.0, "mean detection level", unit="decibel", affects="simulation"),
+    Param("sigma_level", 0.1, "level noise", unit="decibel", minimum=0.0, affects="simulation"),
     Param("frame", "cartesian", "the measurement model the filters get: Cartesian position or polar (range, "
           "bearing); the detections are Cartesian either way", "str", choices=FRAMES),
-    Param("sigma_r", 0.5, "range sigma of the polar model", unit="length", minimum=0.0),
+    Param("sigma_r", 0.5, "range sigma of the polar model", unit="length", minimum=0.0, affects="noise",
+          when={"frame": "polar"}),
     Param("sigma_b_deg", 1.0, "bearing sigma of the polar model, in degrees", unit="angle_deg", minimum=0.0,
-          maximum=360.0),
+          maximum=360.0, affects="noise", when={"frame": "polar"}),
     Param("sigma_xy", None, "position sigma of the Cartesian model (none: sigma_pos)", "float?", unit="length",
-          above=0.0),
-    Param("sensor", (0.0, 0.0), "sensor position of the polar model", "vector", unit="length", length=2),
+          above=0.0, affects="noise", when={"frame": "cartesian"}),
+    Param("sensor", (0.0, 0.0), "sensor position of the polar model", "vector", unit="length", length=2,
+          when={"frame": "polar"}),
 )
 
 ACTIVE_SONAR = SensorSpec(

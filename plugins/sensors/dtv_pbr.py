@@ -97,21 +97,30 @@ def noise_cov(truth: Truth, scans: Scans, **params) -> np.ndarray:
 
 
 PARAMETERS = (
-    Param("tx", DEFAULTS["tx"], "transmitter position (x, y, z)", "vector", unit="length", length=3),
-    Param("rx", DEFAULTS["rx"], "receiver position (x, y, z)", "vector", unit="length", length=3),
-    Param("frequency_hz", 701e6, "carrier frequency of the illuminator", unit="frequency", above=0.0),
+    # the model [R, Rdot] = I x + v takes no geometry: tx, rx (simulation and truth_to_state) and the carrier (the
+    # simulated Doppler) shape the simulation; a recorded file's reader checks them against its own metadata
+    Param("tx", DEFAULTS["tx"], "transmitter position (x, y, z)", "vector", unit="length", length=3,
+          affects="simulation"),
+    Param("rx", DEFAULTS["rx"], "receiver position (x, y, z)", "vector", unit="length", length=3,
+          affects="simulation"),
+    Param("frequency_hz", 701e6, "carrier frequency of the illuminator", unit="frequency", above=0.0,
+          affects="simulation"),
     Param("pd", 0.9, "probability that the target's candidate is reported per frame", unit="dimensionless",
-          minimum=0.0, maximum=1.0),
-    Param("sigma_range", 15.0, "simulated candidate range noise", unit="length", minimum=0.0),
-    Param("sigma_range_rate", 0.4, "simulated candidate range-rate noise", unit="speed", minimum=0.0),
+          minimum=0.0, maximum=1.0, affects="simulation"),
+    Param("sigma_range", 15.0, "simulated candidate range noise", unit="length", minimum=0.0, affects="simulation"),
+    Param("sigma_range_rate", 0.4, "simulated candidate range-rate noise", unit="speed", minimum=0.0,
+          affects="simulation"),
     Param("model_sigma_range", 15.0, "range sigma of the filters' R (about half a 30 m range bin)", unit="length",
-          above=0.0),
+          above=0.0, affects="noise"),
     Param("model_sigma_range_rate", 0.5, "range-rate sigma of the filters' R (about half a Doppler bin)",
-          unit="speed", above=0.0),
-    Param("strength_db", 18.0, "mean target candidate strength above the CFAR noise estimate", unit="decibel"),
-    Param("strength_sigma_db", 2.0, "candidate strength spread", unit="decibel", minimum=0.0),
-    Param("range_max", 3000.0, "range extent of the range-Doppler map (0 .. range_max)", unit="length", above=0.0),
-    Param("range_rate_max", 50.0, "range-rate extent of the map (+-range_rate_max)", unit="speed", above=0.0),
+          unit="speed", above=0.0, affects="noise"),
+    Param("strength_db", 18.0, "mean target candidate strength above the CFAR noise estimate", unit="decibel",
+          affects="simulation"),
+    Param("strength_sigma_db", 2.0, "candidate strength spread", unit="decibel", minimum=0.0, affects="simulation"),
+    Param("range_max", 3000.0, "range extent of the range-Doppler map (0 .. range_max)", unit="length", above=0.0,
+          affects="simulation"),
+    Param("range_rate_max", 50.0, "range-rate extent of the map (+-range_rate_max)", unit="speed", above=0.0,
+          affects="simulation"),
 )
 
 DTV_PBR = SensorSpec(

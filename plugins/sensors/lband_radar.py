@@ -50,15 +50,17 @@ PARAMETERS = (
     Param("threshold_db", 5.0, "SNR detection threshold (none keeps every target return)", "float?",
           unit="decibel"),
     Param("rcs_ref_dbsm", -20.0, "front-aspect RCS (the paper's Ref)", unit="decibel"),
+    # the aspects are not part of the declared target (a filter does not know the aspect): simulation only
     Param("rcs_offsets_db", (0.0, 5.0, 3.0), "RCS of the front, top and side aspects relative to Ref", "vector",
-          unit="decibel"),
+          unit="decibel", affects="simulation"),
     Param("aspect_change_times", (100.0, 160.0), "times at which the aspect changes (front -> top -> side)",
-          "vector", unit="time", minimum=0.0),
+          "vector", unit="time", minimum=0.0, affects="simulation"),
     Param("rcs_sigma_db", 2.0, "RCS fluctuation, one draw per scan", unit="decibel", minimum=0.0),
     Param("sigma_vr", 2.0, "radial-velocity noise", unit="speed", minimum=0.0),
     Param("pseudo_sigma_pos", 300.0, "position sigma of the published R (the brief's pseudo-measurement noise)",
-          unit="length", above=0.0),
-    Param("pseudo_sigma_vr", 10.0, "radial-velocity sigma of the published R", unit="speed", above=0.0),
+          unit="length", above=0.0, affects="noise"),
+    Param("pseudo_sigma_vr", 10.0, "radial-velocity sigma of the published R", unit="speed", above=0.0,
+          affects="noise"),
 )
 PARAMS = defaults(PARAMETERS)
 

@@ -42,8 +42,8 @@ def simulate(truth: Truth, rng: np.random.Generator, sigma_r: float = 1.0, sigma
 
 
 PARAMETERS = (
-    Param("sigma_r", 1.0, "range noise standard deviation", unit="length", minimum=0.0),
-    Param("sigma_theta", 0.1, "bearing noise standard deviation", unit="angle", minimum=0.0),
+    Param("sigma_r", 1.0, "range noise standard deviation", unit="length", minimum=0.0, affects="noise"),
+    Param("sigma_theta", 0.1, "bearing noise standard deviation", unit="angle", minimum=0.0, affects="noise"),
 )
 
 RANGE_BEARING = SensorSpec(
