@@ -20,6 +20,8 @@ import pytest
 from fixtures.candidates import IRREGULAR
 
 from workbench.cli import EXIT, main
+from workbench.plugins import load_host
+from workbench.scenario import load_scenario
 from workbench.recorded import (ImplausibleValueWarning, load_pcl_candidates, load_sonar_recording,
                                 write_pcl_candidates)
 from workbench.tracks_io import TrackFile, read_tracks, write_tracks
@@ -187,9 +189,15 @@ def test_a_compass_heading_where_the_math_convention_is_wanted_is_a_warning_with
     with warnings.catch_warnings():
         warnings.simplefilter("error", ImplausibleValueWarning)
         load_sonar_recording(DATA / "sonar_moving_ship_synthetic.csv")  # the true headings pass
-    assert _run(_scenario(tmp_path, "sonar_moving_ship", data=data), tmp_path / "o") == 0
+    path = _scenario(tmp_path, "sonar_moving_ship", data=data)
+    capsys.readouterr()
+    with pytest.warns(ImplausibleValueWarning, match="a compass heading?"):  # the Python API: a warning, no print
+        scenario = load_scenario(path, load_host())
+    assert capsys.readouterr().err == "" and any("a compass heading?" in note for note in scenario.notes)
+    assert _run(path, tmp_path / "o") == 0
     err = capsys.readouterr().err
     assert "workbench: warning:" in err and "a compass heading?" in err and str(data) in err
+    assert err.count("a compass heading?") == 1  # the command line's own line, not also Python's warning display
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert any("course over ground" in note for note in summary["input_warnings"])
 

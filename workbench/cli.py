@@ -26,6 +26,7 @@ import errno
 import shlex
 import sys
 import traceback
+import warnings
 from pathlib import Path
 
 from .plugins import BLOCK_ENV, PluginHost, UnknownComponent, load_host
@@ -294,9 +295,14 @@ def cmd_report(args) -> int:
 
 def cmd_run(args) -> int:
     from .scenario import load_scenario, run_scenario
+    from .textfields import ImplausibleValueWarning
 
     host = _host(args)
-    scenario = load_scenario(Path(args.scenario), host)
+    with warnings.catch_warnings():  # printed below, as the command line's own warning lines
+        warnings.simplefilter("ignore", ImplausibleValueWarning)
+        scenario = load_scenario(Path(args.scenario), host)
+    for note in scenario.notes:
+        print(f"workbench: warning: {note}", file=sys.stderr)
     out = Path(args.out) if args.out else Path(args.scenario).with_name(f"{scenario.name}-results")
     result = run_scenario(scenario, host, out, seed=args.seed)
     print(result.summary_text())

@@ -321,8 +321,8 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
     data, notes = None, ()
     if recorded:
         data, notes = _read_recorded(path, detections, det_format, dt, steps, host, sensor)
-        for note in notes:
-            print(f"workbench: warning: {note}", file=sys.stderr)
+        for note in notes:  # kept in Scenario.notes too; the command line prints them as its own warning lines
+            warnings.warn(note, ImplausibleValueWarning, stacklevel=2)
     else:
         check_request_size(path, runs, steps, n, len(filters), 1 + len(clutter))
     return Scenario(path, name, seed, runs, steps, dt, motion, x0, x0_std, tuple(legs), sensor, clutter,
