@@ -1,7 +1,9 @@
 """Nothing lost: a component that fails inside a shared task, plugins that come and go, a damaged cache entry
 and two reports into one folder."""
 
+import errno
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -18,8 +20,8 @@ from fixtures import demo_distribution_env
 from workbench import hookimpl
 from workbench.plugins import load_host
 from workbench.report.cache import DEPS_ARRAY, load_arrays
-from workbench.report.engine import LOCK_FILE, ReportFolderBusy, run_recipe, run_report
-from workbench.specs import TaskContext
+from workbench.report.engine import LOCK_FILE, ReportFolderBusy, component_failure, run_recipe, run_report
+from workbench.specs import RecipeSpec, Table, TableSpec, Task, TaskContext
 from workbench.types import InputError
 
 _BASE = load_host()
@@ -90,11 +92,76 @@ def test_a_filter_raising_inside_paper_001s_tracker_loses_only_its_own_rows(tmp_
     for name, value in alone.items():
         np.testing.assert_array_equal(kept[name], np.asarray(value), err_msg=name)
 
-    # blocking plugins that no task of paper 001 uses keeps every finished task, the partial one included
+    # blocking plugins that no task of paper 001 uses keeps every finished task; the partial one is run again (a
+    # failure is never replayed from the cache), fails the same way here and gives the same tables
     blocked = load_host(extra_plugins=[("boom", _plugin(BOOM))], block=["lband_radar", "radar_clutter", "paper003"])
     again = run_recipe(recipe, blocked, tmp_path, size="small", seed=2, filters="+boom-kf", progress=False)
-    assert [(t["key"], t["cached"]) for t in again.tasks] == [(t["key"], True) for t in outcome.tasks]
+    assert [(t["key"], t["cached"]) for t in again.tasks] == [(t["key"], t["key"] != "sim/0") for t in outcome.tasks]
     assert again.errors == outcome.errors and again.tables == outcome.tables
+
+
+_BLOCK = {"now": None}  # the seed block whose simulation task is running (set by _telling_the_block)
+
+
+def _update_raising_in_block_one(state, scan, model, rng=None):
+    """The KF, except inside the second seed block's simulation (a failure that only some data brings out)."""
+    if _BLOCK["now"] == 1:
+        raise RuntimeError("deliberate failure in seed block 1")
+    return KF.update(state, scan, model, rng)
+
+
+BOOM_IN_ONE = replace(KF, name="boom-in-one", update=_update_raising_in_block_one)
+
+
+def _telling_the_block(recipe):
+    """The recipe, its simulation tasks setting :data:`_BLOCK` while they run."""
+    def told(run):
+        def run_telling(ctx):
+            _BLOCK["now"] = int(ctx.params["block"])
+            try:
+                return run(ctx)
+            finally:
+                _BLOCK["now"] = None
+        return run_telling
+
+    def tasks(options):
+        return [replace(t, run=told(t.run)) if t.key.startswith("sim/") else t for t in recipe.tasks(options)]
+
+    return replace(recipe, tasks=tasks)
+
+
+def test_a_filter_raising_in_a_later_seed_block_of_paper_001_loses_only_its_own_rows(tmp_path):
+    host = load_host(extra_plugins=[("boom", _plugin(BOOM_IN_ONE))])
+    recipe = _telling_the_block(host.recipe("001"))
+    small = {"runs": 3, "seeds": 2, "tuning_runs": 3, "variant_seeds": 1}
+    recipe = replace(recipe, sizes={**recipe.sizes, "small": small},
+                     figures=tuple(replace(f, draw=_blank, size=(1.0, 1.0)) for f in recipe.figures))
+    outcome = run_recipe(recipe, host, tmp_path, size="small", seed=2, filters="+boom-in-one", progress=False)
+
+    # the filter ran in block 0 and raised in block 1 only: that one failure is named, nothing else went wrong
+    assert outcome.errors == ["task 'sim/1': filter:boom-in-one failed: RuntimeError: deliberate failure in seed "
+                              "block 1 (the task's other results are kept)"]
+    assert {t["key"]: t.get("partial", []) for t in outcome.tasks if t["key"].startswith("sim/")} == {
+        "sim/0": [], "sim/1": ["filter:boom-in-one failed: RuntimeError: deliberate failure in seed block 1"]}
+    # every figure, table and criterion of the paper is there, on both blocks
+    assert [f["id"] for f in outcome.figures] == [f.id for f in recipe.figures]
+    assert [t["id"] for t in outcome.tables] == [t.id for t in recipe.tables]
+    assert [c.id for c in outcome.criteria] == ["1", "2", "3"]
+    assert all("2 seed block(s) of 3 runs" in c.detail for c in outcome.criteria)
+    tables = {t["id"]: t["rows"] for t in outcome.tables}
+    # the paper's arms keep their rows over both blocks (6 runs); the filter, with rows in block 0 only, has no
+    # numbers (half its runs would be a different experiment) and is marked FAILED, naming the block
+    for arm in ("paper", "principled", "tuned", "previous"):
+        (row,) = [r for r in tables["rows"] if r[0].startswith(arm)]
+        assert "%" in row[1] and row[-1] == 6
+    (failed,) = [r for r in tables["rows"] if "boom-in-one" in r[0]]
+    assert failed[0] == "filter:boom-in-one"
+    assert failed[1].startswith("FAILED, no rows: sim/1: RuntimeError: deliberate failure in seed block 1")
+    (failed,) = [r for r in tables["removal-rate"] if "boom-in-one" in r[1]]
+    assert failed[:2] == ["simulation", "filter:boom-in-one"] and failed[2].startswith("FAILED, no rows: sim/1")
+    gospa = tables["gospa"]
+    assert not [r for r in gospa if "boom-in-one" in r[0]]
+    assert [r[1] for r in gospa if r[0].startswith("paper")] == ["before", "after"] and gospa[0][-1] == 6
 
 
 def _blank(data, fig):
@@ -118,6 +185,48 @@ def test_a_filter_raising_in_paper_000s_shared_task_loses_only_its_row():
     assert str(out["error/filter:boom-ekf (N=600, R=1000 m)"]) == "RuntimeError: deliberate failure inside the tracker"
     rows = paper000._runs({"table@x": out})
     assert list(rows) == [("A", 600, 1000.0)] and set(rows[("A", 600, 1000.0)]) == set(paper000.FIELDS)
+
+
+# -- a failure inside a task is retried by the next report, never replayed from the cache ---------------------
+
+
+def _flaky_recipe(fails: list):
+    """A recipe with a shared task whose second component raises a MemoryError on the first ``len(fails)`` runs
+    (a one-off failure), and a plain task."""
+    def shared(ctx):
+        out = {"steady": np.arange(3.0)}
+        try:
+            if fails:
+                raise fails.pop()
+            out["flaky"] = np.full(2, 7.0)
+        except MemoryError as exc:
+            out.update(component_failure("filter:flaky", exc))
+        return out
+
+    def tasks(options):
+        return [Task("shared", {}, shared), Task("other", {}, lambda ctx: {"other": np.ones(1)})]
+
+    def table(results):
+        return Table(("task", "arrays"), tuple((k, ", ".join(sorted(v))) for k, v in sorted(results.items())))
+
+    return RecipeSpec("flaky", "a shared task with a one-off failure", {"quick": {}}, tasks,
+                      tables=(TableSpec("arrays", "the arrays of each task", table),))
+
+
+def test_a_one_off_failure_inside_a_task_is_retried_by_the_next_report_not_replayed(tmp_path):
+    fails = [MemoryError("one-off")]
+    recipe = _flaky_recipe(fails)
+    first = run_recipe(recipe, _BASE, tmp_path, progress=False)
+    assert first.errors == ["task 'shared': filter:flaky failed: MemoryError: one-off (the task's other results "
+                            "are kept)"]
+    assert first.tables[0]["rows"] == [["other", "other"], ["shared", "error/filter:flaky, steady"]]
+
+    second = run_recipe(recipe, _BASE, tmp_path, progress=False)  # the failure does not happen again
+    assert {t["key"]: t["cached"] for t in second.tasks} == {"shared": False, "other": True}
+    assert second.errors == [] and second.tables[0]["rows"] == [["other", "other"], ["shared", "flaky, steady"]]
+    # the whole result is cached now, and reused
+    third = run_recipe(recipe, _BASE, tmp_path, progress=False)
+    assert all(t["cached"] for t in third.tasks) and third.tables == second.tables and not fails
 
 
 # -- the cache keys each task on what it uses -----------------------------------------------------------------
@@ -241,6 +350,29 @@ def test_the_command_line_waits_as_long_as_wait_says_then_names_the_holder(tmp_p
     assert f"pid {holder.pid}" in err[0]
     assert waited >= 0.5  # a lower bound only: it waited at least as long as asked
     assert not (tmp_path / "paper000").exists()
+
+
+@pytest.mark.parametrize("code, problem", [(errno.ENOLCK, "its filesystem gives no file locks, as a network "
+                                                          "filesystem without a lock service does"),
+                                           (errno.EOPNOTSUPP, "its filesystem does not support file locks"),
+                                           (errno.ENOSYS, "its filesystem does not support file locks")])
+def test_a_folder_whose_filesystem_cannot_lock_is_refused_as_such_not_as_busy(tmp_path, monkeypatch, capsys, code,
+                                                                               problem):
+    import fcntl
+
+    from workbench.cli import EXIT, main
+
+    def flock(fd, op):  # what flock does on NFS without a lock service, or on a filesystem without locks
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(fcntl, "flock", flock)
+    code_ = main(["report", "--paper", "000", "--out", str(tmp_path), "--no-progress"])
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert code_ == EXIT["input"]
+    assert line.startswith(f"workbench: error: cannot lock the report folder {tmp_path}: {problem} "
+                           f"({os.strerror(code)}, on {tmp_path / LOCK_FILE})")
+    assert "local disk" in line and "in use" not in line and "another report" not in line
+    assert not (tmp_path / LOCK_FILE).exists() and not (tmp_path / "paper000").exists()
 
 
 def test_a_lock_left_by_a_process_that_is_gone_is_taken_over(tmp_path, demo_host):

@@ -18,6 +18,8 @@ Output folder layout::
 A component that fails inside a task shared with others (one filter among several run on the same
 detections) does not take the task down when the task isolates it: the task returns its other results and
 a string array ``error/<what>`` (:func:`component_failure`), which the report names in the paper's errors.
+Such a partial result is never reused from the cache: the next report runs the task again, so a one-off
+failure (a ``MemoryError``, a race) is not replayed until the code changes.
 
 Only the full size gives firm verdicts: the criteria of any other size (the quick report) are marked
 indicative (:meth:`workbench.criteria.Criterion.as_indicative`), so a quick report never says *met*.
@@ -27,13 +29,14 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import errno
 import json
 import os
 import socket
 import sys
 import time
 import traceback
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -378,6 +381,10 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
         except CacheEntryUnreadable as exc:
             outcome.warnings.append(f"paper {recipe.paper}, task {task.key!r}: {exc}")
             cached = None
+        if cached is not None and component_errors(cached):
+            # a component failed inside this task (a one-off MemoryError, a race...): never replayed from the
+            # cache, the task runs again (its finished parts with it) and its entry is overwritten
+            cached = None
         if cached is not None:
             results[task.key] = cached
             outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": ""})
@@ -666,6 +673,24 @@ def _pid_alive(pid) -> bool:
     return True
 
 
+#: The errors of a non-blocking ``flock`` that mean "another process holds it" (EACCES on some systems).
+_LOCK_BUSY = frozenset({errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES})
+
+
+def _lock_unsupported(out: Path, path: Path, exc: OSError) -> InputError:
+    """The one-line error for a report folder whose filesystem cannot lock ``path`` (``exc`` from ``flock``)."""
+    unsupported = {getattr(errno, n) for n in ("EOPNOTSUPP", "ENOTSUP", "ENOSYS") if hasattr(errno, n)}
+    if exc.errno in unsupported:
+        problem = "its filesystem does not support file locks"
+    elif exc.errno == errno.ENOLCK:
+        problem = "its filesystem gives no file locks, as a network filesystem without a lock service does"
+    else:
+        problem = "its filesystem refused the lock"
+    reason = exc.strerror or str(exc)
+    return InputError(f"cannot lock the report folder {out}: {problem} ({reason}, on {path}); write the report "
+                      f"into a folder on a local disk (--out)")
+
+
 @contextmanager
 def report_lock(out: Path, command: str = "", wait: float = 0.0, poll: float = 0.2):
     """Hold the lock of the report folder ``out`` (the file :data:`LOCK_FILE`, naming this process).
@@ -674,7 +699,9 @@ def report_lock(out: Path, command: str = "", wait: float = 0.0, poll: float = 0
     first, then raises :class:`ReportFolderBusy` naming the holder (pid, host, command, start).  The lock is an
     OS lock on the file (``flock``), released when its process ends however it ends, so a lock file left by a
     process that is gone is taken over (yields the list of notes saying so); without ``flock`` (Windows) the
-    file is created exclusively and a lock of a dead pid on this host is taken over.
+    file is created exclusively and a lock of a dead pid on this host is taken over.  A filesystem that cannot
+    lock (``flock`` failing with anything but "would block", e.g. ``ENOLCK`` on NFS or ``EOPNOTSUPP``) raises
+    an :class:`InputError` naming the folder and the problem, never "in use by another report".
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -692,8 +719,13 @@ def report_lock(out: Path, command: str = "", wait: float = 0.0, poll: float = 0
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
+            except OSError as exc:
                 os.close(fd)
+                if exc.errno not in _LOCK_BUSY:  # not another report: the filesystem cannot lock (NFS, FUSE...)
+                    with suppress(OSError):
+                        if path.stat().st_size == 0:  # the empty file just created: no stale lock file left
+                            path.unlink()
+                    raise _lock_unsupported(out, path, exc) from None
                 holder = _read_holder(path)
             else:
                 try:

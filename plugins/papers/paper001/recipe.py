@@ -825,9 +825,12 @@ ARM_LABELS = {
 
 
 def _arms_in(results: Mapping) -> list[str]:
+    """The arms with rows in every seed block (an arm whose filter raised in any block is left out here and
+    marked FAILED by :func:`_failed_rows`): the paper's own arms, then any added ``filter:`` arm."""
     arms = [a for a in ARM_LABELS if _arm_counts(results, a, "after") is not None]
-    res = results[_blocks(results)[0]]
-    arms += sorted({k.split("/")[0] for k in res if k.startswith("filter:") and k.endswith("/after/confirmed")})
+    added = {k.split("/")[0] for key in _blocks(results) for k in results[key]
+             if k.startswith("filter:") and k.endswith("/after/confirmed")}
+    arms += sorted(a for a in added if _arm_counts(results, a, "after") is not None)
     return arms
 
 
@@ -927,7 +930,7 @@ def _rows_table(results) -> Table:
 def _gospa_stats(results: Mapping, arm: str, phase: str) -> dict | None:
     """Per-run means over the pings after the warm-up of GOSPA and its terms, pooled over the seed blocks."""
     blocks = _blocks(results)
-    if f"{arm}/{phase}/gospa" not in results[blocks[0]]:
+    if any(f"{arm}/{phase}/gospa" not in results[key] for key in blocks):  # the arm failed in some block
         return None
     out = {}
     for term in ("gospa", "gospa_loc", "gospa_missed", "gospa_false"):
