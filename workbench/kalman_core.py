@@ -10,6 +10,13 @@ Predict::
 
     x- = F x          P- = F P F^T + Q
 
+and, for a motion model that overrides ``f`` (not :attr:`~workbench.models.MotionModel.linear`), the extended
+predict (:func:`extended_predict`) with the model's Jacobian ``J = df/dx`` at ``x``::
+
+    x- = f(x)         P- = J P J^T + Q
+
+:func:`linear_predict` refuses such a model by name: no filter reads ``F`` from a model that overrides ``f``.
+
 Update, per item ``b`` with a measurement present::
 
     S = H P- H^T + R_b            innovation covariance
@@ -30,11 +37,11 @@ import numpy as np
 from .filtering import keep_where, single_measurement
 from .kernels.backend import BackendRecord, resolve
 from .linalg import joseph_update, psd_solve, symmetrise
-from .models import MeasurementModel, MotionModel
+from .models import MeasurementModel, MotionModel, require_jacobian, require_linear
 from .types import Gaussian, InputError, Scan
 
-__all__ = ["linear_predict", "linear_update", "kalman_update", "kf_update", "ekf_update", "measurement_covariance",
-           "last_backend", "backend_counts"]
+__all__ = ["linear_predict", "extended_predict", "linear_update", "kalman_update", "kf_update", "ekf_update",
+           "measurement_covariance", "last_backend", "backend_counts"]
 
 
 #: Batches smaller than this take the compiled item-by-item loops (:mod:`workbench.kernels.kalman_numba`) where
@@ -70,8 +77,10 @@ def _compiled():
     return _LOOPS[0]
 
 
-def linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
-    """One step of the linear motion model for every item of the batch."""
+def linear_predict(state: Gaussian, motion: MotionModel, who: str = "kf") -> Gaussian:
+    """One step of the linear motion model for every item of the batch; :class:`~workbench.types.InputError`
+    naming the filter ``who`` and the model when the model overrides ``f`` (it is not linear)."""
+    require_linear(motion, who)
     if state.batch < SMALL_BATCH and (fast := _compiled()) is not None:
         mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
         fast.predict_items(state.mean, state.cov, np.ascontiguousarray(motion.F, dtype=float),
@@ -81,6 +90,24 @@ def linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
     _RECORD.note("numpy")
     mean = state.mean @ motion.F.T  # x- = F x
     cov = symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q)  # P- = F P F^T + Q
+    return Gaussian.trusted(mean, cov)
+
+
+def extended_predict(state: Gaussian, motion: MotionModel, who: str = "ekf") -> Gaussian:
+    """The EKF's predict: :func:`linear_predict` (the same code, bit for bit) for a linear model; for a model that
+    overrides ``f``, ``x- = f(x)``, ``P- = J P J^T + Q`` with the model's ``jacobian`` at ``x``.  A nonlinear
+    model without a Jacobian is refused naming the filter ``who`` and the model."""
+    if motion.linear:
+        return linear_predict(state, motion, who)
+    jac = require_jacobian(motion, who)
+    B, n = state.mean.shape
+    mean = np.asarray(motion.f(state.mean), dtype=float)  # x- = f(x)
+    J = np.asarray(jac(state.mean), dtype=float)
+    if mean.shape != (B, n) or J.shape != (B, n, n):
+        raise InputError(f"filter {who!r}: motion model {motion.name!r} gave f of shape {mean.shape} and a "
+                         f"jacobian of shape {J.shape} for states {(B, n)}; expected {(B, n)} and {(B, n, n)}")
+    _RECORD.note("numpy")
+    cov = symmetrise(J @ state.cov @ np.swapaxes(J, -1, -2) + motion.Q)  # P- = J P J^T + Q
     return Gaussian.trusted(mean, cov)
 
 

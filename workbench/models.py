@@ -1,9 +1,12 @@
 """Motion and measurement models: what filters need to know about dynamics and sensors.
 
 A sensor plugin publishes a :class:`MeasurementModel` (``h``, its Jacobian where it has one, ``R``
-and which components are angles), so filters never import sensor code.  Motion models here are
+and which components are angles), so filters never import sensor code.  The motion models built here are
 linear-Gaussian, ``x_k = F x_{k-1} + w_k``, ``w_k ~ N(0, Q)``; ``Q_sqrt`` is an explicit factor
-``Q = Q_sqrt Q_sqrt^T`` so that square-root filters never take the Cholesky factor of a singular Q.
+``Q = Q_sqrt Q_sqrt^T`` so that square-root filters never take the Cholesky factor of a singular Q.  A subclass
+of :class:`MotionModel` that overrides ``f`` is a nonlinear model (``x_k = f(x_{k-1}) + w_k``): every built-in
+filter either follows its ``f`` (and its ``jacobian`` where it needs one) or refuses it by name
+(:func:`require_linear`, :func:`require_jacobian`), never reading ``F`` from it.
 
 State layout convention: positions first, then velocities, e.g. ``[x, y, vx, vy]`` or
 ``[x, y, z, vx, vy, vz]``.
@@ -21,6 +24,8 @@ from .types import InputError
 
 __all__ = [
     "MotionModel",
+    "require_linear",
+    "require_jacobian",
     "MeasurementModel",
     "DetectionModel",
     "constant_velocity",
@@ -40,6 +45,13 @@ class MotionModel:
 
     Shapes: ``F (n, n)``, ``Q (n, n)``, ``Q_sqrt (n, n)`` with ``Q = Q_sqrt Q_sqrt^T``.  ``state_names`` and
     ``state_units`` declare the state's layout (e.g. ``x, y, vx, vy`` in m and m/s), for track files and plots.
+
+    Nonlinear motion ``x_k = f(x_{k-1}) + w_k``: subclass and override :meth:`f` (vectorised over any leading
+    axes), and :meth:`jacobian` where filters that linearise (the EKF) should take the model.  Such a model is
+    not :attr:`linear`, and no built-in filter reads its ``F`` (it still has one, its fields being this
+    class's; filters that need a transition matrix refuse the model by name).  A subclass whose ``f`` is still
+    ``x F^T`` (e.g. written out for speed) declares ``linear = True`` as a class attribute and keeps the exact
+    linear filters and their compiled paths.
     """
 
     name: str
@@ -53,7 +65,18 @@ class MotionModel:
 
     @property
     def dim(self) -> int:
-        return self.F.shape[0]
+        return self.Q.shape[0]
+
+    @property
+    def linear(self) -> bool:
+        """Whether ``f(x) = x F^T``: true unless a subclass overrides :meth:`f`; a subclass that overrides it with
+        the same linear map declares ``linear = True`` (a class attribute, which replaces this property)."""
+        return type(self).f is MotionModel.f
+
+    @property
+    def has_jacobian(self) -> bool:
+        """Whether :meth:`jacobian` is available: a linear model's (``F``), or a subclass's own."""
+        return self.linear or type(self).jacobian is not MotionModel.jacobian
 
     @property
     def position_dims(self) -> int:
@@ -81,6 +104,45 @@ class MotionModel:
         # one (K, n) x (n, n) product: x @ F.T on a stack (B, S, n) makes one small product per item
         # (6x slower for the UKF's (3000, 9, 4) sigma points)
         return (x.reshape(-1, x.shape[-1]) @ self.F.T).reshape(x.shape)
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """``df/dx`` at states ``x (..., n)`` -> ``(..., n, n)``: ``F`` everywhere for a linear model.
+
+        A nonlinear subclass overrides it with its own (analytic) Jacobian; one that does not has none, and
+        this raises :class:`~workbench.types.InputError` (see :attr:`has_jacobian`).
+        """
+        if not self.linear:
+            raise InputError(f"motion model {self.name!r} ({type(self).__name__}) overrides f but gives no "
+                             f"jacobian(x) method")
+        x = np.asarray(x, dtype=float)
+        return np.broadcast_to(self.F, x.shape + (self.F.shape[1],))
+
+
+def _model_label(motion: MotionModel) -> str:
+    kind = type(motion).__name__
+    return f"motion model {motion.name!r}" + (f" ({kind})" if kind != "MotionModel" else "")
+
+
+def require_linear(motion: MotionModel, who: str, instead: str = "'ekf' (with the model's jacobian), 'ukf' or "
+                                                                 "'sir'") -> np.ndarray:
+    """The transition matrix ``F`` of a :attr:`~MotionModel.linear` model, for the filter named ``who``;
+    :class:`~workbench.types.InputError` naming the filter and the model when the model overrides ``f``
+    (``instead``: the filters the message suggests)."""
+    if not motion.linear:
+        raise InputError(f"filter {who!r} needs a linear motion model (it propagates with the transition matrix "
+                         f"F), but {_model_label(motion)} overrides f: use {instead}, or declare linear = True "
+                         f"on the model if its f is x F^T")
+    return motion.F
+
+
+def require_jacobian(motion: MotionModel, who: str, instead: str = "'ukf' or 'sir'"):
+    """The Jacobian ``x (..., n) -> (..., n, n)`` of ``motion`` for the filter named ``who`` (a linear model's
+    is ``F``); :class:`~workbench.types.InputError` naming the filter and the model when a nonlinear model
+    gives none."""
+    if not motion.has_jacobian:
+        raise InputError(f"filter {who!r} needs the Jacobian of {_model_label(motion)}: give the model a "
+                         f"jacobian(x) method, or use {instead}")
+    return motion.jacobian
 
 
 def _cartesian_layout(dims: int) -> dict:

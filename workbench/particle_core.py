@@ -7,7 +7,10 @@ estimate and the counters.
 
 State: :class:`ParticleState` with particles ``(B, N, n)`` and normalised log-weights ``(B, N)``.
 
-Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal).
+Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal); for a motion model that overrides ``f``
+(not :attr:`~workbench.models.MotionModel.linear`) ``x_i <- f(x_i) + Q_sqrt e_i``, ``f`` called once on all
+``(B N, n)`` particles (:func:`propagate_f`), the noise drawn as for a linear model (the same numbers), and the
+NumPy code runs whatever the backend (the compiled steps use ``F``).
 Likelihood: ``log N(z; h(x_i), R)`` up to a constant, with the residual wrapped for angular components.
 
 Speed: the particle arrays made here are stored component-major (``(n, B, N)`` in memory, seen as
@@ -41,8 +44,9 @@ from .linalg import safe_cholesky
 from .models import MeasurementModel, MotionModel
 from .types import Gaussian, InputError, Particles
 
-__all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "log_likelihood",
-           "weighted_log_likelihood", "log_likelihood_cov", "reweight", "estimate", "diagnostics", "compiled"]
+__all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "propagate_f", "noise_columns",
+           "log_likelihood", "weighted_log_likelihood", "log_likelihood_cov", "reweight", "estimate", "diagnostics",
+           "compiled"]
 
 
 @dataclass(frozen=True)
@@ -182,13 +186,43 @@ def _propagation_cached(f_bytes: bytes, q_bytes: bytes, n: int, q_cols: int) -> 
     return matrix, g.shape[1]
 
 
+def noise_columns(motion: MotionModel) -> np.ndarray:
+    """The non-zero columns ``G (n, k)`` of ``Q_sqrt``: the noise a particle filter draws is ``G e``, ``e`` of
+    length ``k`` (no ``F`` read)."""
+    Q = np.asarray(motion.Q_sqrt, dtype=float)
+    return Q[:, np.flatnonzero(np.any(Q != 0.0, axis=0))]
+
+
+def propagate_f(x: np.ndarray, motion: MotionModel, who: str = "this particle filter") -> np.ndarray:
+    """``f(x_i)`` for particles ``x (B, N, n)``, one call of the model's ``f`` on all ``(B N, n)`` of them;
+    returned component-major (:func:`component_major`).  :class:`~workbench.types.InputError` naming ``who`` and
+    the model when ``f`` gives another shape."""
+    B, N, n = x.shape
+    moved = np.asarray(motion.f(np.asarray(x, dtype=float).reshape(B * N, n)), dtype=float)
+    if moved.shape != (B * N, n):
+        raise InputError(f"{who}: motion model {motion.name!r} gave f of shape {moved.shape} for particles "
+                         f"{(B * N, n)}; f must keep the shape (..., n)")
+    out = component_major(B, N, n)
+    out[...] = moved.reshape(B, N, n)
+    return out
+
+
 def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
             backend: str = "numpy") -> ParticleState:
     """``x_i <- F x_i + Q_sqrt e_i`` with ``e = rng.standard_normal((B, N, k))`` for the ``k`` non-zero columns of
-    ``Q_sqrt``; ``backend`` as in the module docstring (the same particles either way)."""
+    ``Q_sqrt``; ``backend`` as in the module docstring (the same particles either way).  A model that overrides
+    ``f``: ``x_i <- f(x_i) + Q_sqrt e_i``, the same draws, in NumPy whatever the backend."""
     need_rng(rng, "particle_core.predict")
     x = state.cloud.particles
     B, N, n = x.shape
+    if not motion.linear:
+        g = noise_columns(motion)
+        sources = [propagate_f(x, motion, "particle_core.predict")]
+        if g.shape[1]:
+            sources.append(rng.standard_normal((B, N, g.shape[1])))
+        # x_i <- f(x_i) + Q_sqrt e_i: [I | G] applied to [f(x_i), e_i]
+        moved = combine_columns(component_major(B, N, n), np.hstack([np.eye(n), g]), *sources)
+        return ParticleState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows)
     matrix, k = _propagation(motion)
     if compiled(backend):
         out = np.empty((n, B, N))

@@ -75,7 +75,8 @@ def piecewise_trajectory(position: Sequence[float], velocity: Sequence[float], l
 
 
 def sample_motion(x0: np.ndarray, motion: MotionModel, steps: int, rng: np.random.Generator) -> Truth:
-    """Random paths ``x_k = F x_{k-1} + Q_sqrt e_k`` from start states ``x0 (B, n)``; ``steps`` samples each."""
+    """Random paths ``x_k = f(x_{k-1}) + Q_sqrt e_k`` from start states ``x0 (B, n)``; ``steps`` samples each
+    (``f(x) = F x`` for a linear model, the model's own ``f`` where a subclass overrides it)."""
     x0 = np.atleast_2d(np.asarray(x0, dtype=float))
     B, n = x0.shape
     if n != motion.dim:
@@ -85,5 +86,6 @@ def sample_motion(x0: np.ndarray, motion: MotionModel, steps: int, rng: np.rando
     states = np.empty((B, steps, n))
     states[:, 0] = x0
     for k in range(1, steps):
-        states[:, k] = states[:, k - 1] @ motion.F.T + noise[:, k - 1]
+        moved = states[:, k - 1] @ motion.F.T if motion.linear else motion.f(states[:, k - 1])
+        states[:, k] = moved + noise[:, k - 1]
     return Truth(states, motion.dt * np.arange(steps))

@@ -22,7 +22,7 @@ import numpy as np
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.linalg import joseph_update, symmetrise
-from workbench.models import converted_covariance, polar_to_cartesian
+from workbench.models import converted_covariance, polar_to_cartesian, require_linear
 from workbench.params import Param
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError
@@ -33,7 +33,8 @@ def init(prior, rng=None):
 
 
 def predict(state, motion, rng=None):
-    return Gaussian(state.mean @ motion.F.T, symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q))
+    F = require_linear(motion, "alpha-beta")  # the transition matrix, or a named refusal of a nonlinear model
+    return Gaussian(state.mean @ F.T, symmetrise(F @ state.cov @ F.T + motion.Q))
 
 
 def _position_measurement(z, model, d):

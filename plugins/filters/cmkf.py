@@ -21,7 +21,8 @@ plugin does not accept that convention.)  ``sigma_r`` and ``sigma_b`` are read f
 the model's declared ``std`` (``sigma_b`` in radians) and the sensor position from its declared
 ``sensor_position``, as :func:`workbench.models.range_bearing` publishes them.
 
-Predict and update are :func:`workbench.kalman_core.linear_predict` and
+Predict and update are :func:`workbench.kalman_core.extended_predict` (the linear predict for a linear motion
+model; ``f`` and the model's ``jacobian`` for one that overrides ``f``, refused by name without a Jacobian) and
 :func:`workbench.kalman_core.linear_update` (the shared linear KF with a per-item ``R``).
 """
 
@@ -31,7 +32,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import single_measurement
-from workbench.kalman_core import linear_predict, linear_update
+from workbench.kalman_core import extended_predict, linear_update
 from workbench.models import MeasurementModel, MotionModel, converted_covariance, polar_to_cartesian
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Scan
@@ -56,7 +57,7 @@ def init(prior: Gaussian, rng=None) -> Gaussian:
 
 
 def predict(state: Gaussian, motion: MotionModel, rng=None) -> Gaussian:
-    return linear_predict(state, motion)
+    return extended_predict(state, motion, "cmkf-l")
 
 
 def update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:

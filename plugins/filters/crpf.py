@@ -1,7 +1,9 @@
 """Cost-reference particle filter (CRPF; Míguez, Bugallo & Djurić 2004; Table 6 of paper 003), batch-first.
 
 The CRPF needs no noise statistics: it never reads ``Q`` or ``R``.  It uses the motion model's ``F``
-(the noise-free prediction ``f``), the sensor's ``h`` and the sensor's angle-aware ``residual``.
+(the noise-free prediction ``f``), the sensor's ``h`` and the sensor's angle-aware ``residual``.  Its propagation
+(the fused kernel and the predicted belief ``F m``, ``F P F^T``) is written for a linear model: a motion model
+that overrides ``f`` is refused by name at ``predict``.
 Particles carry a cost instead of a likelihood weight, and (Table 6) a propagation variance of their own.
 For each measurement ``y_t`` (``t`` counts the propagations, ``t >= 1``)::
 
@@ -50,7 +52,7 @@ from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.kernels.counter_normals import draw_key
 from workbench.kernels.crpf_step import crpf_step, pmf_offset, propagation_normals
-from workbench.models import MeasurementModel, MotionModel
+from workbench.models import MeasurementModel, MotionModel, require_linear
 from workbench.params import Param
 from workbench.resampling import normalise_log_weights, systematic_resample
 from workbench.specs import FilterSpec
@@ -273,11 +275,13 @@ def _blind_move(state: CRPFState, rng: np.random.Generator, params: CRPFParams) 
                      state.blind_moves + rows.size)
 
 
-def predict(state: CRPFState, motion: MotionModel, rng: np.random.Generator, params: CRPFParams) -> CRPFState:
-    """Record ``F``; the predicted belief is ``N(F m, F P F^T + mean_i sigma_i^2 diag(s^2))``."""
+def predict(state: CRPFState, motion: MotionModel, rng: np.random.Generator, params: CRPFParams,
+            who: str = "crpf") -> CRPFState:
+    """Record ``F``; the predicted belief is ``N(F m, F P F^T + mean_i sigma_i^2 diag(s^2))``.  A motion model that
+    overrides ``f`` is refused naming the filter ``who`` and the model."""
+    F = np.asarray(require_linear(motion, who, "'sir' or 'ukf'"), dtype=float)
     if state.pending.any():
         state = _blind_move(state, rng, params)
-    F = np.asarray(motion.F, dtype=float)
     n = F.shape[0]
     spread = np.mean(state.variances, axis=1)  # (B,): the particles' mean propagation variance
     mean = state.belief.mean @ F.T
@@ -375,7 +379,7 @@ def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: flo
         summary=(f"Cost-reference particle filter, N={params.particles}, {params.cost} cost, lam={params.lam:g}, "
                  f"q={params.q:g}, beta={params.beta:g}, {params.delta_mode} delta={params.delta:g}, {spread}"),
         init=partial(init, params=params),
-        predict=partial(predict, params=params),
+        predict=partial(predict, params=params, who=name or f"crpf-{params.particles}"),
         update=partial(update, params=params),
         estimate=estimate,
         # the arc-length cost reads a range and a bearing: it needs a range-bearing sensor

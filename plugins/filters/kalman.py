@@ -2,9 +2,13 @@
 
 The state is a :class:`~workbench.types.Gaussian` with ``mean (B, n)`` and ``cov (B, n, n)``.
 
-Predict (both)::
+Predict (both, for a linear motion model)::
 
     x- = F x          P- = F P F^T + Q
+
+A motion model that overrides ``f`` (nonlinear): the KF refuses it by name; the EKF predicts ``x- = f(x)``,
+``P- = J P J^T + Q`` with the model's ``jacobian`` (:func:`workbench.kalman_core.extended_predict`), and refuses a
+model without one by name.
 
 Update::
 
@@ -22,7 +26,7 @@ from __future__ import annotations
 
 
 from workbench import hookimpl
-from workbench.kalman_core import ekf_update, kf_update, linear_predict
+from workbench.kalman_core import ekf_update, extended_predict, kf_update, linear_predict
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian
 
@@ -32,7 +36,11 @@ def init(prior: Gaussian, rng=None) -> Gaussian:
 
 
 def predict(state: Gaussian, motion, rng=None) -> Gaussian:
-    return linear_predict(state, motion)
+    return linear_predict(state, motion, "kf")
+
+
+def ekf_predict(state: Gaussian, motion, rng=None) -> Gaussian:
+    return extended_predict(state, motion, "ekf")
 
 
 def estimate(state: Gaussian) -> Gaussian:
@@ -49,7 +57,7 @@ KF = FilterSpec(
 EKF = FilterSpec(
     name="ekf",
     summary="Extended Kalman filter, Jacobian at the prediction, Joseph-form update",
-    init=init, predict=predict, update=ekf_update, estimate=estimate,
+    init=init, predict=ekf_predict, update=ekf_update, estimate=estimate,
     capabilities=frozenset({"gaussian", "exact_linear", "needs_jacobian", "detection_covariance"}),
 )
 

@@ -3,7 +3,9 @@
 State: :class:`workbench.particle_core.ParticleState` with particles ``(B, N, n)`` and normalised
 log-weights ``(B, N)``.
 
-Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal).
+Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal); for a motion model that overrides ``f``,
+``x_i <- f(x_i) + Q_sqrt e_i`` with the same draws, in NumPy whatever the backend
+(:func:`workbench.particle_core.predict`).
 Update:  ``log w_i <- log w_i + log N(z; h(x_i), R)`` with the residual wrapped for angular
 components (``R``: the detection's own covariance where the scan carries one); normalise with logsumexp;
 resample systematically where ``N_eff < threshold * N`` (``threshold > 1``, e.g. ``inf``, resamples at

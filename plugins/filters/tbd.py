@@ -86,10 +86,10 @@ from workbench.kalman_core import ekf_update, measurement_covariance
 from workbench.kernels.backend import BACKENDS
 from workbench.kernels.tbd_weights import PRECISIONS, tbd_log_weight_sums
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
-from workbench.models import MeasurementModel, MotionModel
+from workbench.models import MeasurementModel, MotionModel, require_jacobian
 from workbench.params import Param
 from workbench.particle_core import (ParticleState, combine_columns, component_major, diagnostics, estimate, init,
-                                     log_likelihood_cov, predict)
+                                     log_likelihood_cov, noise_columns, predict, propagate_f)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
 from workbench.specs import FilterSpec
@@ -241,6 +241,7 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
 
         m_i <- Markov(m_i),   x_i <- F x_i + (scale if m_i else 1) W^(1/2) e_i
 
+    (``f(x_i)`` in place of ``F x_i`` for a motion model that overrides ``f``, the same draws.)
     A particle that the detections select during a manoeuvre keeps a large noise for its
     descendants (mean sojourn ``1 / switch_off`` scans), so the cloud can follow a sustained turn.
 
@@ -254,11 +255,16 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     u = rng.random((B, N))
     # m <- 1 - m with probability switch_off (m = 1) or switch_on (m = 0)
     mode = np.where(u < np.where(mode > 0, switch_off, switch_on), 1.0 - mode, mode)
-    g = motion.Q_sqrt[:, np.flatnonzero(np.any(motion.Q_sqrt != 0.0, axis=0))]  # non-zero columns of W^(1/2)
+    g = noise_columns(motion)  # non-zero columns of W^(1/2)
     e = rng.standard_normal((B, N, g.shape[1]))
     e *= np.where(mode > 0, scale, 1.0)[..., None]
-    # x_i <- F x_i + s_i W^(1/2) e_i  (small products written out per component, no threaded BLAS call)
-    moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), x, e)
+    if motion.linear:
+        # x_i <- F x_i + s_i W^(1/2) e_i  (small products written out per component, no threaded BLAS call)
+        moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), x, e)
+    else:
+        # x_i <- f(x_i) + s_i W^(1/2) e_i
+        moved = combine_columns(component_major(B, N, n), np.hstack([np.eye(n), g]),
+                                propagate_f(x, motion, "the two-mode particle prediction"), e)
     return ModeState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows, mode)
 
 
@@ -582,13 +588,26 @@ def nis_init(prior: Gaussian, rng=None) -> AdaptiveGaussian:
     return AdaptiveGaussian(prior, np.zeros(prior.batch, dtype=bool))
 
 
-def nis_predict(state: AdaptiveGaussian, motion: MotionModel, rng=None, *, scale: float) -> AdaptiveGaussian:
-    """``x- = F x``, ``P- = F P F^T + q_b W`` with ``q_b = scale^2`` for an item in manoeuvre, else 1."""
+def nis_predict(state: AdaptiveGaussian, motion: MotionModel, rng=None, *, scale: float,
+                who: str = "ekf-nis") -> AdaptiveGaussian:
+    """``x- = F x``, ``P- = F P F^T + q_b W`` with ``q_b = scale^2`` for an item in manoeuvre, else 1.
+
+    A motion model that overrides ``f``: ``x- = f(x)``, ``P- = J P J^T + q_b W`` with the model's ``jacobian``
+    ``J`` at ``x`` (refused by name without one)."""
     g = state.gaussian
     q = np.where(state.manoeuvre, scale**2, 1.0)
-    mean = g.mean @ motion.F.T
-    # P- = F P F^T + q_b W
-    cov = symmetrise(motion.F @ g.cov @ motion.F.T + q[:, None, None] * motion.Q)
+    if motion.linear:
+        mean = g.mean @ motion.F.T
+        # P- = F P F^T + q_b W
+        cov = symmetrise(motion.F @ g.cov @ motion.F.T + q[:, None, None] * motion.Q)
+        return AdaptiveGaussian(Gaussian(mean, cov), state.manoeuvre)
+    J = np.asarray(require_jacobian(motion, who)(g.mean), dtype=float)
+    mean = np.asarray(motion.f(g.mean), dtype=float)  # x- = f(x)
+    if mean.shape != g.mean.shape or J.shape != g.cov.shape:
+        raise InputError(f"filter {who!r}: motion model {motion.name!r} gave f of shape {mean.shape} and a jacobian "
+                         f"of shape {J.shape} for states {g.mean.shape}")
+    # P- = J P J^T + q_b W
+    cov = symmetrise(J @ g.cov @ np.swapaxes(J, -1, -2) + q[:, None, None] * motion.Q)
     return AdaptiveGaussian(Gaussian(mean, cov), state.manoeuvre)
 
 
@@ -661,7 +680,7 @@ def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float 
         name=name or "ekf-nis",
         summary=f"EKF with NIS-switched process noise (x{manoeuvre_scale:g} above NIS {nis_threshold:.2f})",
         init=nis_init,
-        predict=partial(nis_predict, scale=manoeuvre_scale),
+        predict=partial(nis_predict, scale=manoeuvre_scale, who=name or "ekf-nis"),
         update=partial(nis_update, nis_threshold=nis_threshold),
         estimate=nis_estimate,
         capabilities=frozenset({"gaussian", "needs_jacobian", "detection_covariance", "clutter_density",

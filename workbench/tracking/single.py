@@ -152,7 +152,8 @@ class Gated(SingleTarget):
 
     Per scan: predict (from scan 1 on); the predicted position is ``F x_{k-1|k-1}``, the motion model's
     prediction of the last estimate (for a particle cloud the expectation of its predicted mean), so the
-    estimate is taken once per scan; gate; update.  ``pseudo`` returns the pseudo-measurement as a
+    estimate is taken once per scan; for a motion model that overrides ``f`` (not linear) it is the filter's own
+    estimate of its predicted state, never ``F x``; gate; update.  ``pseudo`` returns the pseudo-measurement as a
     :class:`~workbench.types.Scan` (with its own ``cov`` and ``clutter_density`` where it has them), or
     ``(Scan, MeasurementModel)`` when the model changes per scan.
 
@@ -182,8 +183,13 @@ class Gated(SingleTarget):
 
     def predicted_mean(self, carry, k):
         if k > 0:
+            motion = carry.extra["motion"]
+            if not motion.linear:
+                # a nonlinear model: the filter's own prediction (its F is not the model's transition)
+                carry.extra["previous"] = super().predicted_mean(carry, k)
+                return carry.extra["previous"]
             # p_{k|k-1} = F x_{k-1|k-1}
-            carry.extra["previous"] = carry.extra["previous"] @ carry.extra["motion"].F.T
+            carry.extra["previous"] = carry.extra["previous"] @ motion.F.T
         return carry.extra["previous"]
 
     def associate(self, carry, scan, k, predicted):
