@@ -92,10 +92,24 @@ def test_labels_seed_and_frame_faults_fail_their_own_checks():
         assert outcome.status == "failed" and text in outcome.message, (check, outcome)
 
 
+def test_a_generator_that_ignores_a_configured_value_fails_only_the_configured_values_check():
+    def fixed_power(truth, rng, rate=3.0, rate_factor=1.0, mean_power=10.0):  # the mean power is always 10
+        return wrong.generate_clutter(truth, rng, rate, rate_factor, 10.0)
+
+    outcomes = _outcomes(_generator(name="fixed-power", generate=fixed_power))
+    bad = outcomes["check_configured_values"]
+    assert bad.status == "failed" and "'mean_power' changed nothing in the clutter when configured from 10 to: 5 " \
+                                       "changed nothing; 16 changed nothing" in bad.message, bad
+    assert all(o.status == "passed" for k, o in outcomes.items() if k != "check_configured_values")
+    assert _outcomes(wrong.FAIR_CLUTTER)["check_configured_values"].message.startswith(
+        "3 parameters configured, each changed the clutter: rate -> ")
+
+
 def test_checks_follow_the_declarations():
     bare = _generator(expected_count=None, region=None, amplitude_cdf=None)
     names = {c.name for c in checks_for(bare)}
-    assert names == {"check_all_clutter", "check_same_seed_same_scans", "check_frame_respected", "check_parameters"}
+    assert names == {"check_all_clutter", "check_same_seed_same_scans", "check_frame_respected", "check_parameters",
+                     "check_configured_values"}
     skipped = _outcomes(bare)["check_count_poisson"]
     assert skipped.status == "skipped" and "needs a declared expected_count" in skipped.message
 

@@ -162,6 +162,23 @@ def test_parameters_are_refused_by_name():
         spec.configure(sigma="1 s")
 
 
+def test_a_model_that_ignores_its_configured_noise_fails_only_the_configured_values_check():
+    # R = 4 I whatever sigma is: right at the default (every other check passes), wrong once sigma is configured
+    def fixed_model(sigma=2.0, bias_sigmas=0.0):
+        return linear_measurement(np.eye(2, 4), 4.0 * np.eye(2), name="position", frame="cartesian-2d",
+                                  std=(2.0, 2.0))
+
+    spec = replace(wrong.FAIR_SENSOR, name="fixed-R", measurement_model=fixed_model)
+    outcomes = _outcomes(spec)
+    bad = outcomes["check_configured_values"]
+    assert bad.status == "failed" and "'sigma', declared affects='model', changed nothing in the published " \
+                                       "measurement model when configured from 2 to: 1 changed the simulated z" \
+                                       in bad.message, bad
+    assert all(o.status == "passed" for k, o in outcomes.items() if k != "check_configured_values")
+    assert _outcomes(wrong.FAIR_SENSOR)["check_configured_values"].message == (
+        "2 parameters configured, each changed what it declares: sigma -> R, std; bias_sigmas -> z")
+
+
 @parametrize_with_checks([wrong.FAIR_SENSOR])
 def test_parametrize_with_checks_takes_sensors(spec, check):
     check(spec)
@@ -181,4 +198,4 @@ def test_check_plugin_runs_the_sensor_kit(capsys):
     assert "PASSED   fair-position-check_centred_on_h: " in out
     assert "FAILED   biased-position-check_centred_on_h: check_centred_on_h: " in out
     assert "component 'x': mean residual +3.0" in out
-    assert "4 passed, 1 failed" in out
+    assert "5 passed, 1 failed" in out

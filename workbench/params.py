@@ -17,11 +17,38 @@ from typing import Any, Iterable, Mapping
 from .types import InputError
 from .units import DIMENSIONS, GENERIC_LIMIT, LIMITS, SI_LABELS, parse_quantity
 
-__all__ = ["Param", "check_value", "check_values", "infer_params", "describe", "format_value", "defaults",
-           "parse_reference", "split_list", "check_footprint", "memory_limit"]
+__all__ = ["Param", "AtLeast", "when_text", "when_example", "check_value", "check_values", "infer_params", "describe",
+           "format_value", "defaults", "parse_reference", "split_list", "check_footprint", "memory_limit"]
 
 #: The value types a parameter may declare.
 TYPES = ("float", "int", "bool", "str", "vector", "float?", "vector?")
+
+
+@dataclass(frozen=True)
+class AtLeast:
+    """A :attr:`Param.when` condition other than equality: the other parameter is at least ``value`` (e.g. a
+    site's detection probability matters only where there is at least one site: ``when={"sites": AtLeast(1)}``)."""
+
+    value: float
+
+    def holds(self, x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and x >= self.value
+
+    def example(self) -> float:
+        """A value that meets the condition (what a kit configures to try the parameter)."""
+        return self.value
+
+
+def when_text(key: str, want: Any) -> str:
+    """One :attr:`Param.when` condition in words: ``frame = polar``, ``sites >= 1``."""
+    if isinstance(want, AtLeast):
+        return f"{key} >= {format_value(want.value)}"
+    return f"{key} = {format_value(want)}"
+
+
+def when_example(want: Any) -> Any:
+    """A value that meets the :attr:`Param.when` condition ``want``."""
+    return want.example() if isinstance(want, AtLeast) else want
 
 
 @dataclass(frozen=True)
@@ -77,8 +104,8 @@ class Param:
     when : tuple of (name, value) pairs
         For ``"model"`` and ``"noise"``: the values of the component's other parameters under which this one
         reaches the model (all must hold; a mapping is accepted); otherwise it affects only the simulation, e.g.
-        ``when={"frame": "polar"}`` for the range sigma of a polar model that a ``frame`` parameter chooses.
-        Empty: always.
+        ``when={"frame": "polar"}`` for the range sigma of a polar model that a ``frame`` parameter chooses;
+        a value :class:`AtLeast` asks for at least that value instead of equality.  Empty: always.
     """
 
     name: str
@@ -129,6 +156,8 @@ class Param:
     def _same(value: Any, want: Any) -> bool:
         """Whether a value meets a :attr:`when` condition (``None`` only by ``None``; sequences element by
         element)."""
+        if isinstance(want, AtLeast):
+            return want.holds(value)
         if want is None or value is None:
             return value is None and want is None
         if isinstance(want, (list, tuple)):
@@ -138,12 +167,12 @@ class Param:
     @property
     def role(self) -> str:
         """What the parameter reaches, for listings: ``""`` for a plain model parameter, else e.g.
-        ``"simulation only"``, ``"model R"`` or ``"model R if frame = polar"``."""
+        ``"simulation only"``, ``"model R"``, ``"model R if frame = polar"`` or ``"only if sites >= 1"``."""
         if self.affects == "model" and not self.when:
             return ""
-        text = {"model": "model", "noise": "model R", "simulation": "simulation only"}[self.affects]
+        text = {"model": "", "noise": "model R", "simulation": "simulation only"}[self.affects]
         if self.when:
-            text += " if " + ", ".join(f"{key} = {format_value(want)}" for key, want in self.when)
+            text += (" if " if text else "only if ") + ", ".join(when_text(key, want) for key, want in self.when)
         return text
 
     @property

@@ -29,7 +29,7 @@ from .filtering import run_filter
 from .frames import FRAMES, check_same_frame
 from .metrics import position_sq_error
 from .models import MotionModel, constant_velocity, random_walk_velocity, range_rate_model
-from .params import memory_limit
+from .params import memory_limit, when_text
 from .plugins import PluginHost
 from .rng import generator
 from .trajectory import Leg, piecewise_trajectory, sample_motion
@@ -456,7 +456,7 @@ def _check_sensor_keys(path: Path, file: Path, spec, plugin: str, given: Mapping
     for p in chosen:
         unmet = p.unmet(effective)
         if unmet:
-            needs = ", ".join(f"{key} = {format_value(want)}" for key, want in p.when)
+            needs = ", ".join(when_text(key, want) for key, want in p.when)
             now = ", ".join(f"{key} = {format_value(effective.get(key))}" for key, _ in unmet)
             raise InputError(f"{path}: [sensor] {said([p])} enters the measurement model of sensor {plugin!r} only "
                              f"if {needs} (here {now}), else it only shapes simulated detections, which the recorded "

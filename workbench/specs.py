@@ -7,6 +7,8 @@ report recipes, the CLI and the test kit.  See ``docs/writing-a-plugin.md``.
 
 from __future__ import annotations
 
+import functools
+import inspect
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
@@ -66,8 +68,87 @@ def configured_name(base: str, changed: Mapping[str, Any]) -> str:
     return f"{base}(" + ", ".join(f"{k}={format_value(v)}" for k, v in changed.items()) + ")"
 
 
+class BoundFunction:
+    """A component's function with the component's current ``params`` as the values of every parameter the caller
+    does not pass: ``spec.simulate(truth, rng)`` simulates with the spec's configured values, and
+    ``spec.simulate(truth, rng, sigma_r=2.0)`` with 2.0 for ``sigma_r`` and the spec's values for the rest.
+
+    A sensor, clutter generator or remover spec wraps its functions in this when it is made (so
+    :meth:`SensorSpec.configure` and ``dataclasses.replace(spec, params=...)`` bind the new values); the plugin's
+    own function is :attr:`raw`, and the wrapper reports its name, module and docstring
+    (:func:`functools.update_wrapper`), so report fingerprints and listings see the plugin's function.  Two bound
+    functions are equal when their raw functions are, bound to equal values.
+    """
+
+    def __init__(self, raw: Callable[..., Any], params: Mapping[str, Any] | None):
+        functools.update_wrapper(self, raw)
+        self.raw = raw
+        self.params = params if isinstance(params, Mapping) else {}
+        try:
+            signature = inspect.signature(raw)
+        except (TypeError, ValueError):  # no signature to read (a builtin): every value goes by keyword
+            self._positional: tuple[str, ...] = ()
+        else:
+            self._positional = tuple(n for n, q in signature.parameters.items()
+                                     if q.kind in (q.POSITIONAL_ONLY, q.POSITIONAL_OR_KEYWORD))
+            # help() and inspect.signature show the values it is bound to as the defaults
+            try:
+                self.__signature__ = signature.replace(parameters=[
+                    q.replace(default=self.params[n]) if n in self.params and q.kind not in (q.VAR_POSITIONAL,
+                                                                                             q.VAR_KEYWORD) else q
+                    for n, q in signature.parameters.items()])
+            except ValueError:  # a bound value before a parameter without default: show the plugin's own
+                pass
+
+    def __call__(self, *args, **kwargs):
+        # the caller's positional arguments fill the first parameters; the spec's values fill every parameter
+        # neither they nor the caller's keywords give
+        taken = self._positional[:len(args)]
+        values = {k: v for k, v in self.params.items() if k not in kwargs and k not in taken}
+        return self.raw(*args, **values, **kwargs)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, BoundFunction):
+            return NotImplemented
+        return self.raw == other.raw and _same_values(self.params, other.params)
+
+    def __hash__(self) -> int:
+        try:
+            return hash(self.raw)
+        except TypeError:  # an unhashable callable object
+            return id(self.raw)
+
+    def __repr__(self) -> str:
+        return f"<{getattr(self.raw, '__qualname__', self.raw)!s} bound to {dict(self.params)!r}>"
+
+    def __reduce__(self):
+        return BoundFunction, (self.raw, self.params)
+
+
+def _same_values(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    if a is b:
+        return True
+    try:
+        return bool(dict(a) == dict(b))
+    except (TypeError, ValueError):  # values that do not compare to one bool (arrays)
+        return dict(a).keys() == dict(b).keys() and all(
+            np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
+
+
 class _Configurable:
     """What every component spec shares: declared parameters, their current values, one checked way in."""
+
+    #: The names of the spec's functions that take the parameters as keywords (``**params``); each is bound to
+    #: ``params`` when the spec is made (:class:`BoundFunction`).
+    _BOUND: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in self._BOUND:
+            fn = getattr(self, name)
+            if isinstance(fn, BoundFunction):  # a replace() or configure(): bind the plugin's own function again
+                fn = fn.raw
+            if callable(fn):  # anything else is left for the host's load check to name
+                object.__setattr__(self, name, BoundFunction(fn, self.params))
 
     @property
     def declared(self) -> tuple[Param, ...]:
@@ -189,6 +270,10 @@ class SensorSpec(_Configurable):
         the covariance of the simulated noise of each target detection, for a sensor whose simulation noise is
         not its model's ``R`` (accuracy that follows each detection's SNR, or a filters' ``R`` tuned apart from
         the simulation); ``None``: the simulation noise is ``R``.  The sensor kit's chi-square test uses it.
+
+    The plugin passes its own functions; the spec binds each of them to ``params`` (:class:`BoundFunction`), so
+    ``spec.measurement_model()`` and ``spec.simulate(truth, rng)`` use the spec's current (configured) values
+    for every parameter the caller does not pass, and keywords the caller passes win.
     """
 
     name: str
@@ -202,6 +287,7 @@ class SensorSpec(_Configurable):
     noise_cov: Callable[..., np.ndarray] | None = None
 
     kind = "sensor"
+    _BOUND = ("measurement_model", "simulate", "truth_to_state", "noise_cov")
 
     def configure(self, **values) -> "SensorSpec":
         """This sensor with some parameter values set (checked, converted to SI)."""
@@ -224,6 +310,9 @@ class ClutterGeneratorSpec(_Configurable):
     ``expected_count(truth, **params) -> (B, T)``, ``region(truth, **params) -> (low, high)`` (each ``(B, T, m)``,
     ``(T, m)`` or ``(m,)``: inclusive bounds of every component) and ``amplitude_cdf(snr_db, **params) ->
     P(Scans.snr <= snr_db)`` are optional declarations for the clutter kit (:mod:`workbench.testing.clutter`).
+
+    Each of these functions is bound to ``params`` (:class:`BoundFunction`): called without a parameter, it uses
+    the spec's current (configured) value; a keyword the caller passes wins.
     """
 
     name: str
@@ -237,6 +326,7 @@ class ClutterGeneratorSpec(_Configurable):
     amplitude_cdf: Callable[..., np.ndarray] | None = None
 
     kind = "clutter generator"
+    _BOUND = ("generate", "expected_count", "region", "amplitude_cdf")
 
     def configure(self, **values) -> "ClutterGeneratorSpec":
         """This clutter model with some parameter values set (checked, converted to SI)."""
@@ -254,7 +344,8 @@ class ClutterRemoverSpec(_Configurable):
     A remover must be causal (the decision for scan ``k`` uses scans ``<= k`` only) and must not read
     ``scans.origin``.  It may also replace the detections it keeps (e.g. project them onto a line it found), when
     a declared parameter asks for it; it never adds rows.  ``frames`` lists the measurement frames it works in
-    (empty: any).
+    (empty: any).  ``remove`` is bound to ``params`` (:class:`BoundFunction`): ``spec.remove(scans)`` uses the
+    spec's current (configured) values.
     """
 
     name: str
@@ -265,6 +356,7 @@ class ClutterRemoverSpec(_Configurable):
     frames: tuple[str, ...] = ()
 
     kind = "clutter remover"
+    _BOUND = ("remove",)
 
     def configure(self, **values) -> "ClutterRemoverSpec":
         """This remover with some parameter values set (checked, converted to SI)."""

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from workbench import hookimpl
-from workbench.params import Param
+from workbench.params import AtLeast, Param
 from workbench.specs import ClutterGeneratorSpec
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
@@ -94,9 +94,11 @@ PARAMETERS = (
     Param("rate_scale", 1.0, "factor on the clutter rate", unit="dimensionless", minimum=0.0, maximum=1e6),
     Param("persistent_sites", 0, "stationary clutter sites per run (e.g. wrecks, rocks)", "int", unit="dimensionless",
           minimum=0, maximum=10**6),
+    # these two shape the clutter only where there is at least one site
     Param("persistent_pd", 0.7, "probability that a site is seen per ping", unit="dimensionless", minimum=0.0,
-          maximum=1.0),
-    Param("persistent_sigma", 2.0, "position noise of a site's detections", unit="length", minimum=0.0),
+          maximum=1.0, when={"persistent_sites": AtLeast(1)}),
+    Param("persistent_sigma", 2.0, "position noise of a site's detections", unit="length", minimum=0.0,
+          when={"persistent_sites": AtLeast(1)}),
 )
 
 #: How far (in site sigmas) the declared region reaches beyond the area for the persistent sites' detections.

@@ -21,15 +21,17 @@ from scipy import stats
 
 from ..frames import FRAMES
 from ..rng import generator
-from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec
+from ..params import format_value, when_example
+from ..specs import BoundFunction, ClutterGeneratorSpec, ClutterRemoverSpec
 from ..types import CLUTTER, Scans, Truth
 from ._common import Check, Outcome, check_parameters, fail, frame_problems, kit_truth, normal_p, poisson_p, \
     run_kit, scans_equal
+from .sensors import trial_values
 
 __all__ = ["GENERATOR_CHECKS", "REMOVER_CHECKS", "generator_checks_for", "remover_checks_for",
            "run_generator_checks", "run_remover_checks", "remover_scene", "check_count_poisson",
            "check_inside_region", "check_amplitude_law", "check_all_clutter", "check_causal",
-           "check_never_reads_origin", "check_only_narrows"]
+           "check_never_reads_origin", "check_only_narrows", "check_generator_configured_values"]
 
 #: Scans of the count test: RUNS x STEPS = 2,000.
 RUNS, STEPS = 40, 50
@@ -234,6 +236,113 @@ def check_generator_frame(spec: ClutterGeneratorSpec) -> str:
     return f"{spec.detection_frame()!r} points of dimension {scans.z.shape[-1]}"
 
 
+#: The truth of the configured-values check: runs x steps, dt seconds apart.
+EFFECT_RUNS, EFFECT_STEPS, EFFECT_DT = 4, 30, 5.0
+
+
+def _declared_problems(configured: ClutterGeneratorSpec, truth: Truth, seed: int) -> tuple[Scans, list[str]]:
+    """The configured generator's scans, and where it called without parameters is not its plugin's functions
+    called with its ``params``."""
+    params = dict(configured.params)
+    out = []
+    a = configured.generate(truth, generator(seed, "clutter-kit", "configured"))
+    b = _raw(configured.generate)(truth, generator(seed, "clutter-kit", "configured"), **params)
+    if scans_equal(a, b):
+        out.append(f"generate(truth, rng) differs from the plugin's generate(truth, rng, **params) in "
+                   f"{', '.join(scans_equal(a, b))}")
+    snr = np.linspace(-10.0, 40.0, 11)
+    for field, args in (("expected_count", (truth,)), ("region", (truth,)), ("amplitude_cdf", (snr,))):
+        fn = getattr(configured, field)
+        if fn is not None and not _same_output(fn(*args), _raw(fn)(*args, **params)):
+            out.append(f"{field}() differs from the plugin's {field}(..., **params)")
+    return a, out
+
+
+def _same_output(x, y) -> bool:
+    if isinstance(x, tuple) and isinstance(y, tuple):
+        return len(x) == len(y) and all(_same_output(u, v) for u, v in zip(x, y))
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    return x.shape == y.shape and bool(np.array_equal(x, y, equal_nan=True))
+
+
+def _raw(fn):
+    return fn.raw if isinstance(fn, BoundFunction) else fn
+
+
+def check_generator_configured_values(spec: ClutterGeneratorSpec) -> str:
+    """Every declared parameter, configured (``spec.configure(name=value)``) to another valid value, changes the
+    clutter the generator makes (the same seed, 4 test paths of 30 scans 5 s apart), and the configured generator
+    called without parameters (``generate(truth, rng)``, ``expected_count``, ``region``, ``amplitude_cdf``) equals its
+    plugin's own functions called with the configured ``params``.
+
+    A parameter with :attr:`~workbench.params.Param.when` conditions (the settings in which it has an effect, e.g. a
+    site's detection probability when there are sites) is tried with them met.  The values tried are those of
+    :func:`workbench.testing.sensors.trial_values` that pass the declaration; the check passes a parameter at the
+    first one that changes the clutter.  A parameter with no other valid value is not tried."""
+    name = "check_configured_values"
+    declared = spec.declared
+    problems, tried, untried = [], [], []
+    seed = 9
+    for p in declared:
+        conds = {key: when_example(want) for key, want in p.when}
+        try:
+            base = spec.configure(**conds) if conds else spec
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"{p.name!r}: its when conditions {conds} are refused: {exc}")
+            continue
+        value = base.params.get(p.name, p.default)
+        values = []
+        for v in trial_values(p, value):
+            try:
+                base.check(**{p.name: v})
+            except Exception:  # noqa: BLE001 - not a valid value of this parameter: try another
+                continue
+            values.append(v)
+        if not values:
+            untried.append(p.name)
+            continue
+        try:
+            truth = kit_truth(base.detection_frame(), EFFECT_RUNS, EFFECT_STEPS, seed, dt=EFFECT_DT)
+            before = base.generate(truth, generator(seed, "clutter-kit", "configured"))
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"{p.name!r}: no test truth or clutter with {conds or 'its values'}: "
+                            f"{type(exc).__name__}: {exc}")
+            continue
+        found, notes = None, []
+        for v in values:
+            try:
+                configured = base.configure(**{p.name: v})
+                after, wrong = _declared_problems(configured, truth, seed)
+            except Exception as exc:  # noqa: BLE001
+                notes.append(f"{format_value(v)}: {type(exc).__name__}: {exc}")
+                continue
+            changed = scans_equal(before, after)
+            if configured.detection_frame() != base.detection_frame():
+                changed.append("frame")
+            if changed or wrong:
+                found = (v, changed, wrong)
+                break
+            notes.append(f"{format_value(v)} changed nothing")
+        where = f" (with {', '.join(f'{k} = {format_value(w)}' for k, w in conds.items())})" if conds else ""
+        if found is None:
+            problems.append(f"{p.name!r}{where} changed nothing in the clutter when configured from "
+                            f"{format_value(value)} to: " + "; ".join(notes))
+            continue
+        v, changed, wrong = found
+        if wrong:
+            problems.append(f"{p.name!r} = {format_value(v)}{where}: the configured generator called without "
+                            f"parameters is not its plugin's functions called with the configured params: "
+                            + "; ".join(wrong))
+            continue
+        tried.append(f"{p.name} -> {', '.join(changed)}")
+    if problems:
+        raise fail(name, f"{len(problems)} of {len(declared)} parameters are not honoured when configured: "
+                   + "; ".join(problems) + "; a parameter that has an effect only in some settings declares them "
+                                           "with Param.when")
+    skipped = f"; not tried (no other valid value): {', '.join(untried)}" if untried else ""
+    return f"{len(tried)} parameters configured, each changed the clutter: " + "; ".join(tried) + skipped
+
+
 def _parameters(spec) -> str:
     """Every declared default passes its own declaration, and so does the current value; a NaN, a quantity in a
     wrong unit, a string outside the choices and an undeclared key are each refused by ``spec.configure`` with
@@ -252,6 +361,8 @@ GENERATOR_CHECKS: tuple[Check, ...] = (
     Check("check_same_seed_same_scans", check_generator_same_seed.__doc__, lambda s: True, check_generator_same_seed),
     Check("check_frame_respected", check_generator_frame.__doc__, lambda s: True, check_generator_frame),
     Check("check_parameters", _parameters.__doc__, lambda s: True, _parameters),
+    Check("check_configured_values", check_generator_configured_values.__doc__, lambda s: bool(s.declared),
+          check_generator_configured_values, "declared parameters"),
 )
 
 

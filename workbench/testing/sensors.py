@@ -20,18 +20,21 @@ some of them.  What a sensor must declare for the kit:
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from ..frames import FRAMES
+from ..params import format_value, when_example
 from ..rng import generator
-from ..specs import SensorSpec
+from ..specs import BoundFunction, SensorSpec
 from ..types import Scans, Truth
 from ._common import Check, Outcome, chi2_p, check_parameters, fail, frame_problems, kit_truth, normal_p, run_kit, \
     scans_equal
 
 __all__ = ["SENSOR_CHECKS", "sensor_checks_for", "run_sensor_checks", "check_centred_on_h",
-           "check_same_seed_same_scans", "check_frame_respected", "check_origin_labels", "check_sensor_parameters"]
+           "check_same_seed_same_scans", "check_frame_respected", "check_origin_labels", "check_sensor_parameters",
+           "check_configured_values", "trial_values", "model_view", "views_differ"]
 
 #: Test paths and scans of the chi-square test: up to RUNS x STEPS target detections.
 RUNS, STEPS = 100, 20
@@ -239,6 +242,220 @@ def check_origin_labels(spec: SensorSpec) -> str:
     return f"{n} valid detections, every one labelled 0 (the truth's index)"
 
 
+# -- configured values -----------------------------------------------------------------------------------------
+
+#: The truth of the configured-values check: runs x steps, dt seconds apart (0 to 295 s, so parameters of time,
+#: such as the times at which a target's aspect changes, are crossed).
+EFFECT_RUNS, EFFECT_STEPS, EFFECT_DT = 20, 60, 5.0
+
+
+def trial_values(param, value) -> list:
+    """Other valid-looking values of ``param`` than its current ``value``, in the order a kit tries them: the
+    other choices (or ``not value``); for a number ``value / 2``, ``1.5 value + 1`` and ``value + 100 (|value| + 1)``
+    (each moved half-way back towards ``value`` where it passes a declared bound); for an integer ``value + 1`` and
+    ``2 value + 1``; for a vector the same element by element; for an optional value ``None`` or a number.  The
+    caller still checks each against the declaration (:meth:`workbench.specs.SensorSpec.check`)."""
+    if param.type == "bool":
+        return [not value] if isinstance(value, bool) else [True, False]
+    if param.type == "str":
+        return [c for c in (param.choices or ()) if c != value]
+    low, high = param.bounds
+
+    def inside(x: float, v: float) -> float:  # half-way from v to the bound x passes
+        return (v + high) / 2 if x > high else (v + low) / 2 if x < low else x
+
+    def numbers(v: float) -> list[float]:
+        if param.type == "int":
+            return [inside(v + 1, v), inside(2 * v + 1, v)]
+        return [inside(0.5 * v, v), inside(1.5 * v + 1.0, v), inside(v + 100.0 * (abs(v) + 1.0), v)]
+
+    if value is None:
+        if param.type == "vector?":
+            n = param.length or (len(param.default) if isinstance(param.default, (tuple, list)) else 0)
+            return [tuple(min(max(1.0, low), high) for _ in range(n))] if n else []
+        seeds = [param.default] if param.default is not None else []
+        return [min(max(float(v), low), high) for v in seeds + [1.0, 10.0]]
+    if param.type in ("vector", "vector?"):
+        out = [tuple(column) for column in zip(*(numbers(float(v)) for v in value))] if len(value) else []
+    else:
+        out = numbers(float(value))
+        out = [int(round(v)) for v in out] if param.type == "int" else out
+    if param.type.endswith("?"):
+        out.append(None)
+    unique = []
+    for v in out:
+        if v != (tuple(value) if isinstance(value, list) else value) and v not in unique:
+            unique.append(v)
+    return unique
+
+
+def _view(value) -> Any:
+    return value if value is None or isinstance(value, str) else np.asarray(value, dtype=float)
+
+
+def model_view(model, states: np.ndarray) -> dict[str, Any]:
+    """Everything a filter can read from a measurement model, evaluated at ``states (..., n)``: its name, frame,
+    angular components, ``h``, the Jacobian, ``R``, ``H``, ``std``, ``sensor_position`` and its detection law at fixed
+    SNRs, ranges and positions; an evaluation that raises is held as its error text."""
+    def call(fn, *args):
+        try:
+            return _view(fn(*args))
+        except Exception as exc:  # noqa: BLE001 - a changed error is a changed model
+            return f"{type(exc).__name__}: {exc}"
+
+    x = np.asarray(states, dtype=float)
+    view: dict[str, Any] = {"name": model.name, "frame": model.frame, "angular": _view(model.angular),
+                            "h": call(model.h, x), "R": _view(model.R), "H": _view(model.H), "std": _view(model.std),
+                            "sensor_position": _view(model.sensor_position)}
+    if model.jacobian is not None:
+        view["jacobian"] = call(model.jacobian, x.reshape(-1, x.shape[-1]))
+    d = model.detection
+    if d is not None:
+        snr, ranges = np.array([3.0, 8.0, 15.0, 25.0]), np.array([500.0, 5e3, 2e4, 6e4])
+        view.update(log_pd=call(d.log_pd, snr), position_sigma=call(d.position_sigma, snr, ranges),
+                    doppler_sigma=_view(d.doppler_sigma), pfa=_view(d.pfa))
+        position = x[..., :3] if x.shape[-1] >= 6 else np.array([[1e3, 2e3, 300.0], [2e4, -1e4, 3e3]])
+        for name, args in (("nominal_snr_db", (position,)), ("log_detection", (snr,)),
+                           ("log_snr_density", (snr, snr[::-1])), ("clutter_log_snr_density", (snr,))):
+            fn = getattr(d, name, None)
+            if fn is not None:
+                view[name] = call(fn, *args)
+    return view
+
+
+def views_differ(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """The entries of two model views that differ (NaN equals NaN)."""
+    def same(x, y) -> bool:
+        if isinstance(x, np.ndarray) and isinstance(y, np.ndarray):
+            return x.shape == y.shape and bool(np.array_equal(x, y, equal_nan=True))
+        return type(x) is type(y) and x == y  # names, frames, error texts, None
+
+    return sorted(k for k in a.keys() | b.keys() if k not in a or k not in b or not same(a[k], b[k]))
+
+
+def _raw(fn):
+    """The plugin's own function behind a spec's bound function."""
+    return fn.raw if isinstance(fn, BoundFunction) else fn
+
+
+def _configured_problems(configured: SensorSpec, truth: Truth, states, seed: int) -> list[str]:
+    """Where ``configured`` called without parameters is not its plugin's functions called with its ``params``."""
+    out = []
+    params = dict(configured.params)
+    bound = model_view(configured.measurement_model(), states)
+    raw = model_view(_raw(configured.measurement_model)(**params), states)
+    if views_differ(bound, raw):
+        out.append(f"measurement_model() differs from the plugin's measurement_model(**params) in "
+                   f"{', '.join(views_differ(bound, raw))}")
+    a = configured.simulate(truth, generator(seed, "sensor-kit", "configured"))
+    b = _raw(configured.simulate)(truth, generator(seed, "sensor-kit", "configured"), **params)
+    if scans_equal(a, b):
+        out.append(f"simulate(truth, rng) differs from the plugin's simulate(truth, rng, **params) in "
+                   f"{', '.join(scans_equal(a, b))}")
+    if configured.truth_to_state is not None and not np.array_equal(
+            np.asarray(configured.truth_to_state(truth.states)),
+            np.asarray(_raw(configured.truth_to_state)(truth.states, **params))):
+        out.append("truth_to_state(states) differs from the plugin's truth_to_state(states, **params)")
+    if configured.noise_cov is not None and not np.array_equal(
+            np.asarray(configured.noise_cov(truth, a)), np.asarray(_raw(configured.noise_cov)(truth, a, **params)),
+            equal_nan=True):
+        out.append("noise_cov(truth, scans) differs from the plugin's noise_cov(truth, scans, **params)")
+    return out
+
+
+def check_configured_values(spec: SensorSpec) -> str:
+    """Every declared parameter, configured (``spec.configure(name=value)``) to another valid value, changes what the
+    sensor publishes or simulates as its declared role says, and the configured sensor called without parameters
+    (``measurement_model()``, ``simulate(truth, rng)``, ``truth_to_state``, ``noise_cov``) equals its plugin's own
+    functions called with the configured ``params``.
+
+    Roles (:attr:`workbench.params.Param.affects`): a ``"simulation"`` parameter must change the simulated
+    detections (the same seed, 20 test paths of 60 scans 5 s apart); a ``"noise"`` one the published model's ``R``; a
+    ``"model"`` one something a filter reads from the model (``h``, the Jacobian, ``R``, frame, sensor position,
+    detection law).  A parameter with :attr:`~workbench.params.Param.when` conditions is tried with them met.  The
+    values tried are :func:`trial_values` that pass the declaration; the check passes a parameter at the first one
+    that has an effect.  A parameter with no other valid value (a single choice, a free string) is not tried."""
+    name = "check_configured_values"
+    declared = spec.declared
+    roles = bool(spec.parameters)  # inferred declarations carry no role: any effect will do
+    problems, tried, untried = [], [], []
+    seed = 8
+    for p in declared:
+        conds = {key: when_example(want) for key, want in p.when}
+        try:
+            base = spec.configure(**conds) if conds else spec
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"{p.name!r}: its when conditions {conds} are refused: {exc}")
+            continue
+        value = base.params.get(p.name, p.default)
+        values = []
+        for v in trial_values(p, value):
+            try:
+                base.check(**{p.name: v})
+            except Exception:  # noqa: BLE001 - not a valid value of this parameter: try another
+                continue
+            values.append(v)
+        if not values:
+            untried.append(p.name)
+            continue
+        try:
+            truth = kit_truth(base.detection_frame(), EFFECT_RUNS, EFFECT_STEPS, seed,
+                              centre=base.measurement_model().sensor_position, dt=EFFECT_DT)
+            states = truth.states[:4, ::10]
+            if base.truth_to_state is not None:
+                states = np.asarray(base.truth_to_state(states), dtype=float)
+            before_model = model_view(base.measurement_model(), states)
+            before_scans = base.simulate(truth, generator(seed, "sensor-kit", "configured"))
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"{p.name!r}: no test truth, model or detections of the sensor with "
+                            f"{conds or 'its values'}: {type(exc).__name__}: {exc}")
+            continue
+        role = p.affects if roles else "any"
+        found, notes = None, []
+        for v in values:
+            try:
+                configured = base.configure(**{p.name: v})
+                wrong = _configured_problems(configured, truth, states, seed)
+                if configured.detection_frame() != base.detection_frame():
+                    found = (v, [f"detection frame {configured.detection_frame()!r}"], wrong)
+                    break
+                model = views_differ(before_model, model_view(configured.measurement_model(), states))
+                scans = scans_equal(before_scans, configured.simulate(truth, generator(seed, "sensor-kit",
+                                                                                      "configured")))
+            except Exception as exc:  # noqa: BLE001
+                notes.append(f"{format_value(v)}: {type(exc).__name__}: {exc}")
+                continue
+            effect = (scans if role == "simulation" else ["R"] if role == "noise" and "R" in model else
+                      [] if role == "noise" else model if role == "model" else model + scans)
+            if effect or wrong:
+                found = (v, effect, wrong)
+                break
+            seen = ([f"the model's {', '.join(model)}"] if model else []) + (
+                [f"the simulated {', '.join(scans)}"] if scans else [])
+            notes.append(f"{format_value(v)} changed " + (" and ".join(seen) or "nothing"))
+        where = f" (with {', '.join(f'{k} = {format_value(w)}' for k, w in conds.items())})" if conds else ""
+        if found is None:
+            what = {"simulation": "the simulated detections", "noise": "the published model's R",
+                    "model": "the published measurement model", "any": "the model or the detections"}[role]
+            problems.append(f"{p.name!r}{where}, declared affects={p.affects!r}, changed nothing in {what} when "
+                            f"configured from {format_value(value)} to: " + "; ".join(notes))
+            continue
+        v, effect, wrong = found
+        if wrong:
+            problems.append(f"{p.name!r} = {format_value(v)}{where}: the configured sensor called without "
+                            f"parameters is not its plugin's functions called with the configured params: "
+                            + "; ".join(wrong))
+            continue
+        tried.append(f"{p.name} -> {', '.join(effect)}")
+    if problems:
+        hint = ("; a parameter that shapes only the simulated detections declares affects='simulation', one that "
+                "reaches the model only in some settings declares them with Param.when")
+        raise fail(name, f"{len(problems)} of {len(declared)} parameters are not honoured when configured: "
+                   + "; ".join(problems) + hint)
+    skipped = f"; not tried (no other valid value): {', '.join(untried)}" if untried else ""
+    return f"{len(tried)} parameters configured, each changed what it declares: " + "; ".join(tried) + skipped
+
+
 def check_sensor_parameters(spec: SensorSpec) -> str:
     """Every declared default passes its own declaration, and so does the current value; a NaN, a quantity in a
     wrong unit, a string outside the choices and an undeclared key are each refused by ``spec.configure`` with
@@ -254,6 +471,8 @@ SENSOR_CHECKS: tuple[Check, ...] = (
     Check("check_frame_respected", check_frame_respected.__doc__, lambda s: True, check_frame_respected),
     Check("check_origin_labels", check_origin_labels.__doc__, lambda s: True, check_origin_labels),
     Check("check_parameters", check_sensor_parameters.__doc__, lambda s: True, check_sensor_parameters),
+    Check("check_configured_values", check_configured_values.__doc__, lambda s: bool(s.declared),
+          check_configured_values, "declared parameters"),
 )
 
 
