@@ -23,6 +23,8 @@ def test_builtins_load_through_entry_points():
     ("teleport", broken_plugins.UNKNOWN_HOOK, "not a workbench hook"),
     ("raiser", broken_plugins.RAISES, "boom from a plugin"),
     ("wrongtype", broken_plugins.WRONG_TYPE, "expected FilterSpec"),
+    ("typo", broken_plugins.MISSPELT_CAPABILITY, "unknown capabilities ['gausian'] (known: clutter_density, "),
+    ("typo", broken_plugins.MISSPELT_CAPABILITY, "'gausian': did you mean 'gaussian'?"),
 ])
 def test_broken_plugin_is_reported_and_the_rest_work(name, obj, fragment):
     host = load_host(extra_plugins=[(name, obj)])

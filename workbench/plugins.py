@@ -6,6 +6,7 @@ arrive the same way, through the entry-point group ``workbench``.
 
 from __future__ import annotations
 
+import difflib
 import os
 import traceback
 from dataclasses import dataclass, field
@@ -16,7 +17,8 @@ import pluggy
 
 from . import hookspecs
 from .params import check_value
-from .specs import BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
+from .specs import (CAPABILITIES, BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec,
+                    SensorSpec)
 from .types import InputError
 
 __all__ = ["PluginInfo", "PluginHost", "load_host", "blocked_from_env", "UnknownComponent", "BUILTIN_DISTRIBUTION"]
@@ -337,6 +339,12 @@ def _declaration_problem(spec) -> str:
     for name in REQUIRED_FUNCTIONS.get(type(spec), ()):
         if not callable(getattr(spec, name, None)):
             return f"its {name!r} is not a function (got {type(getattr(spec, name, None)).__name__})"
+    if isinstance(spec, FilterSpec):  # a misspelt capability would silently switch kit checks off
+        unknown = sorted(set(spec.capabilities) - set(CAPABILITIES))
+        if unknown:
+            close = {c: difflib.get_close_matches(c, sorted(CAPABILITIES), n=1) for c in unknown}
+            hints = "".join(f"; {c!r}: did you mean {m[0]!r}?" for c, m in close.items() if m)
+            return (f"unknown capabilities {unknown} (known: {', '.join(sorted(CAPABILITIES))}){hints}")
     parameters = getattr(spec, "parameters", None)
     if not parameters:
         return ""

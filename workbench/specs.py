@@ -58,6 +58,9 @@ CAPABILITIES = {
     "clutter_density": "update accounts for clutter with the scan's declared clutter density (Scan.clutter_density)",
     "ignores_noise_statistics": "the filter never reads Q or R (e.g. a cost-reference particle filter), so handing it "
                                 "other noise statistics changes nothing",
+    "manoeuvre_modes": "the filter carries a manoeuvre mode of its own (a jump-Markov or NIS-switched model), so a "
+                       "recipe hands it the quiet motion model instead of one with the manoeuvres' noise moment-matched "
+                       "in",
 }
 
 
