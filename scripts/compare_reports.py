@@ -25,7 +25,7 @@ import numpy as np
 
 TIMING = re.compile(r"(second|time|\(s\)|\(ms\)|\bms\b|\bus\b|µs|speed|wall|cpu|per run|_s$|_s_)", re.IGNORECASE)
 #: Cells that hold a criterion's verdict word rather than a number (the verdict format is the report's, not a result).
-VERDICT_WORDS = {"met", "not met", "NOT met", "inconclusive", "not attainable", "indicative"}
+VERDICT_WORDS = {"met", "not met", "NOT met", "inconclusive", "not attainable", "not judgeable", "indicative"}
 
 
 def _close(a, b, rtol: float) -> tuple[bool, float]:

@@ -9,13 +9,17 @@ import pytest
 from scipy.stats import binom
 
 from workbench.criteria import (
+    VERDICTS,
     Criterion,
+    Precondition,
     binomial_interval,
     bootstrap_interval,
     criterion_from_counts,
     criterion_from_runs,
     judge,
+    reference_converged,
     replication_rate,
+    rows_track,
 )
 
 
@@ -239,3 +243,110 @@ def test_replication_rate_counts_how_often_the_criterion_holds():
     holds, of = replication_rate(x, 20, lambda b: b.mean() > 0, replications=50, seed=0)
     assert of == 50 and 30 <= holds <= 50  # P(mean of 20 > 0) = Phi(0.3 * sqrt(20)) = 0.91
     assert replication_rate(x, 20, lambda b: b.mean() > 0, replications=50, seed=0) == (holds, of)
+
+
+# -- preconditions: "not judgeable" ------------------------------------------------------------------------
+
+def test_a_failed_precondition_makes_every_verdict_not_judgeable():
+    fails = Precondition("judged rows track", False, "lost runs A 20/20 (100 %)")
+    holds = Precondition("reference converged", True, "1.001 [0.99, 1.01]")
+    assert "not judgeable" in VERDICTS
+    for verdict in ("met", "not met", "inconclusive", "not attainable", True, False):
+        c = Criterion("1", "x", verdict, preconditions=(holds, fails))
+        assert c.verdict == "not judgeable" and not c.met
+        assert c.failed_preconditions == (fails,)
+        assert c.verdict_if_judged == {True: "met", False: "not met"}.get(verdict, verdict)
+    # all preconditions hold: the verdict stands
+    assert Criterion("1", "x", "met", preconditions=(holds,)).verdict == "met"
+    # no path back to "met" while a precondition fails: a replaced verdict is overridden again
+    from dataclasses import replace
+
+    c = Criterion("1", "x", "met", preconditions=(fails,))
+    again = replace(c, verdict="not attainable")
+    assert again.verdict == "not judgeable" and again.verdict_if_judged == "not attainable"
+    # quick mode keeps it; summary.json round-trips it, preconditions and numbers included
+    assert c.as_indicative().verdict == "not judgeable"
+    d = json.loads(json.dumps(c.to_dict()))
+    assert d["verdict"] == "not judgeable" and d["met"] is False
+    assert d["preconditions"] == [{"name": "judged rows track", "holds": False, "detail": "lost runs A 20/20 (100 %)",
+                                   "values": {}}]
+    assert Criterion.from_dict(d) == c
+    # "not judgeable" must name a failed precondition
+    with pytest.raises(ValueError, match="needs a failed precondition"):
+        Criterion("1", "x", "not judgeable")
+    with pytest.raises(ValueError, match="needs a failed precondition"):
+        Criterion("1", "x", "not judgeable", preconditions=(holds,))
+
+
+def test_rows_track_counts_the_lost_runs_of_each_row():
+    lost = {"A": np.ones(20, dtype=bool), "B": np.r_[np.ones(2, bool), np.zeros(18, bool)],
+            "C": np.zeros(20, dtype=bool)}
+    p = rows_track(lost, 0.10)
+    assert not p.holds and p.name == "judged rows track"
+    assert p.values["rows"] == {"A": {"lost": 20, "runs": 20, "share": 1.0}, "B": {"lost": 2, "runs": 20, "share": 0.1},
+                                "C": {"lost": 0, "runs": 20, "share": 0.0}}
+    assert p.values["above"] == ["A"] and p.values["max_share"] == 0.1  # B at exactly the share is allowed
+    assert p.detail == ("lost runs A 20/20 (100 %), B 2/20 (10 %), C 0/20 (0 %); each judged row may lose at most "
+                        "10 % of its runs; above it: A")
+    assert rows_track({"B": lost["B"], "C": lost["C"]}, 0.10).holds
+    assert not rows_track({"B": lost["B"]}, 0.05).holds
+    assert not rows_track({"A": np.zeros(0, dtype=bool)}, 0.5).holds  # a row with no runs does not track
+    assert rows_track({"A": [0, 1, 0, 0]}, 0.25).values["rows"]["A"]["lost"] == 1  # 0/1 flags read as bools
+    with pytest.raises(ValueError, match="max_share"):
+        rows_track(lost, 1.5)
+    with pytest.raises(ValueError, match="one bool per run"):
+        rows_track({"A": np.zeros((2, 3), dtype=bool)}, 0.5)
+
+
+def test_reference_converged_is_a_paired_ratio_within_the_tolerance():
+    from scipy.stats import bootstrap
+
+    rng = np.random.default_rng(3)
+    at_4n = rng.lognormal(3.0, 0.4, 100)
+    # 4N particles lower every run's error by the same 8 %: every resample's ratio is 1.08 exactly
+    p = reference_converged(1.08 * at_4n, at_4n, particles=5000, tolerance=0.05, min_n=100)
+    assert not p.holds and p.values["ratio"] == pytest.approx(1.08)
+    assert p.values["interval"] == pytest.approx([1.08, 1.08]) and p.values["particles_4n"] == 20000
+    assert p.values["band"] == [0.95, 1.05] and p.values["n"] == 100
+    assert p.detail.startswith("mean error of the reference at N = 5000 / at 4N = 20000 on the same 100 runs: 1.08")
+    # a 1 % change with a 1 % run-to-run scatter: converged
+    near = at_4n * 1.01 * rng.lognormal(0.0, 0.01, 100)
+    p = reference_converged(near, at_4n, particles=5000, tolerance=0.05, min_n=100, seed=1)
+    assert p.holds
+    # the interval is the paired percentile bootstrap of mean(N) / mean(4N): scipy's agrees to its resampling noise
+    ref = bootstrap((near, at_4n), lambda a, b, axis=-1: a.mean(axis=axis) / b.mean(axis=axis), paired=True,
+                    method="percentile", n_resamples=20000, random_state=np.random.default_rng(0)).confidence_interval
+    assert p.values["interval"] == pytest.approx([ref.low, ref.high], abs=2e-3)
+    # too few runs: convergence is not shown, however close the two are
+    few = reference_converged(near[:20], at_4n[:20], particles=5000, tolerance=0.05, min_n=100)
+    assert not few.holds and "needs n >= 100" in few.detail
+    # runs differing one by one with equal means: a wide interval, not shown to converge
+    wide = reference_converged(at_4n[::-1], at_4n, particles=100, tolerance=0.05)
+    assert wide.values["ratio"] == pytest.approx(1.0) and wide.values["interval"][1] > 1.05 and not wide.holds
+    with pytest.raises(ValueError, match="same runs"):
+        reference_converged(at_4n[:10], at_4n, particles=5000, tolerance=0.05)
+    with pytest.raises(ValueError, match="tolerance"):
+        reference_converged(at_4n, at_4n, particles=5000, tolerance=0.0)
+
+
+def test_a_criterion_fed_diverged_rows_or_an_unconverged_reference_is_not_judgeable():
+    rng = np.random.default_rng(5)
+    # A/C >= 1.3 from A's diverged runs (tens of km) against C's tracked ones (about 100 m): the numbers say "met"
+    a = rng.uniform(30e3, 45e3, 100)
+    c = rng.uniform(80.0, 120.0, 100)
+    lost = {"A": a > 3e3, "C": c > 3e3}
+    crit = criterion_from_runs("2", "A/C >= 1.3", (a, c), lambda x, y: x.mean() / y.mean(), 1.3, ">=", min_n=20,
+                               preconditions=(rows_track(lost, 0.10),))
+    assert crit.verdict == "not judgeable" and crit.verdict_if_judged == "met" and crit.interval[0] > 1.3
+    assert "A 100/100 (100 %)" in crit.failed_preconditions[0].detail
+    # "not attainable" resting on a reference that 4N particles improve by 8 %
+    ref = rng.lognormal(3.0, 0.3, 100)
+    unconverged = reference_converged(ref, ref / 1.08, particles=5000, tolerance=0.05, min_n=100)
+    crit = criterion_from_counts("4", "beats the reference", 10, 100, 0.5, ">=", min_n=20,
+                                 preconditions=(unconverged,))
+    assert crit.verdict == "not judgeable" and crit.verdict_if_judged == "not met"
+    assert Criterion("4", "x", "not attainable", preconditions=(unconverged,)).verdict == "not judgeable"
+    # both preconditions holding leave the verdict as the numbers give it
+    ok = criterion_from_runs("2", "A/C >= 1.3", (a, c), lambda x, y: x.mean() / y.mean(), 1.3, ">=", min_n=20,
+                             preconditions=(rows_track({"A": c > 3e3, "C": c > 3e3}, 0.10),))
+    assert ok.verdict == "met" and ok.met

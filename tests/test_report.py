@@ -349,3 +349,45 @@ def test_a_recipe_whose_figure_and_table_share_an_id_is_refused():
         RecipeSpec("x", "t", {"quick": {}}, lambda options: [], figures=(fig,), tables=(table,))
     RecipeSpec("x", "t", {"quick": {}}, lambda options: [], figures=(fig,),
                tables=(TableSpec("gospa-table", "a table", table.make),))
+
+
+def test_scoreboard_and_at_a_glance_show_not_judgeable_with_the_failed_precondition(tmp_path, demo_host):
+    from dataclasses import replace
+
+    from fixtures import demo_plugin
+    from workbench.criteria import criterion_from_runs, rows_track
+    from workbench.report.engine import ReportOutcome, run_recipe
+    from workbench.report.html import write_index, write_summary
+
+    def criteria(results):
+        a, c = np.full(20, 39e3), np.linspace(90.0, 110.0, 20)
+        track = rows_track({"A": a > 3e3, "C": c > 3e3}, 0.1)
+        return [criterion_from_runs("1", "A/C >= 1.3", (a, c), lambda x, y: x.mean() / y.mean(), 1.3, ">=",
+                                    min_n=20, preconditions=(track,)),
+                criterion_from_runs("2", "C below 200 m", c, np.mean, 200.0, "<", min_n=20,
+                                    preconditions=(rows_track({"C": c > 3e3}, 0.1),))]
+
+    paper = run_recipe(replace(demo_plugin.RECIPE, criteria=criteria), demo_host, tmp_path, size="full",
+                       progress=False)
+    report = ReportOutcome(tmp_path, [paper], 0.0, "", 0, "full")
+    write_summary(report, demo_host)
+    write_index(report, demo_host)
+    crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
+    assert crit["1"]["verdict"] == "not judgeable" and crit["1"]["met"] is False
+    assert crit["1"]["extra"]["verdict_if_judged"] == "met"
+    (pre,) = crit["1"]["preconditions"]
+    assert pre["name"] == "judged rows track" and pre["holds"] is False
+    assert pre["values"]["rows"]["A"] == {"lost": 20, "runs": 20, "share": 1.0}
+    assert crit["2"]["verdict"] == "met" and crit["2"]["preconditions"][0]["holds"] is True
+    index = (tmp_path / "index.html").read_text()
+    board = index.split("id='paperdemo-scoreboard'")[1].split("id='paperdemo-differs'")[0]
+    assert board.count(">not judgeable</span>") == 1 and board.count(">met</span>") == 1
+    assert "row-not-judgeable" in board and "failed: judged rows track" in board and "numbers alone: met" in board
+    assert "precondition fails: judged rows track (lost runs A 20/20 (100 %), C 0/20 (0 %)" in board
+    assert "precondition holds: judged rows track (lost runs C 0/20 (0 %)" in board
+    glance = index.split("id='overview'")[1].split("<section")[0]
+    assert "<th class='num'>not judgeable</th>" in glance and "not judgeable: failed precondition" in glance
+    assert "<span class='badge v-not-judgeable'>1</span>" in glance
+    assert "<b>judged rows track</b> fails for 1" in glance
+    nav = index.split("<nav")[1].split("</nav>")[0]
+    assert "1 not judgeable" in nav

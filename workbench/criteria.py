@@ -7,7 +7,15 @@ Every recipe's ``criteria(results)`` returns a list of :class:`Criterion`.  A ve
 - ``"not met"``: the whole interval lies on the failing side;
 - ``"inconclusive"``: the interval straddles the threshold, or fewer runs than the criterion needs;
 - ``"not attainable"``: the criterion cannot be met by any method on this set-up (the evidence, for example a
-  near-optimal reference, is in ``detail``).
+  near-optimal reference, is in ``detail``);
+- ``"not judgeable"``: a :class:`Precondition` of the criterion fails (the judged rows lose their tracks, the
+  reference has not converged...): the numbers cannot speak to the paper's claim, so the criterion is neither met,
+  not met nor inconclusive.  The failed preconditions, with their numbers, are in ``preconditions``.
+
+A criterion declares what must hold for it to be judged as a tuple of :class:`Precondition` records.  Where any
+fails, the record's verdict *is* ``"not judgeable"`` whatever verdict it was built with (that verdict is kept in
+``extra["verdict_if_judged"]``): no construction path can give a *met* (or *not met*) beside a failed
+precondition.  :func:`rows_track` and :func:`reference_converged` build the two preconditions the papers use.
 
 A quick report never says *met*: the report engine marks every quick-mode verdict ``indicative``.
 
@@ -19,7 +27,10 @@ The functions below build criteria honestly from per-run data:
 - :func:`criterion_from_runs` and :func:`criterion_from_counts`: a :class:`Criterion` with ours, n, the
   interval and the verdict filled in;
 - :func:`replication_rate`: how often the criterion, computed the paper's way on a few runs, holds in
-  independent, disjoint batches of runs.
+  independent, disjoint batches of runs;
+- :func:`rows_track` and :func:`reference_converged`: the preconditions "the judged rows track" (a stated share
+  of lost runs at most, per row, with the counts) and "the reference has converged" (the reference at N against
+  4N on the same runs, a paired ratio within a stated tolerance, with its interval).
 
 Samples are given with the runs on the first axis.  A *tuple* of arrays is a paired sample: every array
 holds the same runs (for example the errors of methods A and C on the same simulated tracks), and a
@@ -35,11 +46,58 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["VERDICTS", "DIRECTIONS", "Criterion", "bootstrap_interval", "binomial_interval", "judge",
-           "criterion_from_runs", "criterion_from_counts", "replication_rate", "RUNS_DETAIL", "COUNTS_DETAIL"]
+__all__ = ["VERDICTS", "NOT_JUDGEABLE", "DIRECTIONS", "Criterion", "Precondition", "bootstrap_interval",
+           "binomial_interval", "judge", "criterion_from_runs", "criterion_from_counts", "replication_rate",
+           "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL"]
+
+#: The verdict of a criterion whose precondition fails.
+NOT_JUDGEABLE = "not judgeable"
 
 #: The verdicts a criterion may carry.
-VERDICTS = ("met", "not met", "inconclusive", "not attainable")
+VERDICTS = ("met", "not met", "inconclusive", "not attainable", NOT_JUDGEABLE)
+
+
+@dataclass(frozen=True)
+class Precondition:
+    """What must hold for a criterion to be judged at all, evaluated on our numbers.
+
+    Attributes
+    ----------
+    name : str
+        What must hold, e.g. ``"judged rows track"``.
+    holds : bool
+        Whether it holds.
+    detail : str
+        The numbers it was decided on, in words (counts, the ratio and its interval, the stated limit).
+    values : dict
+        The same numbers, JSON-ready, for a machine reader.
+    """
+
+    name: str
+    holds: bool
+    detail: str = ""
+    values: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not str(self.name).strip():
+            raise ValueError("a precondition needs a name")
+        object.__setattr__(self, "holds", bool(self.holds))
+        object.__setattr__(self, "values", _plain(dict(self.values or {})))
+
+    def text(self) -> str:
+        """``"NAME holds (DETAIL)"`` or ``"NAME fails (DETAIL)"``."""
+        state = "holds" if self.holds else "fails"
+        return f"{self.name} {state}" + (f" ({self.detail})" if self.detail else "")
+
+    def to_dict(self) -> dict:
+        """``name, holds, detail, values`` (JSON-ready)."""
+        return {"name": self.name, "holds": self.holds, "detail": self.detail, "values": _plain(self.values)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Precondition":
+        """Rebuild a precondition written by :meth:`to_dict` (unknown keys are ignored)."""
+        return cls(str(data["name"]), bool(data["holds"]), str(data.get("detail", "")),
+                   dict(data.get("values") or {}))
 
 
 @dataclass(frozen=True)
@@ -79,6 +137,13 @@ class Criterion:
         The statistics sentence :func:`criterion_from_runs` / :func:`criterion_from_counts` wrote (ours, the
         interval and its method, the passing condition, the runs needed), which ``detail`` contains; a reader that
         shows those numbers in columns of its own takes it out of ``detail`` (the report's scoreboard).
+    extra : dict
+        Further numbers of the recipe's own; ``"verdict_if_judged"`` holds the verdict the numbers gave when a
+        precondition fails.
+    preconditions : tuple of Precondition
+        What must hold for the criterion to be judged.  Where any fails the verdict is ``"not judgeable"``
+        (set here, whatever verdict the record was built with); ``"not judgeable"`` without a failed
+        precondition is refused.
     """
 
     id: str
@@ -96,6 +161,7 @@ class Criterion:
     method: str | None = None
     statistics: str = ""
     extra: dict = field(default_factory=dict)
+    preconditions: tuple[Precondition, ...] = ()
 
     def __post_init__(self) -> None:
         verdict = self.verdict
@@ -103,6 +169,19 @@ class Criterion:
             verdict = "met" if bool(verdict) else "not met"
         if verdict not in VERDICTS:
             raise ValueError(f"criterion {self.id!r}: verdict must be one of {VERDICTS}, got {verdict!r}")
+        pre = self.preconditions
+        if isinstance(pre, (Precondition, Mapping)):
+            pre = (pre,)
+        pre = tuple(p if isinstance(p, Precondition) else Precondition.from_dict(p) for p in (pre or ()))
+        object.__setattr__(self, "preconditions", pre)
+        failed = [p.name for p in pre if not p.holds]
+        if failed and verdict != NOT_JUDGEABLE:
+            # a failed precondition overrides any verdict: the numbers' own verdict is kept, never shown as one
+            object.__setattr__(self, "extra", {**self.extra, "verdict_if_judged": verdict})
+            verdict = NOT_JUDGEABLE
+        elif verdict == NOT_JUDGEABLE and not failed:
+            raise ValueError(f"criterion {self.id!r}: the verdict {NOT_JUDGEABLE!r} needs a failed precondition "
+                             "naming why")
         object.__setattr__(self, "verdict", verdict)
         if self.interval is not None:
             lo, hi = (float(v) for v in self.interval)
@@ -112,6 +191,16 @@ class Criterion:
     def met(self) -> bool:
         """True only for a firm ``"met"`` outside quick mode."""
         return self.verdict == "met" and not self.indicative
+
+    @property
+    def failed_preconditions(self) -> tuple[Precondition, ...]:
+        """The preconditions that fail (empty unless the verdict is ``"not judgeable"``)."""
+        return tuple(p for p in self.preconditions if not p.holds)
+
+    @property
+    def verdict_if_judged(self) -> str | None:
+        """For a criterion that is not judgeable, the verdict its numbers alone would have given."""
+        return self.extra.get("verdict_if_judged") if self.verdict == NOT_JUDGEABLE else None
 
     @property
     def quick_verdict(self) -> str | None:
@@ -144,9 +233,11 @@ class Criterion:
         -------
         dict
             ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication, min_n,
-            method, statistics, detail, extra``; numpy scalars become Python numbers, tuples become lists.
+            method, statistics, detail, extra, preconditions`` (each ``name, holds, detail, values``); numpy
+            scalars become Python numbers, tuples become lists.
         """
-        out = {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
+        out = {f.name: _plain(getattr(self, f.name)) for f in fields(self) if f.name != "preconditions"}
+        out["preconditions"] = [p.to_dict() for p in self.preconditions]
         out["met"] = bool(self.met)
         return out
 
@@ -170,6 +261,7 @@ class Criterion:
                 kw[key] = tuple(kw[key])
         if kw.get("extra") is None:
             kw["extra"] = {}
+        kw["preconditions"] = tuple(Precondition.from_dict(p) for p in kw.get("preconditions") or ())
         return cls(**kw)
 
 
@@ -408,7 +500,8 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
                         threshold: float | tuple[float, float], direction: str, *, min_n: int,
                         published: Any = None, detail_fmt: str = RUNS_DETAIL, level: float = 0.95,
                         resamples: int = 2000, seed: int | None = 0, threshold_text: str | None = None,
-                        replication: tuple[int, int] | None = None) -> Criterion:
+                        replication: tuple[int, int] | None = None,
+                        preconditions: tuple[Precondition, ...] = ()) -> Criterion:
     """A :class:`Criterion` judged from per-run data: ours, n, a bootstrap interval and the verdict.
 
     Parameters
@@ -435,6 +528,9 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
         The passing condition in words (default e.g. ``">= 1.3"``).
     replication : (int, int), optional
         ``(holds, of)`` from :func:`replication_rate`.
+    preconditions : tuple of Precondition
+        What must hold for the criterion to be judged (e.g. :func:`rows_track`); where any fails the verdict is
+        ``"not judgeable"``.
 
     Returns
     -------
@@ -456,13 +552,14 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
     return Criterion(id, text, verdict, detail_fmt.format(**values), ours=ours, published=published, n=n,
                      interval=interval, threshold=thr, replication=replication, min_n=min_n,
                      method=None if no_interval else f"percentile bootstrap, {resamples} resamples",
-                     statistics=statistics)
+                     statistics=statistics, preconditions=tuple(preconditions))
 
 
 def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float | tuple[float, float],
                           direction: str, *, min_n: int, published: Any = None, detail_fmt: str = COUNTS_DETAIL,
                           level: float = 0.95, threshold_text: str | None = None,
-                          replication: tuple[int, int] | None = None) -> Criterion:
+                          replication: tuple[int, int] | None = None,
+                          preconditions: tuple[Precondition, ...] = ()) -> Criterion:
     """A :class:`Criterion` on a proportion ``k / n`` of runs, with the exact binomial interval.
 
     Parameters
@@ -471,7 +568,7 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
         The criterion's id and statement.
     k, n : int
         Runs in which the event happened, and runs in all.
-    threshold, direction, min_n, published, level, threshold_text, replication
+    threshold, direction, min_n, published, level, threshold_text, replication, preconditions
         As in :func:`criterion_from_runs` (the threshold is a proportion in [0, 1]).
     detail_fmt : str
         Format of ``detail``; fields ``k, n, ours, lo, hi, min_n, pct, threshold, verdict``.  The record also
@@ -490,7 +587,8 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
                   verdict=verdict)
     return Criterion(id, text, verdict, detail_fmt.format(**values), ours=ours, published=published, n=int(n),
                      interval=interval, threshold=thr, replication=replication, min_n=min_n,
-                     method="exact, Clopper-Pearson", statistics=COUNTS_DETAIL.format(**values))
+                     method="exact, Clopper-Pearson", statistics=COUNTS_DETAIL.format(**values),
+                     preconditions=tuple(preconditions))
 
 
 def replication_rate(samples: Any, protocol_runs: int, holds_fn: Callable[..., bool], replications: int = 50,
@@ -532,3 +630,117 @@ def replication_rate(samples: Any, protocol_runs: int, holds_fn: Callable[..., b
         idx = order[b * protocol_runs:(b + 1) * protocol_runs]
         holds += bool(holds_fn(*(a[idx] for a in arrays)))
     return (holds, batches)
+
+
+# -- preconditions ------------------------------------------------------------------------------------------
+
+def rows_track(lost: Mapping[str, Any], max_share: float, *, name: str = "judged rows track") -> Precondition:
+    """The precondition "the judged rows track": each row loses at most ``max_share`` of its runs.
+
+    Parameters
+    ----------
+    lost : mapping
+        Row label -> per-run lost flags (bool array, one per run) of the runs the criterion judges.
+    max_share : float
+        The largest share of lost runs, in [0, 1], a row may have and still be judged.
+    name : str
+        The precondition's name.
+
+    Returns
+    -------
+    Precondition
+        Holds when every row has at least one run and ``lost / runs <= max_share``; ``detail`` gives every row's
+        count (``"A 20/20 (100 %)"``), the limit and the rows above it; ``values`` holds ``max_share``, per row
+        ``lost, runs, share`` and the list ``above``.
+
+    Examples
+    --------
+    >>> p = rows_track({"A": [True, True, False, True], "C": [False] * 4}, 0.5)
+    >>> p.holds, p.values["rows"]["A"]["lost"], p.values["above"]
+    (False, 3, ['A'])
+    """
+    if not 0.0 <= float(max_share) <= 1.0:
+        raise ValueError(f"max_share must be in [0, 1], got {max_share!r}")
+    if not lost:
+        raise ValueError("rows_track needs at least one row's lost flags")
+    rows: dict[str, dict] = {}
+    for label, flags in lost.items():
+        f = np.asarray(flags)
+        if f.ndim != 1 or not (f.dtype == bool or np.isin(f, (0, 1)).all()):
+            raise ValueError(f"row {label!r}: lost flags must be one bool per run, got shape {f.shape}, "
+                             f"dtype {f.dtype}")
+        k, n = int(np.count_nonzero(f)), int(f.size)
+        rows[str(label)] = {"lost": k, "runs": n, "share": k / n if n else math.nan}
+    above = [label for label, r in rows.items() if not (r["runs"] > 0 and r["share"] <= max_share)]
+    counts = ", ".join(f"{label} {r['lost']}/{r['runs']}"
+                       + (f" ({100 * r['share']:.0f} %)" if r["runs"] else " (no runs)") for label, r in rows.items())
+    detail = f"lost runs {counts}; each judged row may lose at most {100 * float(max_share):g} % of its runs"
+    if above:
+        detail += f"; above it: {', '.join(above)}"
+    return Precondition(name, not above, detail, {"max_share": float(max_share), "rows": rows, "above": above})
+
+
+def _mean_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.mean(a) / np.mean(b))
+
+
+def reference_converged(at_n: Any, at_4n: Any, *, particles: int, tolerance: float, min_n: int | None = None,
+                        level: float = 0.95, resamples: int = 2000, seed: int | None = 0,
+                        what: str = "mean error", name: str = "reference converged") -> Precondition:
+    """The precondition "the reference has converged": the reference at N against 4N on the same runs.
+
+    The statistic is the paired ratio ``mean(at_n) / mean(at_4n)`` of a per-run error (for example each run's
+    time-averaged MSE), with a paired percentile bootstrap interval (:func:`bootstrap_interval`).  The reference
+    has converged when the whole interval lies within ``[1 - tolerance, 1 + tolerance]``: four times the
+    particles changes its error by less than the tolerance.
+
+    Parameters
+    ----------
+    at_n, at_4n : array_like
+        Per-run errors of the reference with ``particles`` and with ``4 * particles``, on the same runs (the same
+        truths and measurements) in the same order.
+    particles : int
+        N, the reference's particle count.
+    tolerance : float
+        The largest relative change of the error from N to 4N, in (0, 1).
+    min_n : int, optional
+        The fewest runs from which convergence may be shown; with fewer it is not shown (the precondition fails).
+    level, resamples, seed
+        Passed to :func:`bootstrap_interval`.
+    what : str
+        The per-run error's name, for the detail (e.g. ``"MSE"``).
+    name : str
+        The precondition's name.
+
+    Returns
+    -------
+    Precondition
+        ``values``: ``particles, particles_4n, n, ratio, interval, tolerance, band, min_n``.
+
+    Examples
+    --------
+    >>> p = reference_converged([1.0, 2.0, 3.0, 4.0], [1.0, 2.0, 3.0, 4.0], particles=100, tolerance=0.05)
+    >>> p.holds, p.values["ratio"]
+    (True, 1.0)
+    """
+    if not 0.0 < float(tolerance) < 1.0:
+        raise ValueError(f"tolerance must be in (0, 1), got {tolerance!r}")
+    a, b = np.asarray(at_n, dtype=float), np.asarray(at_4n, dtype=float)
+    if a.ndim != 1 or a.shape != b.shape:
+        raise ValueError(f"the reference at N and at 4N need one error per run on the same runs, got shapes "
+                         f"{a.shape} and {b.shape}")
+    n = int(a.size)
+    ratio = _mean_ratio(a, b) if n else math.nan
+    interval = bootstrap_interval((a, b), _mean_ratio, level=level, resamples=resamples, seed=seed)
+    band = (1.0 - float(tolerance), 1.0 + float(tolerance))
+    enough = min_n is None or n >= min_n
+    holds = enough and judge(interval, band, "within") == "met"
+    detail = (f"{what} of the reference at N = {particles} / at 4N = {4 * particles} on the same {n} runs: "
+              f"{ratio:.4g}, {100 * level:g} % interval [{interval[0]:.4g}, {interval[1]:.4g}] (paired percentile "
+              f"bootstrap, {resamples} resamples); converged if the interval lies within "
+              f"[{band[0]:g}, {band[1]:g}]")
+    if not enough:
+        detail += f"; needs n >= {min_n}"
+    return Precondition(name, holds, detail, {"particles": int(particles), "particles_4n": 4 * int(particles),
+                                              "n": n, "ratio": ratio, "interval": list(interval),
+                                              "tolerance": float(tolerance), "band": list(band), "min_n": min_n})

@@ -86,10 +86,15 @@ table.scoreboard td.num .detail{white-space:normal;text-align:right}
 .v-not-met{background:#fbe1e0;color:#9b1c1c;border-color:#eba7a3}
 .v-inconclusive{background:#fff1c9;color:#6e4e00;border-color:#e9cf79}
 .v-not-attainable{background:#e7e8ee;color:#464a5c;border-color:#c3c6d2}
+.v-not-judgeable{background:#f3e6f5;color:#6a2a73;border-color:#cfa6d6}
 tr.row-met>td:first-child{box-shadow:inset 4px 0 #2e8b4a}
 tr.row-not-met>td:first-child{box-shadow:inset 4px 0 #c0392b}
 tr.row-inconclusive>td:first-child{box-shadow:inset 4px 0 #d4a20a}
 tr.row-not-attainable>td:first-child{box-shadow:inset 4px 0 #7c8196}
+tr.row-not-judgeable>td:first-child{box-shadow:inset 4px 0 #8e44ad}
+table.scoreboard .pre{font-size:.8rem;margin-top:.2rem}
+table.scoreboard .pre.fail{color:#6a2a73;font-weight:600}
+table.scoreboard .pre.ok{color:var(--muted)}
 .ind{display:inline-block;margin-top:.2rem;font-size:.74rem;color:#6e4e00;border:1px dashed #d4a20a;
   border-radius:4px;padding:0 .3rem;white-space:nowrap}
 .would{font-size:.76rem;color:var(--muted);margin-top:.15rem}
@@ -141,8 +146,8 @@ _SCRIPT = """
 """
 
 _CLASS = {"met": "v-met", "not met": "v-not-met", "inconclusive": "v-inconclusive",
-          "not attainable": "v-not-attainable"}
-_ORDER = ("met", "not met", "inconclusive", "not attainable")
+          "not attainable": "v-not-attainable", "not judgeable": "v-not-judgeable"}
+_ORDER = ("met", "not met", "inconclusive", "not attainable", "not judgeable")
 
 
 # -- values --------------------------------------------------------------------------------------------------
@@ -348,12 +353,21 @@ def _scoreboard(p) -> str:
         if c.interval is not None and not any(math.isnan(v) for v in c.interval):
             interval = f"[{format_value(c.interval[0])}, {format_value(c.interval[1])}]"
         verdict = _badge(c.verdict)
+        failed = _failed_preconditions(c)
+        if failed:
+            verdict += f"<div class='would'>failed: {_esc(', '.join(p.name for p in failed))}</div>"
+            if _verdict_if_judged(c):
+                verdict += f"<div class='would'>numbers alone: {_esc(_verdict_if_judged(c))}</div>"
         if c.indicative:
             verdict += "<br><span class='ind'>indicative (quick run)</span>"
             if c.quick_verdict == "met":
                 verdict += "<div class='would'>quick-run numbers pass</div>"
         explanation, method, min_n = scoreboard_detail(c)
         statement = _esc(c.text) + (f"<div class='detail'>{_esc(explanation)}</div>" if explanation else "")
+        statement += "".join(
+            f"<div class='pre {'ok' if p.holds else 'fail'}'>precondition {'holds' if p.holds else 'fails'}: "
+            f"{_esc(p.name)}{f' ({_esc(p.detail)})' if p.detail else ''}</div>"
+            for p in getattr(c, "preconditions", ()))
         row = [c.id, c.text, c.verdict, c.ours, c.published, c.n, interval, c.threshold or None]
         n_cell = None
         if min_n is not None and c.n is not None:
@@ -379,6 +393,27 @@ def _scoreboard(p) -> str:
     if with_rep:
         numeric[8] = False
     return _table(columns, rows, cls="scoreboard", row_classes=classes, html_cells=cells, numeric=numeric)
+
+
+def _failed_preconditions(c) -> tuple:
+    return tuple(p for p in getattr(c, "preconditions", ()) if not p.holds)
+
+
+def _verdict_if_judged(c) -> str | None:
+    return c.extra.get("verdict_if_judged") if c.verdict == "not judgeable" else None
+
+
+def _not_judgeable_cell(criteria) -> tuple[str | None, str]:
+    """The at-a-glance cell of a paper's criteria that are not judgeable: per failed precondition, the criteria ids
+    (text, html); ``(None, "n/a")`` when every criterion could be judged."""
+    by_name: dict[str, list[str]] = {}
+    for c in criteria:
+        for p in _failed_preconditions(c):
+            by_name.setdefault(p.name, []).append(str(c.id))
+    if not by_name:
+        return None, "n/a"
+    text = "; ".join(f"{name}: {', '.join(ids)}" for name, ids in by_name.items())
+    return text, "<br>".join(f"<b>{_esc(name)}</b> fails for {_esc(', '.join(ids))}" for name, ids in by_name.items())
 
 
 def _nav_tally(criteria) -> str:
@@ -500,12 +535,13 @@ def _overview(papers) -> str:
     rows, cells = [], []
     for p in papers:
         counts = _tally(p.criteria)
-        rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), len(p.errors)])
+        why, why_html = _not_judgeable_cell(p.criteria)
+        rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), why, len(p.errors)])
         cells.append([f"<a href='#{_anchor(p.paper)}'>{_esc(p.paper)}</a>", None, None,
                       *(f"<span class='badge {_CLASS[v]}'>{counts[v]}</span>" if counts[v] else "0" for v in _ORDER),
-                      None])
-    columns = ["paper", "title", "size", *_ORDER, "problems"]
-    numeric = [False, False, False, True, True, True, True, True]
+                      why_html, None])
+    columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition", "problems"]
+    numeric = [False, False, False, *(True for _ in _ORDER), False, True]
     return _table(columns, rows, html_cells=cells, numeric=numeric)
 
 
@@ -544,7 +580,8 @@ def write_index(report, host: PluginHost) -> None:
              "<h1>workbench report</h1>",
              "<p>Each paper: a scoreboard of the brief's 'reproduced if' criteria judged on our numbers (the "
              "number of runs, the 95 % interval and a verdict among <i>met</i>, <i>not met</i>, "
-             "<i>inconclusive</i> and <i>not attainable</i>), what differs from the paper, then our tables and "
+             "<i>inconclusive</i>, <i>not attainable</i> and <i>not judgeable</i>, the last where a precondition "
+             "of the criterion fails, named with its numbers), what differs from the paper, then our tables and "
              "figures regenerated from saved raw numbers with the published values beside ours.</p>"]
     for line in getattr(report, "warnings", []):
         parts.append(f"<p class='callout bad'>{_esc(line)}</p>")
@@ -571,8 +608,9 @@ def write_summary(report, host: PluginHost) -> None:
     """Write ``report.out/summary.json`` (atomically): every paper's criteria, tables, figures and tasks.
 
     Each criterion carries ``id, statement (and text), ours, published, n, interval, threshold, verdict,
-    indicative, met`` (bool, for older readers), ``replication``, ``detail`` and ``extra``; a paper kept from
-    an earlier run into the folder has ``from_saved: true``.
+    indicative, met`` (bool, for older readers), ``replication``, ``detail``, ``extra`` and ``preconditions``
+    (each ``name, holds, detail, values``); a paper kept from an earlier run into the folder has
+    ``from_saved: true``.
     """
     from .engine import _jsonable
 

@@ -23,7 +23,7 @@ from typing import Mapping
 
 import numpy as np
 
-from workbench.criteria import criterion_from_runs, replication_rate
+from workbench.criteria import criterion_from_runs, replication_rate, rows_track
 from workbench.report.engine import component_failure
 from workbench.sensing.radar import RadarParameters, aspect_rcs_db, clutter_pass_fraction, db, from_db, radar_snr
 from workbench.specs import Criterion, FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
@@ -49,6 +49,12 @@ TIMING_REPEATS = 7
 MIN_TIMING_REPEATS = 5
 #: the rows the criteria judge
 JUDGED = ("A", "B", "C")
+#: Criteria 1-3 compare the rows' tracking errors, so each judged row must track: at most this share of its runs
+#: lost (the brief's rule, E_error > 3 km for 5 scans), else the criterion is "not judgeable".  The paper's Table 3
+#: means (A 236, B 214, C 124 m whole track over 20 runs) leave no room for a run lost the way ours are (30-46 km
+#: whole-track error: one alone adds 1.5-2.3 km to a 20-run mean), so the paper's rows lost none; 10 % (2 of the
+#: paper's 20 runs) allows for sampling around a low loss rate, and above it the means compare divergences.
+MAX_LOST_SHARE = 0.10
 FIELDS = ("error", "m_error", "gated", "lost", "seconds", "cpu_seconds", "path0", "gated0")
 
 PUBLISHED = {
@@ -98,7 +104,10 @@ position F s_hat_{k-1|k-1}; an empty gate means predict only.  Errors (eqs 19-21
 k = 1..100 and k = 1..299, then the mean over runs with lost runs (E_error > 3 km for 5 scans, never re-initialised)
 included, beside the median and the mean over the runs not lost.  Criteria: judged on the paper's protocol (20
 runs, seed 0) pooled with 80 independent runs (4 replications) for A, B, C and the R = 2.5 km run; bootstrap 95 %
-intervals; 'replication' = in how many disjoint 20-run batches the criterion holds.  Run times: one batched call
+intervals; 'replication' = in how many disjoint 20-run batches the criterion holds.  Criteria 1-3 have the
+precondition "the judged rows track": each of A, B, C (criterion 2: A, C) loses at most 10 % of its judged runs
+(the paper's Table 3 means leave no room for a lost run); where a row loses more, the criterion is "not
+judgeable", with the lost counts.  Run times: one batched call
 for all runs of a row, after a 3-scan warm-up that compiles and loads every kernel."""
 
 
@@ -893,6 +902,8 @@ def _criteria_at(results, rcs: float) -> list[Criterion]:
         (ea, wa), (eb, wb), (ec, wc) = (per_run_errors(rows[k]) for k in JUDGED)
         six = (ea, eb, ec, wa, wb, wc)
         lost = {k: f"{int(rows[k]['lost'].sum())}/{rows[k]['lost'].size}" for k in JUDGED}
+        tracks = rows_track({k: np.asarray(rows[k]["lost"], dtype=bool) for k in JUDGED}, MAX_LOST_SHARE)
+        tracks_ac = rows_track({k: np.asarray(rows[k]["lost"], dtype=bool) for k in ("A", "C")}, MAX_LOST_SHARE)
         means = (f"k=1..100: {_fmt(dict(A=ea.mean(), B=eb.mean(), C=ec.mean()))} m; whole: "
                  f"{_fmt(dict(A=wa.mean(), B=wb.mean(), C=wc.mean()))} m; medians whole: "
                  f"{_fmt(dict(A=np.median(wa), B=np.median(wb), C=np.median(wc)))} m; lost A {lost['A']}, "
@@ -902,13 +913,13 @@ def _criteria_at(results, rcs: float) -> list[Criterion]:
             f"1{tag}", "Ordering C < B < A for both averages (mean over runs)" + where, six, _ordering, 1.0, ">",
             min_n=PROTOCOL_RUNS, published="C < B < A (221 < 291 < 332 m, 124 < 214 < 236 m)",
             detail_fmt=_detail(means), threshold_text="min(B/C, A/B) > 1 for k = 1..100 and whole",
-            replication=_replication(six, lambda *a: _ordering(*a) > 1.0)))
+            replication=_replication(six, lambda *a: _ordering(*a) > 1.0), preconditions=(tracks,)))
         out.append(criterion_from_runs(
             f"2{tag}", "A/C >= 1.3 on the whole track" + where, (wa, wc), _a_over_c, 1.3, ">=", min_n=PROTOCOL_RUNS,
             published=1.90, detail_fmt=_detail(f"whole: A {wa.mean():.0f} m, C {wc.mean():.0f} m; medians "
                                                f"{np.median(wa):.0f} / {np.median(wc):.0f} m; lost A {lost['A']}, "
                                                f"C {lost['C']}" + _with_ours(results, rcs, _a_over_c, "ac")),
-            replication=_replication((wa, wc), lambda a, c: _a_over_c(a, c) >= 1.3)))
+            replication=_replication((wa, wc), lambda a, c: _a_over_c(a, c) >= 1.3), preconditions=(tracks_ac,)))
         out.append(criterion_from_runs(
             f"3{tag}", "Every method's k = 1..100 average is larger than its whole-track average" + where, six,
             _early_over_whole, 1.0, ">", min_n=PROTOCOL_RUNS, published="A 332/236, B 291/214, C 221/124 m",
@@ -917,7 +928,7 @@ def _criteria_at(results, rcs: float) -> list[Criterion]:
                                + "; statistic min over methods of (k=1..100 mean / whole mean)"
                                + _with_ours(results, rcs, _early_over_whole, "six")),
             threshold_text="min over A, B, C of early / whole > 1",
-            replication=_replication(six, lambda *a: _early_over_whole(*a) > 1.0)))
+            replication=_replication(six, lambda *a: _early_over_whole(*a) > 1.0), preconditions=(tracks,)))
     else:
         missing = [k for k, r in rows.items() if r is None]
         for cid in ("1", "2", "3"):

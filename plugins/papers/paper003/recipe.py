@@ -6,7 +6,9 @@ ways: *mismatched* (primary: every filter is handed the reading's nominal L2 ``Q
 *matched* (the level's own ``Q`` and ``R``).  Beside the paper's eight filters every level has
 
 - a **near-optimal reference**: the built-in bootstrap PF ``sir`` configured with 5,000 particles and given the
-  level's true models, on the first ``reference_runs`` runs (the same truths and measurements);
+  level's true models, on the first ``reference_runs`` runs (the same truths and measurements), and at L2 and L3
+  (where criterion 4 reads it) the same PF with 4 x 5,000 = 20,000 particles on the first
+  ``reference_check_runs`` of those runs: the reference's convergence check;
 - an **ablation row**: the previous reconstruction of the CRPF (fixed variance, plain norm, absolute delta),
   built by configuring ``crpf-100``.
 
@@ -47,6 +49,11 @@ CRPF_PARTICLES = (100, 300, 500)
 
 #: The near-optimal reference: the built-in bootstrap PF with 5,000 particles and the level's true models.
 REFERENCE = {"label": "pf-5000 (true noise)", "filter": "sir", "configure": {"particles": 5000}}
+#: The reference's convergence check: the same PF with 4 x the particles, on the same runs (common random numbers).
+REFERENCE_4N = {"label": "pf-20000 (true noise)", "filter": "sir",
+                "configure": {"particles": 4 * REFERENCE["configure"]["particles"]}}
+#: The levels at which criterion 4 reads the reference, hence where its convergence is checked.
+REFERENCE_CHECK_LEVELS = ("L2", "L3")
 #: The previous reconstruction of the CRPF (fixed sigma^2 = kappa / N^(2/n) with the dwna shape, the plain norm,
 #: delta = 0.01): a labelled ablation row, built by configuring crpf-100.
 PREVIOUS = {"label": "crpf-100 previous (ablation)", "filter": "crpf-100",
@@ -71,11 +78,11 @@ TUNING_RULE = ("one setting for every level and both readings: the candidate (si
 
 SIZES = {
     "quick": {"runs": 40, "steps": 100, "chunk": 20, "examples": 20, "grid_runs": 6, "change_runs": 12,
-              "tuning_runs": 6, "reference_runs": 6, "timing_runs": 3, "timing_repeats": 2,
-              "particle_budget": 131072},
+              "tuning_runs": 6, "reference_runs": 6, "reference_check_runs": 6, "timing_runs": 3,
+              "timing_repeats": 2, "particle_budget": 131072},
     "full": {"runs": 3000, "steps": 100, "chunk": 250, "examples": 100, "grid_runs": 300, "change_runs": 300,
-             "tuning_runs": 200, "reference_runs": 100, "timing_runs": 200, "timing_repeats": 7,
-             "particle_budget": 131072},
+             "tuning_runs": 200, "reference_runs": 100, "reference_check_runs": 100, "timing_runs": 200,
+             "timing_repeats": 7, "particle_budget": 131072},
 }
 
 PUBLISHED = {
@@ -101,7 +108,9 @@ Choices where the paper is silent (brief § 3.2-3.4; details and the Table-6 fra
   matched (the level's own Q and R) beside it. At L2 both coincide. The CRPF reads no noise statistics.
 - Reference: the bootstrap PF sir with 5,000 particles given the level's true Q and R, on the first
   reference_runs runs of every level (common random numbers); how far each filter is from it is a paired ratio
-  on those runs.
+  on those runs. At L2 and L3 the same PF with 20,000 particles runs on the same first reference_check_runs runs
+  (100 at full size): the reference has converged when MSE(5,000) / MSE(20,000), paired, has its 95 % interval
+  within [0.95, 1.05].
 - CRPF (Table 6 of the paper): cost C_t = lam C_{t-1} + dC with the arc-length residual
   dC = (dr^2 + (r_meas dtheta)^2) (q = 2), risk with the noise-free prediction, selection PMF
   (R - min R + delta_R)^-beta with a relative offset delta_R = delta x the mean gap of the risks above their
@@ -128,7 +137,11 @@ Choices where the paper is silent (brief § 3.2-3.4; details and the Table-6 fra
   three-way verdict; below 1,000 runs (timing: 100 timed runs, 5 repetitions) a criterion is inconclusive.
   Criterion 4 at L2 and L3: "not attainable" when the near-optimal reference itself is shown not to beat the best
   Kalman-type filter (its interval of MSE_ref / MSE_best-Kalman lies above 1, but not above 2, where the
-  reference is degenerate and no evidence) and CRPF-100 is not shown to either.
+  reference is degenerate and no evidence) and CRPF-100 is not shown to either, and only with the precondition
+  "reference converged" (above); where the reference has not converged the verdict is "not judgeable", with the
+  N / 4N ratio and its interval.
+- Criterion 3 of the brief (the SR forms equal the full forms) is an identity that holds to round-off whenever
+  the code is right: it is shown as a check in the table "checks", not as a criterion.
 """
 
 
@@ -334,6 +347,11 @@ def tasks(options: RecipeOptions) -> list[Task]:
             out.append(Task(f"reference/{name}",
                             _mc_params(v, ref_runs, 0, variant="matched", of_runs=v["runs"], **REFERENCE, **common)
                             | {"chunk": min(v["chunk"], v["runs"])}, run_monte_carlo))
+            if level in REFERENCE_CHECK_LEVELS:  # the same first runs: a paired convergence check
+                out.append(Task(f"reference4n/{name}",
+                                _mc_params(v, min(v["reference_check_runs"], ref_runs), 0, variant="matched",
+                                           of_runs=v["runs"], **REFERENCE_4N, **common)
+                                | {"chunk": min(v["chunk"], v["runs"])}, run_monte_carlo))
     for filt in options.filters:
         out.append(Task(f"grid/{filt}", _mc_params(v, v["grid_runs"], 0, filter=filt, cases=list(GRID_CASES)),
                         run_cases))
@@ -609,10 +627,13 @@ def mse_table_for(reading: str):
                 rows_here.append((PREVIOUS["label"], results[f"ablation/{case}"], None))
             if ref is not None:
                 rows_here.append((REFERENCE["label"] + f" (first {int(ref['runs'])} runs)", ref, None))
+            check = results.get(f"reference4n/{case}")
+            if check is not None:
+                rows_here.append((REFERENCE_4N["label"] + f" (first {int(check['runs'])} runs)", check, None))
             for label, res, matched in rows_here:
                 m, med, nl, lost = _summary(res)
-                k = len(ref["run_mse"]) if ref is not None else 0
-                ratio = (float(np.mean(res["run_mse"][:k]) / np.mean(ref["run_mse"])) if ref is not None
+                k = min(len(ref["run_mse"]), len(res["run_mse"])) if ref is not None else 0
+                ratio = (float(np.mean(res["run_mse"][:k]) / np.mean(ref["run_mse"][:k])) if ref is not None
                          else np.nan)
                 row = [label, case, fmt(m), fmt(np.sqrt(m)), fmt(med), fmt(nl), f"{100 * lost:.1f}", fmt(ratio)]
                 if matched is not None and matched is not res:
@@ -738,15 +759,33 @@ def scenario_table(results) -> Table:
                   f"median lost threshold (m): {LOST_FACTOR:g} x one measurement's rms error"), tuple(rows))
 
 
+def checks_table(results) -> Table:
+    """Checks beside the criteria (identities that hold whenever the code is right): the brief's criterion 3."""
+    rows = []
+    for chk in judging.checks(results):
+        state = "n/a" if chk["holds"] is None else "holds" if chk["holds"] else "FAILS"
+        rows.append((chk["check"], chk["reading"], fmt(chk["value"]) if chk["value"] is not None else "n/a",
+                     f"< {chk['limit']:g}" if chk["limit"] is not None else "n/a", state,
+                     chk["events"] if chk["events"] is not None else "n/a", chk["detail"]))
+    return Table(("check (brief's criterion 3)", "reading", "largest relative MSE difference", "passes if", "result",
+                  "fallback / jitter events", "detail"), tuple(rows))
+
+
 def claims_table(results) -> Table:
     crit = {c.id: c for c in judging.criteria(results)}
     quick = _size(results) != "full"
-    pairs = (("claim_noise", ("C1", "C1-deg")), ("claim_cdkf", ("C2", "C2-deg")), ("claim_sr", ("C3", "C3-deg")),
+    pairs = (("claim_noise", ("C1", "C1-deg")), ("claim_cdkf", ("C2", "C2-deg")), ("claim_sr", ()),
              ("claim_crpf_accuracy", ("C4-L2", "C4-L3", "C4-N", "C4-L2-deg", "C4-L3-deg", "C4-N-deg")),
              ("claim_crpf_time", ("C5-linear", "C5-slower", "C5-linear-batched", "C5-slower-batched")),
              ("claim_sr", ("C6",)))
     rows = []
     for claim, ids in pairs:
+        if claim == "claim_sr" and not ids:  # the brief's C3: a check, not a criterion (table "checks")
+            for chk in judging.checks(results):
+                state = "n/a" if chk["holds"] is None else "holds" if chk["holds"] else "fails"
+                rows.append((PUBLISHED[claim], f"check: SR = full ({chk['reading']} reading)", f"check {state}",
+                             fmt(chk["value"]) if chk["value"] is not None else "-", "-", "-",
+                             f"< {chk['limit']:g}" if chk["limit"] is not None else "-"))
         for cid in ids:
             c = crit.get(cid)
             if c is None:
@@ -797,6 +836,9 @@ TABLES = (
     TableSpec("timing", "Processing time per run (100 steps) per filter, warmed-up.", timing_table),
     TableSpec("scenario", "Noise levels, closest approach and lost thresholds of the simulated truths.",
               scenario_table),
+    TableSpec("checks", "Checks beside the criteria: the square-root forms equal the full forms (the brief's "
+                        "criterion 3), an identity that holds to round-off whenever the code is right, so a check "
+                        "and not a criterion.", checks_table),
     TableSpec("claims", "The paper's qualitative claims beside the criteria computed from our numbers.",
               claims_table),
 )

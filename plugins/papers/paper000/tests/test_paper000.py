@@ -326,10 +326,18 @@ def test_criteria_records_carry_n_interval_and_verdict(host, results):
     assert ids[:6] == ["1", "2", "3", "4", "5", "6"]
     assert {"1@-17dBsm", "2@-17dBsm", "3@-17dBsm", "5@-17dBsm", "6@-17dBsm"} <= set(ids)
     for c in crit:
-        assert isinstance(c, Criterion) and c.verdict in ("met", "not met", "inconclusive", "not attainable")
+        assert isinstance(c, Criterion)
+        assert c.verdict in ("met", "not met", "inconclusive", "not attainable", "not judgeable")
         assert c.n is not None and c.interval is not None
     first = crit[0]
-    assert first.n == 4 and first.verdict == "inconclusive"  # 2 + 2 runs: fewer than the paper's 20
+    # 2 + 2 runs: fewer than the paper's 20, so inconclusive at best; not judgeable where a judged row loses more
+    # than the stated share of its runs (the precondition names the counts)
+    lost = {k: np.concatenate([recipe._get(results, k, 600, 1000.0, stream=s)["lost"] for s in ("", "replicate")])
+            for k in ("A", "B", "C")}
+    above = [k for k, f in lost.items() if f.mean() > recipe.MAX_LOST_SHARE]
+    assert first.n == 4 and first.verdict == ("not judgeable" if above else "inconclusive")
+    assert [p.name for p in first.preconditions] == ["judged rows track"]
+    assert first.preconditions[0].values["above"] == above
     # the A/C ratio is the ratio of the mean whole-track errors of the pooled runs
     pooled = [np.concatenate([recipe._get(results, k, 600, 1000.0, stream=s)["error"] for s in ("", "replicate")])
               for k in ("A", "C")]
@@ -369,6 +377,40 @@ def test_criteria_verdicts_on_hand_made_runs():
     # A/C straddling 1.3 with a wide spread between runs: the interval decides nothing
     close = _fake_results({"A": method(130.0, 0.8), "B": method(120.0, 0.8), "C": method(100.0, 0.8)}, 100)
     assert {c.id: c for c in recipe.criteria(close)}["2"].verdict == "inconclusive"
+
+
+def test_criteria_1_to_3_are_not_judgeable_on_rows_that_lose_their_track():
+    # the paper-literal A and B of the full report: every run diverges (errors growing to tens of km), C tracks;
+    # the numbers alone would say C < B < A and A/C >> 1.3 ("met"), for a reason that is not the paper's claim
+    rng = np.random.default_rng(1)
+    k = np.arange(300)
+    shape = np.where(k <= 100, 2.0, 1.0)
+    tracking = 100.0 * shape * (1 + 0.05 * rng.standard_normal((100, 1)))
+    diverging = lambda rate: rate * k * (1 + 0.05 * rng.standard_normal((100, 1)))  # noqa: E731 - m per scan
+    lost_all = _fake_results({"A": diverging(150.0), "B": diverging(100.0), "C": tracking}, 100)
+    crit = {c.id: c for c in recipe.criteria(lost_all)}
+    for cid in ("1", "2", "3"):
+        c = crit[cid]
+        assert c.verdict == "not judgeable" and not c.met, cid
+        (pre,) = c.failed_preconditions
+        assert pre.name == "judged rows track" and "A 100/100 (100 %)" in pre.detail
+        assert pre.values["rows"]["C"] == {"lost": 0, "runs": 100, "share": 0.0}
+    assert crit["1"].verdict_if_judged == "met" and crit["2"].verdict_if_judged == "met"
+    assert crit["1"].failed_preconditions[0].values["above"] == ["A", "B"]
+    assert crit["2"].failed_preconditions[0].values["above"] == ["A"]  # criterion 2 judges A and C only
+    # one A run in ten lost: at the stated share, still judged (A's other runs track)
+    part = tracking.copy()
+    part[:10] = diverging(150.0)[:10]
+    some = {c.id: c for c in recipe.criteria(_fake_results({"A": part, "B": 0.9 * tracking + 100.0,
+                                                             "C": tracking}, 100))}
+    assert recipe.MAX_LOST_SHARE == 0.10
+    assert some["2"].verdict == "met" and some["2"].preconditions[0].holds
+    assert "A 10/100 (10 %)" in some["2"].preconditions[0].detail
+    # one more: above the share, not judgeable
+    part[10] = diverging(150.0)[10]
+    more = {c.id: c for c in recipe.criteria(_fake_results({"A": part, "B": 0.9 * tracking + 100.0,
+                                                             "C": tracking}, 100))}
+    assert more["2"].verdict == "not judgeable" and "A 11/100 (11 %)" in more["2"].preconditions[0].detail
 
 
 def test_the_timing_task_times_both_radii_in_turn(results):

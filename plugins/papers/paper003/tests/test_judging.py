@@ -1,4 +1,5 @@
-"""Paper 003's criteria fed hand-made run data: each verdict, including "not attainable" and "inconclusive"."""
+"""Paper 003's criteria fed hand-made run data: each verdict, including "not attainable", "not judgeable" (an
+unconverged reference) and "inconclusive", and the SR-form check."""
 
 import numpy as np
 import pytest
@@ -16,8 +17,10 @@ def _runs(mean, n=RUNS, seed=0, spread=0.2):
     return mean * x / x.mean()
 
 
-def _results(means, ref=None, n=RUNS, ref_runs=200):
-    """``means[level][filter]`` -> fake summaries of the radians reading; ``ref[level]`` the reference's mean."""
+def _results(means, ref=None, n=RUNS, ref_runs=200, ref4n=None):
+    """``means[level][filter]`` -> fake summaries of the radians reading; ``ref[level]`` the reference's mean;
+    ``ref4n[level]`` the reference with 4N particles on the same runs, as its MSE over the reference's, run by run
+    (with a 2 % scatter)."""
     out = {}
     for i, lv in enumerate(LEVELS):
         for j, (name, m) in enumerate(means[lv].items()):
@@ -27,6 +30,10 @@ def _results(means, ref=None, n=RUNS, ref_runs=200):
         if ref is not None and lv in ref:
             r = _runs(ref[lv], ref_runs, seed=1000 + i)
             out[f"reference/{lv}"] = {"run_mse": r, "mse_t": np.full(5, r.mean()), "runs": np.array(ref_runs)}
+            if ref4n is not None and lv in ref4n:
+                r4 = r * ref4n[lv] * np.random.default_rng(2000 + i).lognormal(0.0, 0.02, ref_runs)
+                out[f"reference4n/{lv}"] = {"run_mse": r4, "mse_t": np.full(5, r4.mean()),
+                                            "runs": np.array(ref_runs)}
     return out
 
 
@@ -66,10 +73,30 @@ def test_criterion_4_verdicts():
     c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 20.3, "L3": 100.0}), "C4-L2")
     assert c["C4-L2"].verdict == "not met"
     assert c["C4-L2"].extra["reference"]["verdict"] == "inconclusive" and "ties with" in c["C4-L2"].detail
-    # ... or is shown to be worse than them (and is not degenerate): not attainable
-    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}), "C4-L2")
+    # ... or is shown to be worse than them (and is not degenerate), and has converged: not attainable
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}, ref4n={"L2": 1.0}), "C4-L2")
     assert c["C4-L2"].verdict == "not attainable" and c["C4-L2"].extra["reference"]["verdict"] == "not met"
     assert "Not attainable" in c["C4-L2"].detail
+    (pre,) = c["C4-L2"].preconditions
+    assert pre.name == "reference converged" and pre.holds and pre.values["particles_4n"] == 20000
+    assert 0.99 < pre.values["ratio"] < 1.01
+    # ... the same, but 4N particles lower the reference's MSE by 8 %: not converged, so not judgeable (never
+    # "not attainable", nor "not met"), naming the ratio and its interval
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}, ref4n={"L2": 1 / 1.08}), "C4-L2")
+    crit = c["C4-L2"]
+    assert crit.verdict == "not judgeable" and crit.verdict_if_judged == "not attainable"
+    (pre,) = crit.failed_preconditions
+    assert pre.name == "reference converged" and pre.values["ratio"] == pytest.approx(1.08, rel=0.01)
+    assert pre.values["interval"][0] > 1.05 and "converged if the interval lies within [0.95, 1.05]" in pre.detail
+    assert "Not attainable" not in crit.detail and "has not converged" in crit.detail
+    # ... or no 4N run at all: its convergence is not shown
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}), "C4-L2")
+    assert c["C4-L2"].verdict == "not judgeable" and "no run of the reference with 4N" in \
+        c["C4-L2"].failed_preconditions[0].detail
+    # an unconverged reference does not touch a verdict that does not rest on it: CRPF-100 met stays met
+    c = _crit(_results(_means(crpf_l2=10.0), ref={"L2": 30.0, "L3": 100.0}, ref4n={"L2": 1 / 1.08}), "C4-L2")
+    assert c["C4-L2"].verdict == "met" and c["C4-L2"].preconditions == ()
+    assert "Reference convergence (not needed for this verdict): reference converged fails" in c["C4-L2"].detail
     # CRPF-100 ties with the best Kalman filter: inconclusive (the interval straddles 1)
     c = _crit(_results(_means(crpf_l2=20.05), ref={"L2": 10.0, "L3": 100.0}), "C4-L2")
     assert c["C4-L2"].verdict == "inconclusive" and c["C4-L2"].interval[0] < 1.0 < c["C4-L2"].interval[1]
@@ -91,7 +118,7 @@ def test_criterion_4_verdicts():
 
 def test_too_few_runs_is_inconclusive():
     c = _crit(_results(_means(crpf_l2=10.0), ref={"L2": 10.0, "L3": 100.0}, n=judging.MIN_RUNS - 1))
-    for cid in ("C1", "C2", "C3", "C4-L2", "C4-L3", "C4-N"):
+    for cid in ("C1", "C2", "C4-L2", "C4-L3", "C4-N"):
         assert c[cid].verdict == "inconclusive" and c[cid].n == judging.MIN_RUNS - 1
 
 
@@ -107,10 +134,26 @@ def test_criterion_4_in_n_and_criterion_1():
     assert _crit(_results(means))["C1"].verdict == "not met"
 
 
-def test_criteria_2_and_3():
-    c = _crit(_results(_means()))
+def _sr_check(results):
+    return next(x for x in judging.checks(results) if x["reading"] == "rad")
+
+
+def test_criterion_2_and_the_sr_check():
+    res = _results(_means())
+    c = _crit(res)
     assert c["C2"].verdict == "met"  # CDKF <= UKF <= EKF at every level, within 5 %
-    assert c["C3"].verdict == "not met"  # our fake SR forms differ from the full forms by 2 % at every level
+    assert "C3" not in c  # the SR identity is a check, not a criterion
+    for lv in LEVELS:  # the SR-UKF 2 % above the UKF in every run
+        res[f"mc/{lv}/sr-ukf/mismatched"] = {**res[f"mc/{lv}/ukf/mismatched"],
+                                             "run_mse": 1.02 * res[f"mc/{lv}/ukf/mismatched"]["run_mse"]}
+        res[f"mc/{lv}/sr-cdkf/mismatched"] = res[f"mc/{lv}/cdkf/mismatched"]
+    chk = _sr_check(res)
+    assert chk["holds"] is False and chk["limit"] == 1e-6 and chk["value"] == pytest.approx(0.02, rel=1e-9)
+    assert "sr-ukf vs ukf" in chk["detail"]
+    # the runs differ one by one while their means agree exactly: the identity fails all the same
+    res = _results(_means())
+    m = [res[f"mc/L1/{n}/mismatched"]["run_mse"].mean() for n in ("ukf", "sr-ukf")]
+    assert m[0] == pytest.approx(m[1], rel=1e-12) and _sr_check(res)["holds"] is False
     means = _means()
     for lv in LEVELS:
         means[lv]["sr-ukf"] = means[lv]["ukf"]
@@ -119,7 +162,8 @@ def test_criteria_2_and_3():
     for lv in LEVELS:  # the same runs, to round-off
         res[f"mc/{lv}/sr-ukf/mismatched"] = res[f"mc/{lv}/ukf/mismatched"]
         res[f"mc/{lv}/sr-cdkf/mismatched"] = res[f"mc/{lv}/cdkf/mismatched"]
-    assert _crit(res)["C3"].verdict == "met"
+    chk = _sr_check(res)
+    assert chk["holds"] is True and chk["value"] == 0.0 and chk["events"] == 0
     for lv in LEVELS:  # the EKF best everywhere: the ordering fails at every level
         means[lv]["ekf"] = 0.5 * means[lv]["cdkf"]
     assert _crit(_results(means))["C2"].verdict == "not met"

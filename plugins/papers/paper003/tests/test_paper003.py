@@ -20,7 +20,8 @@ from workbench_papers.paper003 import scenario
 HOST = load_host()
 RECIPE = HOST.recipe("003")
 TINY = {"runs": 6, "steps": 30, "chunk": 3, "examples": 6, "grid_runs": 2, "change_runs": 2, "tuning_runs": 2,
-        "reference_runs": 4, "timing_runs": 2, "timing_repeats": 2, "particle_budget": 600}
+        "reference_runs": 4, "reference_check_runs": 3, "timing_runs": 2, "timing_repeats": 2,
+        "particle_budget": 600}
 
 
 def _run_all(filters=None, values=TINY, seed=1, keep=lambda key: True):
@@ -127,6 +128,15 @@ def test_task_layout_and_third_party_filters():
     mc = next(t for t in tasks if t.key == "mc/L3/ukf/mismatched")
     assert ref.params["variant"] == "matched" and ref.params["of_runs"] == mc.params["runs"]
     assert ref.params["chunk"] == mc.params["chunk"] and ref.params["runs"] < mc.params["runs"]
+    # its convergence check: 4 x the particles on the same first runs, at the levels criterion 4 reads
+    assert [k for k in keys if k.startswith("reference4n/")] == ["reference4n/L2", "reference4n/L3",
+                                                                 "reference4n/deg-L2", "reference4n/deg-L3"]
+    check = next(t for t in tasks if t.key == "reference4n/L3")
+    assert check.params["configure"] == {"particles": 4 * ref.params["configure"]["particles"]}
+    assert {k: v for k, v in check.params.items() if k not in ("configure", "label", "runs")} == \
+        {k: v for k, v in ref.params.items() if k not in ("configure", "label", "runs")}
+    assert check.params["runs"] == min(RECIPE.sizes["quick"]["reference_check_runs"], ref.params["runs"])
+    assert RECIPE.sizes["full"]["reference_check_runs"] == RECIPE.sizes["full"]["reference_runs"] == 100
     assert len([k for k in keys if k.startswith("tune/")]) == 2 * len(p3.TUNE_SIGMA0) * len(p3.TUNE_DELTA)
     # the tuning runs use their own seed and stream, never the report's
     tune = next(t for t in tasks if t.key.startswith("tune/"))
@@ -154,6 +164,10 @@ def test_filters_see_the_same_data(tiny):
         assert np.array_equal(ref["lost_threshold"], a["lost_threshold"][: len(ref["lost_threshold"])])
         assert np.array_equal(abl["lost_threshold"], a["lost_threshold"])
         assert np.array_equal(results[f"scenario/{case}"]["lost_threshold"], a["lost_threshold"])
+        if not case.endswith("L1"):  # the convergence check (L2, L3) ran on the reference's first runs
+            check = results[f"reference4n/{case}"]
+            assert len(check["run_mse"]) == TINY["reference_check_runs"]
+            assert np.array_equal(check["lost_threshold"], ref["lost_threshold"][: TINY["reference_check_runs"]])
     assert "same_as_mismatched" in results["mc/L1/crpf-300/matched"]
     assert not np.allclose(results["mc/L3/ukf/matched"]["mse_t"], results["mc/L3/ukf/mismatched"]["mse_t"])
 
@@ -162,6 +176,7 @@ def test_rows_are_the_filters_they_claim(tiny):
     _, results = tiny
     ref = json.loads(str(results["reference/L2"]["filter_params"]))
     assert ref["particles"] == 5000
+    assert json.loads(str(results["reference4n/L2"]["filter_params"]))["particles"] == 20000
     abl = json.loads(str(results["ablation/L2"]["filter_params"]))
     assert (abl["variance"], abl["cost"], abl["delta_mode"], abl["delta"]) == ("fixed", "norm", "absolute", 0.01)
     paper = json.loads(str(results["mc/L2/crpf-100/mismatched"]["filter_params"]))
@@ -258,7 +273,7 @@ def test_mse_tables(tiny):
     for tid, prefix in (("mse", ""), ("mse-deg", "deg-")):
         table = tables[tid]
         cols = list(table.columns)
-        assert len(table.rows) == 3 * (F + 2)
+        assert len(table.rows) == 3 * (F + 2) + 2  # the 4N reference at L2 and L3
         row = next(r for r in table.rows if r[0] == "ekf" and r[1] == f"{prefix}L3")
         res = results[f"mc/{prefix}L3/ekf/mismatched"]
         ours = float(np.mean(res["mse_t"]))
@@ -273,6 +288,11 @@ def test_mse_tables(tiny):
         assert float(row[cols.index("MSE / reference (same runs)")]) == pytest.approx(ratio, rel=1e-3)
         labels = [r[0] for r in table.rows]
         assert any(label.startswith(p3.REFERENCE["label"]) for label in labels) and p3.PREVIOUS["label"] in labels
+        # the 4N reference's ratio to the reference is on the runs both ran
+        row = next(r for r in table.rows if r[0].startswith(p3.REFERENCE_4N["label"]) and r[1] == f"{prefix}L3")
+        check = results[f"reference4n/{prefix}L3"]["run_mse"]
+        assert float(row[cols.index("MSE / reference (same runs)")]) == pytest.approx(
+            check.mean() / ref[: len(check)].mean(), rel=1e-3)
 
 
 def test_other_tables(tiny):
@@ -286,6 +306,10 @@ def test_other_tables(tiny):
     first = changes.rows[0][2]  # paper setting, L1 = the registered crpf-100 on the first change_runs runs
     mse = float(np.mean(results[f"changes/rad/{p3.CHANGES[0][0]}"]["L1:mse_t"]))
     assert first.startswith(f"{mse:.4g}")
+    # the brief's criterion 3 is a check beside the criteria: the SR forms equal the full forms to round-off
+    chk = tables["checks"]
+    assert [r[1] for r in chk.rows] == ["rad", "deg"] and all(r[4] == "holds" for r in chk.rows)
+    assert all(float(r[2]) < 1e-6 for r in chk.rows)
     tuning = tables["tuning"]
     assert len(tuning.rows) == len(p3.TUNE_SIGMA0) * len(p3.TUNE_DELTA)
     scores = p3.tuning_scores(results)
@@ -302,21 +326,25 @@ def test_other_tables(tiny):
 
 def test_claims_table_never_says_met_below_the_full_size(tiny, monkeypatch):
     _, results = tiny
-    # let every criterion be decided on these few runs: C3 (SR forms equal the full forms to round-off) is then met
+    # let every criterion be decided on these few runs: C1 (MSE grows with the noise level, by 100 x) is then met
     monkeypatch.setattr(judging, "_MIN", {"runs": 2, "ref": 2, "timed": 2, "repeats": 2})
     verdicts = {c.id: c.verdict for c in judging.criteria(results)}
-    assert verdicts["C3"] == "met" and verdicts["C3-deg"] == "met"
+    assert verdicts["C1"] == "met" and verdicts["C1-deg"] == "met"
     rows = RECIPE.tables[-1].make(results).rows
-    assert {r[1] for r in rows} == set(verdicts)
-    for r in rows:
+    crit_rows = [r for r in rows if not r[1].startswith("check:")]
+    assert {r[1] for r in crit_rows} == set(verdicts)
+    for r in crit_rows:
         assert not r[2].startswith("met") and r[2].endswith("(indicative: quick size)")
+    # the SR identity is a check beside them (the brief's claim "same accuracy as the non-SR forms")
+    assert [(r[1], r[2]) for r in rows if r[1].startswith("check:")] == [
+        ("check: SR = full (rad reading)", "check holds"), ("check: SR = full (deg reading)", "check holds")]
 
 
 def test_criteria_carry_n_interval_and_verdict(tiny):
     _, results = tiny
     crit = RECIPE.criteria(results)
     ids = [c.id for c in crit]
-    assert ids == ["C1", "C2", "C3", "C4-L2", "C4-L3", "C4-N", "C1-deg", "C2-deg", "C3-deg", "C4-L2-deg",
+    assert ids == ["C1", "C2", "C4-L2", "C4-L3", "C4-N", "C1-deg", "C2-deg", "C4-L2-deg",
                    "C4-L3-deg", "C4-N-deg", "C5-linear", "C5-slower", "C5-linear-batched", "C5-slower-batched", "C6"]
     for c in crit:
         assert c.n is not None and c.n > 0 and c.interval is not None and c.verdict == "inconclusive"  # too few runs
