@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from workbench.metrics import (continuity, mean_std, pooled_rmse, removal_rate, removal_rate_per_ping, track_counts,
-                               track_truth_match)
+from workbench.metrics import (continuity, false_track_sums, mean_std, pooled_rmse, removal_rate_pooled,
+                               removal_rate_pooled_per_ping, removal_ratio, track_counts, track_truth_match)
 from workbench.tracking.multi import CONFIRMED, TENTATIVE, TrackLog
 from workbench.types import InputError
 
@@ -45,16 +45,61 @@ def test_track_counts_on_a_hand_made_table():
         track_counts(log, np.zeros((2, 3, 2)))
 
 
-def test_removal_rate_definition():
-    before = np.array([[0, 4, 4, 2], [0, 0, 5, 10]])
-    after = np.array([[1, 1, 2, 2], [0, 1, 0, 5]])
-    # run 0: pings 1-3 count: r = 0.75, 0.5, 0.0 -> 0.41667; run 1: pings 2-3: 1.0, 0.5 -> 0.75
-    assert np.allclose(removal_rate(before, after), [1.25 / 3, 0.75])
-    assert np.allclose(removal_rate(before, after, pings=[False, False, True, True]), [0.25, 0.75])
-    assert np.allclose(removal_rate_per_ping(before, after), [np.nan, 0.75, 0.75, 0.25], equal_nan=True)
-    assert np.isnan(removal_rate(np.zeros((1, 3)), np.ones((1, 3)))[0])
-    m, s, n = mean_std(removal_rate(before, after))
-    assert n == 2 and np.isclose(m, (1.25 / 3 + 0.75) / 2) and np.isclose(s, np.std([1.25 / 3, 0.75], ddof=1))
+def _brute_force_rate(before, after, pings):
+    """1 - (false tracks after) / (false tracks before), each count added one (run, ping) at a time."""
+    total_before = total_after = 0
+    for b in range(len(before)):
+        for k in range(len(before[b])):
+            if pings[k]:
+                total_before += int(before[b][k])
+                total_after += int(after[b][k])
+    return 1.0 - total_after / total_before if total_before else float("nan")
+
+
+def test_removal_rate_is_the_ratio_of_sums_over_runs_and_pings():
+    # run 2 has false tracks after removal at ping 1 but none before there, run 0 at ping 0: both must count
+    before = np.array([[0, 4, 4, 2], [0, 0, 5, 10], [1, 0, 0, 0]])
+    after = np.array([[1, 1, 2, 2], [0, 1, 0, 5], [0, 2, 0, 0]])
+    # hand-worked: 26 false tracks before, 14 after; on pings 2-3: 21 before, 9 after
+    assert np.isclose(removal_rate_pooled(before, after), 1 - 14 / 26)
+    assert np.isclose(removal_rate_pooled(before, after, pings=[False, False, True, True]), 1 - 9 / 21)
+    # per ping, summed over the runs: ping 0 1 -> 1, ping 1 4 -> 4, ping 2 9 -> 2, ping 3 12 -> 7
+    assert np.allclose(removal_rate_pooled_per_ping(before, after), [0.0, 0.0, 7 / 9, 5 / 12])
+    assert np.allclose(removal_rate_pooled_per_ping(before, after, pings=[True, False, True, True]),
+                       [0.0, np.nan, 7 / 9, 5 / 12], equal_nan=True)
+    sb, sa = false_track_sums(before, after, pings=[False, True, True, True])
+    assert np.array_equal(sb, [10, 15, 0]) and np.array_equal(sa, [5, 6, 2])
+    assert np.isclose(removal_ratio(sb, sa), 1 - 13 / 25)
+    # no false track before removal: no rate, even with some after
+    assert np.isnan(removal_rate_pooled(np.zeros((2, 3)), np.ones((2, 3))))
+    assert np.isnan(removal_rate_pooled_per_ping(np.zeros((2, 3)), np.ones((2, 3)))).all()
+    with pytest.raises(InputError, match="removal rate"):
+        removal_rate_pooled(before, after[:, :3])
+    with pytest.raises(InputError, match="pings must be a mask of 4"):
+        removal_rate_pooled(before, after, pings=[True, False])
+
+
+def test_removal_rate_against_a_brute_force_count_on_sparse_counts():
+    # sparse counts like the paper rows' (mostly 0, sometimes 1-3), after removal often where before is 0
+    rng = np.random.default_rng(7)
+    for trial in range(20):
+        before = rng.poisson(0.3, size=(12, 20))
+        after = rng.poisson(0.15, size=(12, 20))
+        pings = np.arange(20) >= 5
+        assert np.sum(after[:, pings][before[:, pings] == 0]) > 0  # the pings the old estimator dropped
+        want = _brute_force_rate(before.tolist(), after.tolist(), pings.tolist())
+        assert np.isclose(removal_rate_pooled(before, after, pings), want)
+        assert np.isclose(removal_ratio(*false_track_sums(before, after, pings)), want)
+        for k in range(20):
+            one = np.arange(20) == k
+            assert np.isclose(removal_rate_pooled_per_ping(before, after)[k],
+                              _brute_force_rate(before.tolist(), after.tolist(), one.tolist()), equal_nan=True)
+
+
+def test_mean_std_of_finite_values():
+    m, s, n = mean_std(np.array([0.5, np.nan, 1.0, 0.0]))
+    assert n == 3 and np.isclose(m, 0.5) and np.isclose(s, np.std([0.5, 1.0, 0.0], ddof=1))
+    assert mean_std(np.array([np.nan])) == (pytest.approx(np.nan, nan_ok=True), pytest.approx(np.nan, nan_ok=True), 0)
 
 
 def test_continuity_counts_from_the_first_held_ping_to_the_end():

@@ -10,12 +10,22 @@ Per run ``b`` and ping ``k``:
 - ``held[b, k]``: some true track is confirmed at ``k``; ``sq_error[b, k]``: squared position error of
   the true confirmed track nearest the truth (NaN where not held).
 
-False-track removal rate, for counts before and after clutter removal::
+False-track removal rate, for counts before and after clutter removal, as a **ratio of sums** over the runs
+``b`` and the judged pings ``k``::
 
-    r_k = 1 - F_after(k) / F_before(k)        over the pings with F_before(k) > 0
+    rate = 1 - sum_{b,k} F_after(b, k) / sum_{b,k} F_before(b, k)
+         = sum_{b,k} (F_before - F_after) / sum_{b,k} F_before
 
-averaged per run (:func:`removal_rate`), then mean +- std over Monte Carlo runs (:func:`mean_std`).
-The total-count variant uses the confirmed counts instead of the false counts.
+(:func:`removal_rate_pooled`; NaN when no false track is counted before removal).  Every false track counts:
+one left after removal on a ping that had none before lowers the rate.  Its interval is a bootstrap over
+runs, never pings: :func:`false_track_sums` gives each run's two sums, a paired sample whose resamples keep
+a run's before and after together, and :func:`removal_ratio` is the statistic on it.
+:func:`removal_rate_pooled_per_ping` is the same ratio at each ping, summed over the runs.  The total-count
+variant uses the confirmed counts instead of the false counts.
+
+(An earlier estimator averaged ``r_k = 1 - F_after(k) / F_before(k)`` per run over the pings with
+``F_before(k) > 0`` only: it dropped every false track left after removal on a ping without one before, and
+weighted a ping with one false track as much as a ping with ten.  It is gone.)
 
 Continuity: the fraction of pings, from the first held ping to the last ping of the run, at which the
 target is held (0 for a run in which it never is).
@@ -34,8 +44,10 @@ __all__ = [
     "TrackCounts",
     "track_truth_match",
     "track_counts",
-    "removal_rate",
-    "removal_rate_per_ping",
+    "false_track_sums",
+    "removal_ratio",
+    "removal_rate_pooled",
+    "removal_rate_pooled_per_ping",
     "continuity",
     "pooled_rmse",
     "mean_std",
@@ -111,33 +123,47 @@ def track_counts(log: TrackLog, truth_pos: np.ndarray, radius: float = 6.0, min_
     return TrackCounts(confirmed, false, held, np.where(held, best, np.nan))
 
 
-def _rates(before: np.ndarray, after: np.ndarray, pings) -> np.ndarray:
+def _pair(before: np.ndarray, after: np.ndarray, pings) -> tuple[np.ndarray, np.ndarray]:
+    """``before, after`` as float ``(B, T)`` arrays with the pings outside ``pings (T,)`` set to 0."""
     before = np.asarray(before, dtype=float)
     after = np.asarray(after, dtype=float)
-    if before.shape != after.shape:
-        raise InputError(f"removal rate: before {before.shape} and after {after.shape} must match")
-    use = before > 0
+    if before.shape != after.shape or before.ndim != 2:
+        raise InputError(f"removal rate: before {before.shape} and after {after.shape} must be the same (runs, pings)")
     if pings is not None:
-        use &= np.asarray(pings, dtype=bool)[None, :]
-    # r_k = 1 - F_after(k) / F_before(k)  where F_before(k) > 0
-    return np.where(use, 1.0 - after / np.where(use, before, 1.0), np.nan)
+        use = np.asarray(pings, dtype=bool)
+        if use.shape != (before.shape[1],):
+            raise InputError(f"removal rate: pings must be a mask of {before.shape[1]} pings, got shape {use.shape}")
+        before, after = before * use, after * use
+    return before, after
 
 
-def removal_rate(before: np.ndarray, after: np.ndarray, pings=None) -> np.ndarray:
-    """Per-run mean of ``r_k`` over the pings with ``before > 0`` (and in ``pings (T,)`` if given).
+def false_track_sums(before: np.ndarray, after: np.ndarray, pings=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per run, the counts before and after removal summed over the pings in ``pings (T,)`` (all if None).
 
-    ``before, after (B, T)`` -> ``(B,)``; NaN for a run without such a ping.
+    ``before, after (B, T)`` -> ``(sum_before (B,), sum_after (B,))``: the paired per-run sample of
+    :func:`removal_ratio` (resample runs, keep each run's two sums together).
     """
-    r = _rates(before, after, pings)
-    n = np.sum(np.isfinite(r), axis=1)
-    return np.where(n > 0, np.nansum(r, axis=1) / np.maximum(n, 1), np.nan)
+    before, after = _pair(before, after, pings)
+    return before.sum(axis=1), after.sum(axis=1)
 
 
-def removal_rate_per_ping(before: np.ndarray, after: np.ndarray, pings=None) -> np.ndarray:
-    """Mean over runs of ``r_k`` at each ping (runs with ``before > 0`` there), ``(T,)``; NaN if none."""
-    r = _rates(before, after, pings)
-    n = np.sum(np.isfinite(r), axis=0)
-    return np.where(n > 0, np.nansum(r, axis=0) / np.maximum(n, 1), np.nan)
+def removal_ratio(sum_before: np.ndarray, sum_after: np.ndarray) -> float:
+    """``1 - sum(sum_after) / sum(sum_before)`` over the runs given; NaN when ``sum(sum_before) == 0``."""
+    den = float(np.sum(sum_before))
+    return 1.0 - float(np.sum(sum_after)) / den if den > 0 else float("nan")
+
+
+def removal_rate_pooled(before: np.ndarray, after: np.ndarray, pings=None) -> float:
+    """The removal rate as a ratio of sums over all runs and the pings in ``pings`` (see the module text)."""
+    return removal_ratio(*false_track_sums(before, after, pings))
+
+
+def removal_rate_pooled_per_ping(before: np.ndarray, after: np.ndarray, pings=None) -> np.ndarray:
+    """At each ping, ``1 - sum_b F_after(b, k) / sum_b F_before(b, k)`` over the runs, ``(T,)``; NaN where no run
+    has a count before removal there (or the ping is outside ``pings``)."""
+    before, after = _pair(before, after, pings)
+    den = before.sum(axis=0)
+    return np.where(den > 0, 1.0 - after.sum(axis=0) / np.where(den > 0, den, 1.0), np.nan)
 
 
 def continuity(held: np.ndarray) -> np.ndarray:

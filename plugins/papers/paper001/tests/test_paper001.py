@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest
 
-from workbench.metrics import TrackCounts, continuity, pooled_rmse, removal_rate
+from workbench.metrics import TrackCounts, continuity, pooled_rmse
 from workbench.plugins import load_host
 from workbench.recorded.sonar import load_sonar_csv
 from workbench.specs import RecipeOptions, TaskContext
 from workbench_papers.paper001 import recipe as paper001
 
 HOST = load_host()
+#: criterion 1's verdict below its population minimum: never met, never not met
+UNJUDGED = "not judgeable"
 
 
 def test_shipped_surrogate_is_labelled_and_reproducible(tmp_path):
@@ -153,9 +155,15 @@ def test_criteria_recomputed_from_the_raw_counts(report):
     assert set(crit) == {"1", "2", "3"}
     b, a = _counts(results, "paper", "before"), _counts(results, "paper", "after")
     post = np.arange(20) >= 5
-    rate = removal_rate(b.false, a.false, post)
-    rate = rate[np.isfinite(rate)]
-    assert np.isclose(crit["1"].ours, rate.mean()) and crit["1"].n == rate.size
+    # criterion 1: every false track of pings 6-20 of every run, before and after, counted here one by one
+    before = sum(int(b.false[r, k]) for r in range(10) for k in range(20) if post[k])
+    after = sum(int(a.false[r, k]) for r in range(10) for k in range(20) if post[k])
+    assert before > 0 and np.isclose(crit["1"].ours, 1 - after / before) and crit["1"].n == 10
+    pre = crit["1"].extra["precondition"]
+    assert pre["has"] == before and pre["needs"] == paper001.MIN_FALSE_BEFORE
+    assert pre["holds"] == (before >= paper001.MIN_FALSE_BEFORE)
+    assert np.isclose(crit["1"].extra["false_per_ping_before"], before / (10 * 15))
+    assert f"{before} false tracks before removal summed" in crit["1"].detail
     k = int(np.sum(continuity(a.held) >= 0.8))
     assert np.isclose(crit["2"].ours, k / 10) and crit["2"].n == 10
     ci = binomtest(k, 10).proportion_ci(method="exact")
@@ -164,7 +172,8 @@ def test_criteria_recomputed_from_the_raw_counts(report):
     diff = pooled_rmse(np.where(both, a.sq_error, np.nan)) - pooled_rmse(np.where(both, b.sq_error, np.nan))
     assert np.isclose(crit["3"].ours, diff, equal_nan=True)
     # 10 runs are fewer than every criterion needs: no firm verdict, and no 20-run replication fits
-    assert all(c.verdict == "inconclusive" and c.replication is None for c in crit.values())
+    assert all(c.verdict in ("inconclusive", UNJUDGED) and c.replication is None for c in crit.values())
+    assert crit["1"].verdict == ("inconclusive" if pre["holds"] else UNJUDGED)
 
 
 def test_tables_hold_every_row_and_the_tuning_choice(report):
@@ -176,7 +185,14 @@ def test_tables_hold_every_row_and_the_tuning_choice(report):
     # criterion 2's share in the rows table, recomputed for the stated-accuracy row
     s = _counts(results, "stated", "after")
     k = int(np.sum(continuity(s.held) >= 0.8))
-    assert tables["rows"].rows[1][3].startswith(f"{100 * k / 10:.0f} % ({k}/10)")
+    assert tables["rows"].rows[1][4].startswith(f"{100 * k / 10:.0f} % ({k}/10)")
+    # beside each row's removal rate: its false tracks per ping before removal (pings 6-20, mean over runs)
+    for i, arm in enumerate(("paper", "stated")):
+        per_ping = _counts(results, arm, "before").false[:, 5:].sum() / (10 * 15)
+        assert tables["rows"].rows[i][2].startswith(f"{per_ping:.2f}")
+    # the removal-rate table: false tracks before removal summed over runs and pings 6-20, per row
+    paper_row = tables["removal-rate"].rows[0]
+    assert paper_row[8] == int(_counts(results, "paper", "before").false[:, 5:].sum())
     # the tuning choice is the first best candidate on the tuning runs, and the tuned row says which it is
     held = results["tuning"]["tuning/held"]
     chosen = int(np.flatnonzero(held == held.max())[0])
@@ -247,3 +263,54 @@ def test_gospa_terms_agree_with_the_track_counts(report):
     np.testing.assert_allclose(fig["false_after"] ** 2, res["paper/after/gospa_false"].mean(axis=0))
     np.testing.assert_allclose(fig["gospa_before"], res["paper/before/gospa"].mean(axis=0))
     assert np.all(fig["gospa_after"][~post] == fig["gospa_after"][0])  # nothing confirmed in the warm-up
+
+
+# -- criterion 1 on hand-made counts ------------------------------------------------------------------------------
+
+
+def _identical_runs(runs=60):
+    """Every run the same per-ping counts (pings 6-20 judged): 10 false tracks before removal, 2 after, one of them
+    on a ping with none before."""
+    before = np.zeros(20, int)
+    after = np.zeros(20, int)
+    before[[6, 8, 9, 12, 15, 19]] = [1, 2, 3, 1, 2, 1]
+    after[[8, 13]] = [1, 1]  # ping 14 has a false track after removal and none before
+    before[2] = 7  # a warm-up ping: not judged
+    return np.tile(before, (runs, 1)), np.tile(after, (runs, 1)), np.arange(20) >= 5
+
+
+def test_c1_is_the_ratio_of_sums_and_its_interval_resamples_runs():
+    before, after, post = _identical_runs()
+    c = paper001.c1_criterion(before, after, post, "hand-made")
+    assert np.isclose(c.ours, 1 - 2 / 10) and c.n == 60
+    # every run has the same counts: a bootstrap over runs cannot vary (one over pings would)
+    assert c.interval[0] == c.interval[1] == pytest.approx(0.8)
+    assert c.verdict == "met" and c.extra["precondition"] == {"name": "false tracks before removal, summed",
+                                                               "needs": paper001.MIN_FALSE_BEFORE, "has": 600,
+                                                               "holds": True}
+    assert np.isclose(c.extra["false_per_ping_before"], 10 / 15)
+    assert "false tracks per ping before removal 0.667" in c.detail and "600 false tracks before" in c.detail
+    # runs that differ give an interval that is not a point
+    rng = np.random.default_rng(3)
+    varied = paper001.c1_criterion(rng.poisson(0.7, (60, 20)), rng.poisson(0.15, (60, 20)), post)
+    assert varied.interval[0] < varied.ours < varied.interval[1]
+
+
+def test_c1_counts_false_tracks_after_removal_on_pings_without_one_before():
+    before, after, post = _identical_runs()
+    after = after.copy()
+    after[:, 16] = 3  # ping 17: none before, three after, in every run -> 5 after for 10 before: 50 %, not met
+    c = paper001.c1_criterion(before, after, post)
+    assert np.isclose(c.ours, 0.5) and c.verdict == "not met"
+
+
+def test_c1_is_inconclusive_below_its_population_minimum():
+    before, after, post = _identical_runs()
+    c = paper001.c1_criterion(before, after, post, min_false=601)  # 600 false tracks before removal
+    assert c.interval == pytest.approx((0.8, 0.8)) and c.verdict == UNJUDGED
+    assert c.extra["precondition"]["holds"] is False and "NOT JUDGEABLE: 600 false tracks" in c.detail
+    after = after.copy()
+    after[:, 16] = 3
+    c = paper001.c1_criterion(before, after, post, min_false=601)  # never "not met" either
+    assert c.verdict == UNJUDGED and "'not met' from the interval alone set aside" in c.detail
+    assert c.extra["verdict_if_judged"] == "not met"
