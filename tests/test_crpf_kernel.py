@@ -1,5 +1,7 @@
 """The fused CRPF step kernel (workbench.kernels.crpf_step) against its NumPy twin and the plugin's array code."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -43,6 +45,40 @@ def test_kernel_matches_the_numpy_twin(backend, q, beta, arc, adaptive, relative
                     backend=backend)
     for a, b in zip(ref, got):
         assert np.allclose(a, b, rtol=1e-11, atol=1e-11)
+
+
+@pytest.fixture
+def test_arch():
+    """The Taichi arch of the ``on_test_arch`` tests, the ones ``scripts/gpu-check.sh`` runs: ``WORKBENCH_TEST_ARCH``
+    (``cuda`` on a GPU, ``cpu`` standing in for it), and the test fails where Taichi cannot start on the arch it
+    names; unset, ``cuda`` where Taichi finds one, else the test skips."""
+    from workbench.kernels.runtime import taichi_available_arches
+
+    arch = os.environ.get("WORKBENCH_TEST_ARCH")
+    available = taichi_available_arches()
+    if arch is None:
+        if "cuda" not in available:
+            pytest.skip("no CUDA device for Taichi here (WORKBENCH_TEST_ARCH=cpu runs these on the CPU)")
+        return "cuda"
+    if arch not in available:
+        pytest.fail(f"WORKBENCH_TEST_ARCH={arch}: Taichi cannot start on it here (it finds {', '.join(available)})")
+    return arch
+
+
+@pytest.mark.parametrize("B, N", [(7, 64), (4, 50_000), (4096, 32)], ids=["small", "large-N", "large-B"])
+@pytest.mark.parametrize("q, beta, arc, adaptive, relative", [
+    (2.0, 2.0, False, False, False),  # the previous CRPF
+    (2.0, 2.0, True, True, True),  # the paper CRPF
+], ids=["previous", "paper"])
+def test_crpf_step_on_test_arch_matches_the_numpy_twin(test_arch, B, N, q, beta, arc, adaptive, relative):
+    # one run per parallel iteration: many particles in a run (its scratch row), and many runs (the launch)
+    x, c, s2, t, z, key, u0, shape = _inputs(B=B, N=N, seed=9)
+    args = (x, c, s2, t, F, z, key, u0, shape, 0.9, beta, 0.3, q, arc, (5.0, -3.0), adaptive, relative)
+    ref = crpf_step_numpy(*args)
+    got = crpf_step(*args, backend="taichi", arch=test_arch)
+    for a, b in zip(ref, got):
+        assert a.shape == b.shape and np.all(np.isfinite(b))
+        np.testing.assert_allclose(b, a, rtol=1e-11, atol=1e-11)
 
 
 @pytest.mark.skipif(not numba_available(), reason="Numba is not installed")

@@ -1,6 +1,7 @@
 """The method-C weight kernels against their NumPy reference, on every backend and Taichi arch here, in float64 and
 float32."""
 
+import os
 import subprocess
 import sys
 
@@ -114,6 +115,54 @@ def test_float32_kernels_match_the_reference_within_the_stated_tolerance(backend
         # the compiled float32 kernels agree with their NumPy float32 twin as closely as with the float64 reference
         twin = tbd_log_weight_sums_float32(*args)
         np.testing.assert_allclose(out[live], twin[live], rtol=2e-6, atol=1e-4)
+
+
+@pytest.fixture
+def test_arch():
+    """The Taichi arch of the ``on_test_arch`` tests, the ones ``scripts/gpu-check.sh`` runs: ``WORKBENCH_TEST_ARCH``
+    (``cuda`` on a GPU, ``cpu`` standing in for it), and the test fails where Taichi cannot start on the arch it
+    names; unset, ``cuda`` where Taichi finds one, else the test skips."""
+    arch = os.environ.get("WORKBENCH_TEST_ARCH")
+    available = taichi_available_arches()
+    if arch is None:
+        if "cuda" not in available:
+            pytest.skip("no CUDA device for Taichi here (WORKBENCH_TEST_ARCH=cpu runs these on the CPU)")
+        return "cuda"
+    if arch not in available:
+        pytest.fail(f"WORKBENCH_TEST_ARCH={arch}: Taichi cannot start on it here (it finds {', '.join(available)})")
+    return arch
+
+
+#: (B, N, M) of the twin tests on the test arch: small and odd shapes, then a million particles (more than a GPU
+#: runs at once: the launch's grid) and 16411 measurements (a long loop per particle in each precision).
+TWIN_SIZES = {"small": ((4, 300, 40), (3, 257, 1), (2, 1, 9), (5, 130, 129)),
+              "large-N": ((2, 1_000_003, 64),), "large-M": ((2, 4099, 16_411),)}
+
+
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+@pytest.mark.parametrize("size", list(TWIN_SIZES))
+def test_method_c_weights_on_test_arch_match_the_numpy_twins(test_arch, size, precision):
+    # every particle of the kernel's output against the float64 reference (and, in float32, the NumPy float32
+    # twin) on ~130 particles of each run, the last ones among them: a particle's log-sum depends on its own state only
+    rng = np.random.default_rng(21)
+    for B, N, M in TWIN_SIZES[size]:
+        points, z, valid, log_pd, sigma_p, s_vr = random_case(rng, B, N, M)
+        valid[0, 0] = True  # run 0 sees a detection: every particle of it has a finite log-sum
+        out = tbd_log_weight_sums(points, z, valid, log_pd, sigma_p, s_vr, backend="taichi", arch=test_arch,
+                                  precision=precision)
+        assert out.shape == (B, N) and out.dtype == np.float64
+        pick = np.unique(np.r_[np.arange(0, N, max(1, N // 128)), np.arange(max(0, N - 5), N)])  # and the last
+        sub = (points[:, pick], z, valid, log_pd, sigma_p, s_vr)
+        ref, got = tbd_log_weight_sums_reference(*sub), out[:, pick]
+        assert np.array_equal(np.isneginf(got), np.isneginf(ref)) and np.all(np.isneginf(out[1]))  # the empty gate
+        assert np.all(np.isfinite(out[0]))
+        live = np.isfinite(ref)
+        if precision == "float64":
+            np.testing.assert_allclose(got[live], ref[live], rtol=1e-12, atol=1e-9)
+        else:
+            np.testing.assert_allclose(got[live], ref[live], rtol=2e-6, atol=1e-4)
+            np.testing.assert_allclose(got[live], tbd_log_weight_sums_float32(*sub)[live], rtol=2e-6, atol=1e-4)
+            assert _weight_error(got[:1], ref[:1]) < FLOAT32_WEIGHT_RTOL
 
 
 def realistic_scene(rng, B=3, N=6_000, clutter=300):

@@ -109,7 +109,7 @@ def monte_carlo_wall_time(size: str = "full", seed: int = 0, values=None) -> dic
     out = {"mc_size": size, "mc_runs_per_level": values["runs"],
            "mc_reference_runs_per_level": values["reference_runs"],
            "mc_steps": values["steps"], "mc_levels": len(recipe.LEVELS), "mc_filters": len(recipe.DEFAULT_FILTERS),
-           "mc_wall_s": wall, "mc_crpf_backend": resolve_backend("auto", "cpu"),
+           "mc_wall_s": wall, "mc_crpf_backend": resolve_backend("auto"),
            "mc_load_average_1min_before": load_before, "mc_load_average_1min_after": os.getloadavg()[0]}
     if size == "full":  # the target is about the paper's size
         out.update({"target_mc_wall_s": f"< {MC_TARGET_S:g} s", "measured_mc_wall_s": wall,
@@ -176,7 +176,7 @@ def crpf_step_cost(repeat: int = 15, seed: int = 0, budget: int = 131072) -> dic
     parallel region waits at its barrier for a thread the scheduler has put aside, which adds the same stall to
     both configurations and hides the difference; the two-thread figures are printed beside, for information."""
     load = os.getloadavg()[0]
-    out = {"step_backend": resolve_backend("auto", "cpu"), "step_load_average_1min": load}
+    out = {"step_backend": resolve_backend("auto"), "step_load_average_1min": load}
     threads = None
     if out["step_backend"] == "numba":
         import numba

@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""The Python half of ``scripts/gpu-check.sh``: compare the two reports into a JSON verdict, time the CRPF step on
+an arch, and gather the steps' records into ``gpu-check.json``.
+
+    python scripts/gpu_check_compare.py compare A B --rtol 1e-6 --json compare.json
+    python scripts/gpu_check_compare.py crpf-step --arch cuda --json crpf-cuda.json
+    python scripts/gpu_check_compare.py summary --out DIR --work WORK --arch cuda --size quick --rtol 1e-6
+
+``compare`` runs ``scripts/compare_reports.py`` on the two folders and writes its lines with a verdict: ``agree``
+(exit 0), ``differ`` (exit 1) or ``error`` (exit 2: a folder without a ``summary.json``, say).  ``summary`` needs
+the standard library only, so that the JSON is written even where the project does not import.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+#: One line of compare_reports.py per table or figure: ``  table ID: identical (max relative difference 0...)``.
+ITEM = re.compile(r"^\s+(table|figure) (\S+): (identical|agrees|DIFFERS|missing)[^(]*(?:\(max relative difference "
+                  r"([^,)]+))?")
+
+
+def compare(first: Path, second: Path, rtol: float) -> dict:
+    """The verdict of ``compare_reports.py first second --rtol rtol`` as a dict (see the module docstring)."""
+    sys.path.insert(0, str(HERE))
+    import compare_reports
+
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf):
+            code = compare_reports.main([str(first), str(second), "--rtol", repr(rtol)])
+    except (OSError, ValueError, KeyError) as exc:  # a missing or unreadable report folder
+        return {"rtol": rtol, "atol": 1e-12, "verdict": "error", "exit": 2,
+                "error": f"{type(exc).__name__}: {exc}", "lines": buf.getvalue().splitlines()}
+    lines = buf.getvalue().splitlines()
+    items, worst, paper = {}, 0.0, ""
+    for line in lines:
+        if line.startswith("paper "):
+            paper = line[len("paper "):].rstrip(":")
+        m = ITEM.match(line)
+        if m:
+            kind, name, status, rel = m.groups()
+            items[f"paper{paper} {kind} {name}"] = {"identical": "identical", "agrees": "agrees"}.get(status, "differs")
+            if rel is not None:
+                with contextlib.suppress(ValueError):
+                    worst = max(worst, float(rel))
+    return {"rtol": rtol, "atol": 1e-12, "verdict": "agree" if code == 0 else "differ", "exit": int(code),
+            "max_relative_difference": worst, "items": items, "lines": lines}
+
+
+def crpf_step(arch: str, repeat: int) -> dict:
+    """paper 003's CRPF step cost (ns per particle) with the kernels on ``arch``, and which backend ran."""
+    from workbench.kernels.backend import resolve, using
+    from workbench_papers.paper003.bench import crpf_step_cost
+
+    with using(arch):
+        out = crpf_step_cost(repeat=repeat)
+        out["arch"] = arch
+        out["backend_that_ran"] = resolve("auto")  # crpf_step_cost's "step_backend" names the CPU arch's
+    return out
+
+
+def _read_json(path: Path):
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _pytest_result(log: Path) -> str | None:
+    """pytest's closing line (``12 passed, 1 warning in 30.1s``), if the log has one."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return None
+    for line in reversed(lines):
+        if re.search(r"\d+ (passed|failed|error|skipped|deselected)", line) or "no tests ran" in line:
+            return line.strip("= ")
+    return None
+
+
+def _device() -> dict:
+    out = {"host": platform.node(), "machine": platform.machine(), "cpu_count": os.cpu_count(),
+           "python": platform.python_version()}
+    if shutil.which("nvidia-smi"):
+        with contextlib.suppress(OSError, subprocess.SubprocessError):
+            out["gpu"] = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version",
+                                         "--format=csv,noheader"], capture_output=True, text=True,
+                                        timeout=20).stdout.strip()
+    return out
+
+
+def summary(out_dir: Path, work: Path, arch: str, size: str, rtol: float) -> dict:
+    """``gpu-check.json``'s content from the steps' records (``work/steps.tsv``) and their JSON outputs."""
+    steps = []
+    tsv = work / "steps.tsv"
+    lines = tsv.read_text().splitlines() if tsv.exists() else []
+    for line in lines:
+        name, status, code, seconds, command = (line.split("\t") + [""] * 5)[:5]
+        step = {"name": name, "status": status, "exit": int(code), "seconds": float(seconds),
+                "log": f"{name}.log", "command": command}
+        if name == "tests":
+            step["result"] = _pytest_result(out_dir / "tests.log")
+        steps.append(step)
+    bench = {}
+    for path in sorted(work.glob("bench-*.json")):
+        bench[path.stem[len("bench-"):]] = _read_json(path)
+    crpf = {path.stem[len("crpf-"):]: _read_json(path) for path in sorted(work.glob("crpf-*.json"))}
+    comparison = _read_json(work / "compare.json") or {"rtol": rtol, "verdict": "not run"}
+    failed = [s["name"] for s in steps if s["status"] != "ok" and s["status"] != "skipped"]
+    return {"arch": arch, "size": size, "out": str(out_dir), "work": str(work), "device": _device(),
+            "ok": not failed and comparison.get("verdict") == "agree", "failed_steps": failed, "steps": steps,
+            "compare": comparison, "bench": bench, "crpf_step": crpf}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("compare", help="compare two report folders into a JSON verdict")
+    p.add_argument("first", type=Path)
+    p.add_argument("second", type=Path)
+    p.add_argument("--rtol", type=float, required=True)
+    p.add_argument("--json", type=Path, required=True)
+    p = sub.add_parser("crpf-step", help="time the CRPF step on an arch")
+    p.add_argument("--arch", required=True)
+    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--json", type=Path, required=True)
+    p = sub.add_parser("summary", help="write gpu-check.json")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--work", type=Path, required=True)
+    p.add_argument("--arch", required=True)
+    p.add_argument("--size", required=True)
+    p.add_argument("--rtol", type=float, required=True)
+    args = parser.parse_args(argv)
+    if args.command == "compare":
+        result = compare(args.first, args.second, args.rtol)
+        args.json.write_text(json.dumps(result, indent=1))
+        print("\n".join(result["lines"] + ([result["error"]] if "error" in result else [])))
+        print(f"verdict: {result['verdict']} (rtol {args.rtol:g})")
+        return result["exit"]
+    if args.command == "crpf-step":
+        result = crpf_step(args.arch, args.repeat)
+        args.json.write_text(json.dumps(result, indent=1, default=str))
+        for key, value in result.items():
+            print(f"{key:60s} {value}")
+        return 0
+    result = summary(args.out, args.work, args.arch, args.size, args.rtol)
+    (args.out / "gpu-check.json").write_text(json.dumps(result, indent=1, default=str))
+    return 0 if result["ok"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
