@@ -1,5 +1,5 @@
 """The plugin test kits: filters (:mod:`.kit`), sensors (:mod:`.sensors`), clutter generators and removers
-(:mod:`.clutter`).
+(:mod:`.clutter`), motion models (:mod:`.motion`).
 
 From pytest::
 
@@ -17,15 +17,18 @@ checks by its declared capabilities and fields, never by its name.  Test ids rea
 NAME`` or :func:`run_checks`.
 """
 
+from ..models import MotionModel
 from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, SensorSpec
 from . import kit
 from ._common import Check, Outcome, Outcomes
 from .clutter import GENERATOR_CHECKS, REMOVER_CHECKS, generator_checks_for, remover_checks_for
 from .kit import CHECKS, reference_kalman
+from .motion import MOTION_CHECKS, motion_checks_for, run_motion_checks
 from .sensors import SENSOR_CHECKS, sensor_checks_for
 
-__all__ = ["CHECKS", "SENSOR_CHECKS", "GENERATOR_CHECKS", "REMOVER_CHECKS", "Check", "Outcome", "Outcomes",
-           "checks_for", "kit_checks", "run_checks", "reference_kalman", "parametrize_with_checks"]
+__all__ = ["CHECKS", "SENSOR_CHECKS", "GENERATOR_CHECKS", "REMOVER_CHECKS", "MOTION_CHECKS", "Check", "Outcome",
+           "Outcomes", "checks_for", "kit_checks", "run_checks", "reference_kalman", "parametrize_with_checks",
+           "motion_checks_for", "run_motion_checks"]
 
 #: spec type -> (every check of its kit, the applicable ones)
 _KITS = {
@@ -33,6 +36,7 @@ _KITS = {
     SensorSpec: (SENSOR_CHECKS, sensor_checks_for),
     ClutterGeneratorSpec: (GENERATOR_CHECKS, generator_checks_for),
     ClutterRemoverSpec: (REMOVER_CHECKS, remover_checks_for),
+    MotionModel: (MOTION_CHECKS, motion_checks_for),
 }
 
 
@@ -41,7 +45,7 @@ def _kit(spec):
         if isinstance(spec, kind):
             return entry
     raise TypeError(f"no test kit for {type(spec).__name__}; the kits check FilterSpec, SensorSpec, "
-                    f"ClutterGeneratorSpec and ClutterRemoverSpec")
+                    f"ClutterGeneratorSpec, ClutterRemoverSpec and MotionModel")
 
 
 def kit_checks(spec) -> tuple[Check, ...]:
@@ -68,7 +72,8 @@ def run_checks(spec) -> Outcomes:
 
 
 def parametrize_with_checks(specs):
-    """A ``pytest.mark.parametrize`` over every applicable (component, check) pair, for components of any kind."""
+    """A ``pytest.mark.parametrize`` over every applicable (component, check) pair, for components of any kind
+    (motion models too: ids such as ``cv2d-check_jacobian``)."""
     import pytest
 
     params = []
