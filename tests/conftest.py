@@ -1,3 +1,4 @@
+import os
 import sys
 from pathlib import Path
 
@@ -16,3 +17,21 @@ def demo_host():
     from workbench.plugins import load_host
 
     return load_host(extra_plugins=[("demo", demo_plugin)])
+
+
+@pytest.fixture
+def test_arch():
+    """The Taichi arch of the ``on_test_arch`` kernel tests, the ones ``scripts/gpu-check.sh`` runs:
+    ``WORKBENCH_TEST_ARCH`` (``cuda`` on a GPU, ``cpu`` standing in for it), and the test fails where Taichi cannot
+    start on the arch it names; unset, ``cuda`` where Taichi finds one, else the test skips."""
+    from workbench.kernels.runtime import taichi_available_arches
+
+    arch = os.environ.get("WORKBENCH_TEST_ARCH")
+    available = taichi_available_arches()
+    if arch is None:
+        if "cuda" not in available:
+            pytest.skip("no CUDA device for Taichi here (WORKBENCH_TEST_ARCH=cpu runs these on the CPU)")
+        return "cuda"
+    if arch not in available:
+        pytest.fail(f"WORKBENCH_TEST_ARCH={arch}: Taichi cannot start on it here (it finds {', '.join(available)})")
+    return arch

@@ -1,6 +1,5 @@
 """The fused CRPF step kernel (workbench.kernels.crpf_step) against its NumPy twin and the plugin's array code."""
 
-import os
 
 import numpy as np
 import pytest
@@ -45,24 +44,6 @@ def test_kernel_matches_the_numpy_twin(backend, q, beta, arc, adaptive, relative
                     backend=backend)
     for a, b in zip(ref, got):
         assert np.allclose(a, b, rtol=1e-11, atol=1e-11)
-
-
-@pytest.fixture
-def test_arch():
-    """The Taichi arch of the ``on_test_arch`` tests, the ones ``scripts/gpu-check.sh`` runs: ``WORKBENCH_TEST_ARCH``
-    (``cuda`` on a GPU, ``cpu`` standing in for it), and the test fails where Taichi cannot start on the arch it
-    names; unset, ``cuda`` where Taichi finds one, else the test skips."""
-    from workbench.kernels.runtime import taichi_available_arches
-
-    arch = os.environ.get("WORKBENCH_TEST_ARCH")
-    available = taichi_available_arches()
-    if arch is None:
-        if "cuda" not in available:
-            pytest.skip("no CUDA device for Taichi here (WORKBENCH_TEST_ARCH=cpu runs these on the CPU)")
-        return "cuda"
-    if arch not in available:
-        pytest.fail(f"WORKBENCH_TEST_ARCH={arch}: Taichi cannot start on it here (it finds {', '.join(available)})")
-    return arch
 
 
 @pytest.mark.parametrize("B, N", [(7, 64), (4, 50_000), (4096, 32)], ids=["small", "large-N", "large-B"])

@@ -1,7 +1,6 @@
 """The method-C weight kernels against their NumPy reference, on every backend and Taichi arch here, in float64 and
 float32."""
 
-import os
 import subprocess
 import sys
 
@@ -115,22 +114,6 @@ def test_float32_kernels_match_the_reference_within_the_stated_tolerance(backend
         # the compiled float32 kernels agree with their NumPy float32 twin as closely as with the float64 reference
         twin = tbd_log_weight_sums_float32(*args)
         np.testing.assert_allclose(out[live], twin[live], rtol=2e-6, atol=1e-4)
-
-
-@pytest.fixture
-def test_arch():
-    """The Taichi arch of the ``on_test_arch`` tests, the ones ``scripts/gpu-check.sh`` runs: ``WORKBENCH_TEST_ARCH``
-    (``cuda`` on a GPU, ``cpu`` standing in for it), and the test fails where Taichi cannot start on the arch it
-    names; unset, ``cuda`` where Taichi finds one, else the test skips."""
-    arch = os.environ.get("WORKBENCH_TEST_ARCH")
-    available = taichi_available_arches()
-    if arch is None:
-        if "cuda" not in available:
-            pytest.skip("no CUDA device for Taichi here (WORKBENCH_TEST_ARCH=cpu runs these on the CPU)")
-        return "cuda"
-    if arch not in available:
-        pytest.fail(f"WORKBENCH_TEST_ARCH={arch}: Taichi cannot start on it here (it finds {', '.join(available)})")
-    return arch
 
 
 #: (B, N, M) of the twin tests on the test arch: small and odd shapes, then a million particles (more than a GPU

@@ -15,6 +15,8 @@ import math
 import numpy as np
 import pytest
 
+from fixtures.wrong_motion import CoordinatedTurn
+
 from workbench import load_host
 from workbench.filtering import run_filter
 from workbench.models import MotionModel, constant_velocity, linear_measurement, range_bearing
@@ -41,38 +43,16 @@ def reference_f(x):
     return np.array([turn_step(row) for row in x.reshape(-1, N_STATE)]).reshape(x.shape)
 
 
+class Turn(CoordinatedTurn):
+    """The coordinated turn of the motion-model kit's fixtures, with its analytic Jacobian (the kit checks it
+    against central differences; the test below checks f against :func:`turn_step`)."""
+
+
 class TurnNoJacobian(MotionModel):
-    """Coordinated turn, rate in the state, vectorised over ``(..., 5)``; no Jacobian."""
+    """The same turn without a Jacobian."""
 
-    def f(self, x):
-        x = np.asarray(x, dtype=float)
-        T = self.dt
-        px, py, vx, vy, w = (x[..., i] for i in range(N_STATE))
-        s, c = np.sin(w * T), np.cos(w * T)
-        safe = np.where(w == 0.0, 1.0, w)
-        a = np.where(w == 0.0, T, s / safe)  # sin(wT) / w
-        b = np.where(w == 0.0, 0.0, (1.0 - c) / safe)  # (1 - cos(wT)) / w
-        return np.stack([px + a * vx - b * vy, py + b * vx + a * vy, c * vx - s * vy, s * vx + c * vy, w], axis=-1)
-
-
-class Turn(TurnNoJacobian):
-    """The same, with its analytic Jacobian (the test checks it against central differences)."""
-
-    def jacobian(self, x):
-        x = np.asarray(x, dtype=float)
-        T = self.dt
-        vx, vy, w = x[..., 2], x[..., 3], x[..., 4]
-        s, c = np.sin(w * T), np.cos(w * T)
-        a, b = s / w, (1.0 - c) / w
-        da = (T * c * w - s) / (w * w)  # d(sin(wT)/w)/dw
-        db = (T * s * w - (1.0 - c)) / (w * w)  # d((1 - cos(wT))/w)/dw
-        J = np.zeros(x.shape + (N_STATE,))
-        J[..., 0, 0] = J[..., 1, 1] = J[..., 4, 4] = 1.0
-        J[..., 0, 2], J[..., 0, 3], J[..., 0, 4] = a, -b, da * vx - db * vy
-        J[..., 1, 2], J[..., 1, 3], J[..., 1, 4] = b, a, db * vx + da * vy
-        J[..., 2, 2], J[..., 2, 3], J[..., 2, 4] = c, -s, -T * s * vx - T * c * vy
-        J[..., 3, 2], J[..., 3, 3], J[..., 3, 4] = s, c, T * c * vx - T * s * vy
-        return J
+    _terms = CoordinatedTurn._terms
+    f = CoordinatedTurn.f
 
 
 def _cv_with_rate(q_scale: float):

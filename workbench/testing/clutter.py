@@ -21,12 +21,12 @@ from scipy import stats
 
 from ..frames import FRAMES
 from ..rng import generator
-from ..params import format_value, when_example
+from ..params import format_value
 from ..specs import BoundFunction, ClutterGeneratorSpec, ClutterRemoverSpec
 from ..types import CLUTTER, Scans, Truth
 from ._common import Check, Outcome, check_parameters, fail, frame_problems, kit_truth, normal_p, poisson_p, \
     run_kit, scans_equal
-from .sensors import trial_values
+from .sensors import trial_setup
 
 __all__ = ["GENERATOR_CHECKS", "REMOVER_CHECKS", "generator_checks_for", "remover_checks_for",
            "run_generator_checks", "run_remover_checks", "remover_scene", "check_count_poisson",
@@ -284,20 +284,10 @@ def check_generator_configured_values(spec: ClutterGeneratorSpec) -> str:
     problems, tried, untried = [], [], []
     seed = 9
     for p in declared:
-        conds = {key: when_example(want) for key, want in p.when}
-        try:
-            base = spec.configure(**conds) if conds else spec
-        except Exception as exc:  # noqa: BLE001
-            problems.append(f"{p.name!r}: its when conditions {conds} are refused: {exc}")
+        conds, base, value, values, problem = trial_setup(spec, p)
+        if problem:
+            problems.append(problem)
             continue
-        value = base.params.get(p.name, p.default)
-        values = []
-        for v in trial_values(p, value):
-            try:
-                base.check(**{p.name: v})
-            except Exception:  # noqa: BLE001 - not a valid value of this parameter: try another
-                continue
-            values.append(v)
         if not values:
             untried.append(p.name)
             continue

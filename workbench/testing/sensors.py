@@ -249,6 +249,27 @@ def check_origin_labels(spec: SensorSpec) -> str:
 EFFECT_RUNS, EFFECT_STEPS, EFFECT_DT = 20, 60, 5.0
 
 
+def trial_setup(spec, p):
+    """For ``check_configured_values``: ``(conds, base, value, values, problem)``: the settings that meet ``p``'s
+    :attr:`~workbench.params.Param.when` conditions, the spec configured to them, ``p``'s value there, the other
+    values to try (those of :func:`trial_values` its declaration accepts) and a problem line (or ``""``) where the
+    conditions themselves are refused."""
+    conds = {key: when_example(want) for key, want in p.when}
+    try:
+        base = spec.configure(**conds) if conds else spec
+    except Exception as exc:  # noqa: BLE001
+        return conds, None, None, [], f"{p.name!r}: its when conditions {conds} are refused: {exc}"
+    value = base.params.get(p.name, p.default)
+    values = []
+    for v in trial_values(p, value):
+        try:
+            base.check(**{p.name: v})
+        except Exception:  # noqa: BLE001 - not a valid value of this parameter: try another
+            continue
+        values.append(v)
+    return conds, base, value, values, ""
+
+
 def trial_values(param, value) -> list:
     """Other valid-looking values of ``param`` than its current ``value``, in the order a kit tries them: the
     other choices (or ``not value``); for a number ``value / 2``, ``1.5 value + 1`` and ``value + 100 (|value| + 1)``
@@ -381,20 +402,10 @@ def check_configured_values(spec: SensorSpec) -> str:
     problems, tried, untried = [], [], []
     seed = 8
     for p in declared:
-        conds = {key: when_example(want) for key, want in p.when}
-        try:
-            base = spec.configure(**conds) if conds else spec
-        except Exception as exc:  # noqa: BLE001
-            problems.append(f"{p.name!r}: its when conditions {conds} are refused: {exc}")
+        conds, base, value, values, problem = trial_setup(spec, p)
+        if problem:
+            problems.append(problem)
             continue
-        value = base.params.get(p.name, p.default)
-        values = []
-        for v in trial_values(p, value):
-            try:
-                base.check(**{p.name: v})
-            except Exception:  # noqa: BLE001 - not a valid value of this parameter: try another
-                continue
-            values.append(v)
         if not values:
             untried.append(p.name)
             continue
