@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import binom
+from scipy.stats import binom, ttest_1samp
 
 from workbench.criteria import (
     VERDICTS,
@@ -14,9 +14,12 @@ from workbench.criteria import (
     Precondition,
     binomial_interval,
     bootstrap_interval,
+    criterion_equivalent,
     criterion_from_counts,
     criterion_from_runs,
+    equivalence_band,
     judge,
+    judge_equivalent,
     reference_converged,
     replication_rate,
     rows_track,
@@ -350,3 +353,81 @@ def test_a_criterion_fed_diverged_rows_or_an_unconverged_reference_is_not_judgea
     ok = criterion_from_runs("2", "A/C >= 1.3", (a, c), lambda x, y: x.mean() / y.mean(), 1.3, ">=", min_n=20,
                              preconditions=(rows_track({"A": c > 3e3, "C": c > 3e3}, 0.10),))
     assert ok.verdict == "met" and ok.met
+
+
+# -- equivalence: two one-sided tests (TOST) with a stated margin -----------------------------------------------
+
+def _normal(n, mu, sd=1.0, seed=7):
+    """A normal sample of exactly mean ``mu`` and standard deviation ``sd`` (ddof = 1)."""
+    z = np.random.default_rng(seed).normal(size=n)
+    return mu + sd * (z - z.mean()) / z.std(ddof=1)
+
+
+def test_equivalence_band_of_a_difference_and_of_a_ratio():
+    assert equivalence_band(0.3) == (-0.3, 0.3)
+    lo, hi = equivalence_band(0.05, ratio=True)
+    assert lo == pytest.approx(0.952380952, rel=1e-8) and hi == pytest.approx(1.05, rel=1e-12)  # 1/1.05, 1.05
+    assert judge_equivalent((0.96, 1.04), 0.05, ratio=True) == "met"
+    assert judge_equivalent((0.94, 0.949), 0.05, ratio=True) == "not met"  # wholly below 1/1.05
+    assert judge_equivalent((0.94, 0.96), 0.05, ratio=True) == "inconclusive"
+    assert judge_equivalent((-0.1, 0.1), 0.3, n=5, min_n=20) == "inconclusive"
+    for bad in (0.0, -0.1, math.inf, math.nan):
+        with pytest.raises(ValueError, match="margin"):
+            equivalence_band(bad)
+
+
+def test_tost_on_hand_made_samples_tie_difference_and_wide():
+    m = 0.3
+    tie = criterion_equivalent("E", "about equal", _normal(200, 0.0, 0.2), np.mean, m, min_n=20)
+    assert tie.verdict == "met" and -m < tie.interval[0] < tie.interval[1] < m
+    for mu in (2 * m, -2 * m):  # a difference of twice the margin, either side
+        far = criterion_equivalent("E", "about equal", _normal(200, mu, 0.2), np.mean, m, min_n=20)
+        assert far.verdict == "not met", mu
+    wide = criterion_equivalent("E", "about equal", _normal(200, 0.0, 8.0), np.mean, m, min_n=20)
+    assert wide.verdict == "inconclusive" and wide.interval[0] < -m and wide.interval[1] > m
+    assert criterion_equivalent("E", "x", _normal(10, 0.0, 0.2), np.mean, m, min_n=20).verdict == "inconclusive"
+    # the record states the method, the margin and the 90 % level
+    assert tie.method.startswith("equivalence (TOST, margin 0.3, 90 % interval)")
+    assert "equivalence (TOST, margin 0.3, 90 % interval" in tie.detail and "90 % interval [" in tie.detail
+    assert tie.extra["equivalence"] == {"margin": 0.3, "ratio": False, "alpha": 0.05, "band": [-0.3, 0.3]}
+    back = Criterion.from_dict(json.loads(json.dumps(tie.to_dict())))
+    assert back.verdict == "met" and back.method == tie.method
+
+
+def test_tost_on_a_paired_ratio_reads_a_tie_as_a_tie():
+    rng = np.random.default_rng(11)
+    a = rng.lognormal(3.0, 0.3, 1000)
+    tie = criterion_equivalent("C2", "about equal", (a, a * 1.002 * rng.lognormal(0.0, 0.01, 1000)),
+                               lambda x, y: y.mean() / x.mean(), 0.05, ratio=True, min_n=100)
+    assert tie.verdict == "met" and 1.0 < tie.interval[0] < tie.interval[1] < 1.01
+    assert "margin 5 %" in tie.method and "within [0.9524, 1.05]" in tie.threshold
+    for f in (1.12, 1 / 1.12):  # 12 % apart, either way: a difference of at least the margin
+        c = criterion_equivalent("C2", "about equal", (a, a * f), lambda x, y: y.mean() / x.mean(), 0.05,
+                                 ratio=True, min_n=100)
+        assert c.verdict == "not met", f
+
+
+def test_tost_uses_the_90_percent_interval_of_the_same_bootstrap():
+    x = _normal(200, 0.1, 1.0)
+    c = criterion_equivalent("E", "x", x, np.mean, 0.3, min_n=20, resamples=3000, seed=4)
+    # the same resamples drawn here, and their 5th and 95th percentiles taken by numpy
+    idx = np.random.default_rng(4).integers(0, 200, size=(3000, 200))
+    means = x[idx].mean(axis=1)
+    assert c.interval == pytest.approx(tuple(np.percentile(means, [5.0, 95.0])), rel=1e-12, abs=1e-12)
+    assert c.interval[0] > np.percentile(means, 2.5) and c.interval[1] < np.percentile(means, 97.5)
+
+
+@pytest.mark.parametrize("mu", [-0.6, -0.428, -0.25, -0.172, 0.0, 0.1, 0.172, 0.25, 0.428, 0.6])
+def test_tost_agrees_with_the_t_based_two_one_sided_tests_on_a_normal_sample(mu):
+    """The bootstrap TOST's verdict against scipy's one-sided t-tests at alpha = 0.05 on a normal sample of 200.
+
+    mu = +-0.172 and +-0.428 sit where the one-sided p-value is about 0.036: between 0.025 and 0.05, so a verdict
+    read from the 95 % interval (each side at 0.025) would be inconclusive there."""
+    m, x = 0.3, _normal(200, mu, 1.0)
+    p_equiv = max(ttest_1samp(x, -m, alternative="greater").pvalue, ttest_1samp(x, m, alternative="less").pvalue)
+    p_diff = min(ttest_1samp(x, m, alternative="greater").pvalue, ttest_1samp(x, -m, alternative="less").pvalue)
+    assert all(abs(p - 0.05) > 0.01 for p in (p_equiv, p_diff))  # no case at the boundary itself
+    if abs(mu) in (0.172, 0.428):  # the cases that tell 90 % from 95 %: one one-sided p in (0.025, 0.05)
+        assert 0.025 < (p_equiv if abs(mu) < 0.3 else p_diff) < 0.05
+    expected = "met" if p_equiv < 0.05 else "not met" if p_diff < 0.05 else "inconclusive"
+    assert criterion_equivalent("E", "x", x, np.mean, m, min_n=20, seed=3).verdict == expected

@@ -26,6 +26,9 @@ The functions below build criteria honestly from per-run data:
 - :func:`judge`: the three-way verdict of an interval against a threshold;
 - :func:`criterion_from_runs` and :func:`criterion_from_counts`: a :class:`Criterion` with ours, n, the
   interval and the verdict filled in;
+- :func:`criterion_equivalent` (with :func:`judge_equivalent` and :func:`equivalence_band`): an "about equal"
+  claim judged as equivalence by two one-sided tests (TOST) with a stated margin, read from the 90 % interval, so
+  that a tie reads as a tie;
 - :func:`replication_rate`: how often the criterion, computed the paper's way on a few runs, holds in
   independent, disjoint batches of runs;
 - :func:`rows_track` and :func:`reference_converged`: the preconditions "the judged rows track" (a stated share
@@ -48,7 +51,8 @@ import numpy as np
 
 __all__ = ["VERDICTS", "NOT_JUDGEABLE", "DIRECTIONS", "Criterion", "Precondition", "bootstrap_interval",
            "binomial_interval", "judge", "criterion_from_runs", "criterion_from_counts", "replication_rate",
-           "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL"]
+           "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL", "equivalence_band",
+           "judge_equivalent", "criterion_equivalent", "EQUIVALENCE_DETAIL"]
 
 #: The verdict of a criterion whose precondition fails.
 NOT_JUDGEABLE = "not judgeable"
@@ -589,6 +593,120 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
                      interval=interval, threshold=thr, replication=replication, min_n=min_n,
                      method="exact, Clopper-Pearson", statistics=COUNTS_DETAIL.format(**values),
                      preconditions=tuple(preconditions))
+
+
+# -- equivalence (two one-sided tests) ------------------------------------------------------------------------
+
+def equivalence_band(margin: float, *, ratio: bool = False) -> tuple[float, float]:
+    """The equivalence range of a stated margin: ``[-margin, +margin]`` for a difference, ``[1/(1+m), 1+m]`` for a
+    ratio (symmetric on the log scale: "within 5 %" either way).
+
+    Examples
+    --------
+    >>> equivalence_band(0.5)
+    (-0.5, 0.5)
+    >>> tuple(round(v, 4) for v in equivalence_band(0.05, ratio=True))
+    (0.9524, 1.05)
+    """
+    m = float(margin)
+    if not (math.isfinite(m) and m > 0.0):
+        raise ValueError(f"an equivalence margin must be a finite number > 0, got {margin!r}")
+    return (1.0 / (1.0 + m), 1.0 + m) if ratio else (-m, m)
+
+
+def _margin_text(margin: float, ratio: bool) -> str:
+    return f"{100 * float(margin):g} %" if ratio else f"{float(margin):g}"
+
+
+def judge_equivalent(interval: tuple[float, float] | None, margin: float, *, ratio: bool = False,
+                     n: int | None = None, min_n: int | None = None) -> str:
+    """The equivalence verdict (two one-sided tests) of a ``1 - 2 alpha`` interval against a stated margin.
+
+    TOST at level alpha rejects both "difference <= -margin" and "difference >= +margin" exactly when the
+    ``1 - 2 alpha`` interval (90 % for alpha = 0.05) lies inside the equivalence band; this is :func:`judge` with
+    ``direction="within"`` on :func:`equivalence_band`.
+
+    Returns
+    -------
+    str
+        ``"met"`` (equivalent: the whole interval inside the band), ``"not met"`` (the whole interval outside it: a
+        difference of at least the margin shown), else ``"inconclusive"`` (also when ``n < min_n``).
+
+    Examples
+    --------
+    >>> judge_equivalent((-0.1, 0.2), 0.5), judge_equivalent((0.6, 0.9), 0.5), judge_equivalent((0.1, 0.7), 0.5)
+    ('met', 'not met', 'inconclusive')
+    """
+    return judge(interval, equivalence_band(margin, ratio=ratio), "within", n=n, min_n=min_n)
+
+
+#: The sentence :func:`criterion_equivalent` puts after :data:`RUNS_DETAIL` in ``detail`` (fields ``margin_text,
+#: pct`` and ``alpha``), so that a reader taking the statistics sentence out of ``detail`` keeps it.
+EQUIVALENCE_DETAIL = ("; judged as equivalence (TOST, margin {margin_text}, {pct:g} % interval, alpha = {alpha:g} "
+                      "per side)")
+
+
+def _braced(text: str) -> str:
+    return text.replace("{", "{{").replace("}", "}}")
+
+
+def criterion_equivalent(id: str, text: str, samples: Any, statistic: Callable[..., float], margin: float, *,
+                         ratio: bool = False, alpha: float = 0.05, min_n: int, published: Any = None,
+                         prefix: str = "", resamples: int = 2000, seed: int | None = 0,
+                         threshold_text: str | None = None, replication: tuple[int, int] | None = None,
+                         preconditions: tuple[Precondition, ...] = ()) -> Criterion:
+    """A :class:`Criterion` for an "about equal" claim, judged as equivalence by two one-sided tests (TOST).
+
+    The statistic is a per-run difference (equivalent to 0) or ratio (equivalent to 1) with a stated ``margin``.
+    The two one-sided tests at level ``alpha`` are read from the percentile bootstrap interval at level
+    ``1 - 2 alpha`` (90 % for alpha = 0.05) of :func:`criterion_from_runs` with ``direction="within"`` on
+    :func:`equivalence_band`: *met* (equivalent, a tie) when the whole interval lies inside the band, *not met*
+    when the whole interval lies outside it (a difference of at least the margin shown), else *inconclusive*.
+
+    Parameters
+    ----------
+    id, text, samples, statistic, min_n, published, resamples, seed, threshold_text, replication, preconditions
+        As in :func:`criterion_from_runs`.
+    margin : float
+        The stated margin: ``|difference| <= margin``, or for ``ratio=True`` the relative margin ``m`` of the band
+        ``[1/(1+m), 1+m]``.  State it (and why) before looking at the result.
+    ratio : bool, default False
+        Whether the statistic is a ratio (equivalent to 1) rather than a difference (equivalent to 0).
+    alpha : float, default 0.05
+        The level of each one-sided test, in (0, 0.5); the interval's level is ``1 - 2 alpha``.
+    prefix : str
+        Words put before the statistics sentence in ``detail`` (the equivalence sentence :data:`EQUIVALENCE_DETAIL`
+        follows it).
+
+    Returns
+    -------
+    Criterion
+        ``method`` says ``"equivalence (TOST, margin ..., 90 % interval); percentile bootstrap, N resamples"``;
+        ``extra`` holds ``equivalence: {margin, ratio, alpha, band}``.
+
+    Examples
+    --------
+    >>> x = np.random.default_rng(0).normal(0.0, 0.1, 200)
+    >>> c = criterion_equivalent("E", "about equal", x, np.mean, 0.1, min_n=20, resamples=500)
+    >>> c.verdict, c.method.split(";")[0]
+    ('met', 'equivalence (TOST, margin 0.1, 90 % interval)')
+    """
+    if not 0.0 < float(alpha) < 0.5:
+        raise ValueError(f"alpha must be in (0, 0.5), got {alpha!r}")
+    band = equivalence_band(margin, ratio=ratio)
+    level = 1.0 - 2.0 * float(alpha)
+    mtext = _margin_text(margin, ratio)
+    thr = threshold_text or (f"{100 * level:g} % interval within [{band[0]:.4g}, {band[1]:.4g}] (equivalent, "
+                             f"margin {mtext})")
+    tail = EQUIVALENCE_DETAIL.format(margin_text=mtext, pct=100 * level, alpha=float(alpha))
+    c = criterion_from_runs(id, text, samples, statistic, band, "within", min_n=min_n, published=published,
+                            detail_fmt=_braced(prefix) + RUNS_DETAIL + _braced(tail), level=level,
+                            resamples=resamples, seed=seed,
+                            threshold_text=thr, replication=replication, preconditions=preconditions)
+    method = f"equivalence (TOST, margin {mtext}, {100 * level:g} % interval)" + (f"; {c.method}" if c.method else "")
+    extra = {**c.extra, "equivalence": {"margin": float(margin), "ratio": bool(ratio), "alpha": float(alpha),
+                                        "band": list(band)}}
+    return replace(c, method=method, extra=extra)
 
 
 def replication_rate(samples: Any, protocol_runs: int, holds_fn: Callable[..., bool], replications: int = 50,
