@@ -141,7 +141,8 @@ def _sr_check(results):
 def test_criterion_2_and_the_sr_check():
     res = _results(_means())
     c = _crit(res)
-    assert c["C2"].verdict == "met"  # CDKF <= UKF <= EKF at every level, within 5 %
+    # CDKF 2 % below the UKF, the UKF 2 % below the EKF at every level: inside the 5 % margin, ties, so not met
+    assert c["C2"].verdict == "not met" and c["C2"].extra["counts"]["tie"] == 3
     assert "C3" not in c  # the SR identity is a check, not a criterion
     for lv in LEVELS:  # the SR-UKF 2 % above the UKF in every run
         res[f"mc/{lv}/sr-ukf/mismatched"] = {**res[f"mc/{lv}/ukf/mismatched"],
@@ -167,6 +168,74 @@ def test_criterion_2_and_the_sr_check():
     for lv in LEVELS:  # the EKF best everywhere: the ordering fails at every level
         means[lv]["ekf"] = 0.5 * means[lv]["cdkf"]
     assert _crit(_results(means))["C2"].verdict == "not met"
+
+
+def _c2_results(cd_uk, uk_ek, n=RUNS):
+    """Hand-made per-run MSEs for C2: at level i the CDKF family's mean MSE is ``cd_uk[i]`` x the UKF family's and
+    the UKF family's ``uk_ek[i]`` x the EKF's (SR forms equal to their full forms); the CRPF rows do not matter."""
+    means = _means()
+    for lv, a, b in zip(LEVELS, cd_uk, uk_ek):
+        ekf = means[lv]["ekf"]
+        ukf = b * ekf
+        means[lv].update({"ukf": ukf, "sr-ukf": ukf, "cdkf": a * ukf, "sr-cdkf": a * ukf})
+    return _results(means, n=n)
+
+
+def _c2(cd_uk, uk_ek, n=RUNS):
+    return judging._c2(_c2_results(cd_uk, uk_ek, n), "rad")
+
+
+def test_criterion_2_ordering_classes():
+    low, high = 1 / 1.05, 1.05  # the 5 % margin as a band symmetric on the log scale, by hand
+    assert judging.ORDER_MARGIN == 0.05 and judging.ORDER_ALPHA == 0.05
+    assert judging._order_class((0.90, low - 1e-9)) == "ordered"
+    assert judging._order_class((high + 1e-9, 1.2)) == "reversed"
+    assert judging._order_class((low, high)) == "tie" and judging._order_class((0.99, 1.01)) == "tie"
+    assert judging._order_class((0.94, 0.96)) == "undecided" and judging._order_class((1.04, 1.06)) == "undecided"
+    assert judging._order_class((0.90, 1.10)) == "undecided"
+    assert judging._order_class((float("nan"), float("nan"))) == "undecided"
+
+
+def test_criterion_2_a_tie_is_not_the_claimed_order():
+    # the three filters within 0.2 % at every level (CDKF 0.1 % below the UKF, the UKF 0.1 % below the EKF): ties
+    c = _c2((0.999,) * 3, (0.999,) * 3)
+    assert c.verdict == "not met" and c.n == RUNS
+    assert c.extra["counts"] == {"ordered": 0, "reversed": 0, "tie": 3, "undecided": 0}
+    assert "a tie is not the claimed order" in c.detail and "tied at 3" in c.detail
+    assert all(p["class"] == "tie" for p in c.extra["pairs"]) and len(c.extra["pairs"]) == 6
+    for p in c.extra["pairs"]:  # the 90 % interval inside the band, around the ratio made by hand
+        lo, hi = p["interval"]
+        assert 1 / 1.05 <= lo < 0.999 < hi <= 1.05 and p["ratio"] == pytest.approx(0.999, rel=1e-9)
+    for lv in LEVELS:  # every pair and level named with its class
+        for pair in ("CDKF-family / UKF-family", "UKF-family / EKF"):
+            assert f"{lv} {pair} 0.999 [" in c.detail
+    # a 0.2 % difference the other way is a tie too: never support, never a reversal
+    assert _c2((1.002,) * 3, (1.002,) * 3).extra["counts"]["tie"] == 3
+
+
+def test_criterion_2_ordered_reversed_and_scattered():
+    # CDKF 10 % better than the UKF and the UKF 10 % better than the EKF at every level: met
+    c = _c2((0.9,) * 3, (0.9,) * 3)
+    assert c.verdict == "met" and c.extra["counts"]["ordered"] == 3
+    assert all(p["interval"][1] < 1 / 1.05 for p in c.extra["pairs"])
+    # ordered at 2 levels, tied at the third: still met (most cases)
+    assert _c2((0.9, 0.9, 1.0), (0.9, 0.9, 1.0)).verdict == "met"
+    # one pair tied at every level (CDKF 10 % better, the UKF 0.1 % from the EKF): the level is not ordered
+    c = _c2((0.9,) * 3, (0.999,) * 3)
+    assert c.verdict == "not met" and c.extra["levels"] == {"L1": "tie", "L2": "tie", "L3": "tie"}
+    # reversed: the EKF 10 % better than the UKF, the UKF 10 % better than the CDKF
+    c = _c2((1.1,) * 3, (1.1,) * 3)
+    assert c.verdict == "not met" and c.extra["counts"]["reversed"] == 3 and "reversed at 3" in c.detail
+    assert all(p["interval"][0] > 1.05 for p in c.extra["pairs"])
+    # scattered: ordered at L1, reversed at L2, at the edge of the margin at L3 (undecided): inconclusive
+    c = _c2((0.9, 1.1, 1 / 1.05), (0.9, 1.1, 0.9))
+    assert c.extra["levels"] == {"L1": "ordered", "L2": "reversed", "L3": "undecided"}
+    assert c.verdict == "inconclusive"
+    # ordered at one level, a tie at one and a reversal at one: the order is excluded at 2 of 3 levels
+    c = _c2((0.9, 1.0, 1.1), (0.9, 1.0, 1.1))
+    assert c.verdict == "not met" and "reversed at 1, tied at 1" in c.detail
+    # too few runs: inconclusive however clear the order
+    assert _c2((0.9,) * 3, (0.9,) * 3, n=judging.MIN_RUNS - 1).verdict == "inconclusive"
 
 
 def test_timing_criteria():
