@@ -61,13 +61,12 @@ def compare(first: Path, second: Path, rtol: float) -> dict:
 
 def crpf_step(arch: str, repeat: int) -> dict:
     """paper 003's CRPF step cost (ns per particle) with the kernels on ``arch``, and which backend ran."""
-    from workbench.kernels.backend import resolve, using
+    from workbench.kernels.backend import using
     from workbench_papers.paper003.bench import crpf_step_cost
 
     with using(arch):
-        out = crpf_step_cost(repeat=repeat)
+        out = crpf_step_cost(repeat=repeat)  # its "step_backend" is the backend that ran on this arch
         out["arch"] = arch
-        out["backend_that_ran"] = resolve("auto")  # crpf_step_cost's "step_backend" names the CPU arch's
     return out
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.fixtures import wrong_motion as wrong
+from fixtures import wrong_motion as wrong
 from workbench.models import constant_velocity, random_walk_velocity, range_rate_model
 from workbench.testing import (MOTION_CHECKS, checks_for, motion_checks_for, parametrize_with_checks, run_checks,
                                run_motion_checks)

@@ -40,7 +40,7 @@ from .linalg import joseph_update, psd_solve, symmetrise
 from .models import MeasurementModel, MotionModel, require_jacobian, require_linear
 from .types import Gaussian, InputError, Scan
 
-__all__ = ["linear_predict", "extended_predict", "linear_update", "kalman_update", "kf_update", "ekf_update",
+__all__ = ["linear_predict", "extended_predict", "linearised", "linear_update", "kalman_update", "kf_update", "ekf_update",
            "measurement_covariance", "last_backend", "backend_counts"]
 
 
@@ -99,16 +99,24 @@ def extended_predict(state: Gaussian, motion: MotionModel, who: str = "ekf") -> 
     model without a Jacobian is refused naming the filter ``who`` and the model."""
     if motion.linear:
         return linear_predict(state, motion, who)
-    jac = require_jacobian(motion, who)
-    B, n = state.mean.shape
-    mean = np.asarray(motion.f(state.mean), dtype=float)  # x- = f(x)
-    J = np.asarray(jac(state.mean), dtype=float)
-    if mean.shape != (B, n) or J.shape != (B, n, n):
-        raise InputError(f"filter {who!r}: motion model {motion.name!r} gave f of shape {mean.shape} and a "
-                         f"jacobian of shape {J.shape} for states {(B, n)}; expected {(B, n)} and {(B, n, n)}")
+    mean, J = linearised(state.mean, motion, who)
     _RECORD.note("numpy")
     cov = symmetrise(J @ state.cov @ np.swapaxes(J, -1, -2) + motion.Q)  # P- = J P J^T + Q
     return Gaussian.trusted(mean, cov)
+
+
+def linearised(mean: np.ndarray, motion: MotionModel, who: str) -> tuple[np.ndarray, np.ndarray]:
+    """``f(x) (B, n)`` and the Jacobian ``J (B, n, n)`` of a model that overrides ``f``, at the means ``(B, n)``
+    (the EKF-style predicts); the model's Jacobian is required (:func:`~workbench.models.require_jacobian`), and
+    :class:`~workbench.types.InputError` names the filter ``who`` and the model when either has another shape."""
+    jac = require_jacobian(motion, who)
+    B, n = mean.shape
+    moved = np.asarray(motion.f(mean), dtype=float)  # x- = f(x)
+    J = np.asarray(jac(mean), dtype=float)
+    if moved.shape != (B, n) or J.shape != (B, n, n):
+        raise InputError(f"filter {who!r}: motion model {motion.name!r} gave f of shape {moved.shape} and a "
+                         f"jacobian of shape {J.shape} for states {(B, n)}; expected {(B, n)} and {(B, n, n)}")
+    return moved, J
 
 
 def linear_update(state: Gaussian, z: np.ndarray, present: np.ndarray, H: np.ndarray, R: np.ndarray) -> Gaussian:

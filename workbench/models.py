@@ -15,7 +15,7 @@ State layout convention: positions first, then velocities, e.g. ``[x, y, vx, vy]
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
@@ -62,6 +62,12 @@ class MotionModel:
     rebuild: Callable[[float], "MotionModel"] | None = field(default=None, compare=False, repr=False)
     state_names: tuple[str, ...] = ()
     state_units: tuple[str, ...] = ()
+
+    #: Whether ``F`` and ``Q`` are the exact discretisation of a continuous-time model, so that
+    #: ``Q(dt1 + dt2) = F(dt2) Q(dt1) F(dt2)^T + Q(dt2)`` holds (the motion-model kit checks it where ``True``);
+    #: ``None``: not declared (the built-in DWNA models hold the acceleration constant over a step, so theirs
+    #: does not compose), ``False``: an approximation such as an Euler step.
+    exact_discretisation: ClassVar[bool | None] = None
 
     @property
     def dim(self) -> int:

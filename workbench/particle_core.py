@@ -179,18 +179,20 @@ def _propagation(motion: MotionModel) -> tuple[np.ndarray, int]:
 @lru_cache(maxsize=64)
 def _propagation_cached(f_bytes: bytes, q_bytes: bytes, n: int, q_cols: int) -> tuple[np.ndarray, int]:
     F = np.frombuffer(f_bytes, dtype=float).reshape(n, n)
-    Q = np.frombuffer(q_bytes, dtype=float).reshape(n, q_cols)
-    g = Q[:, np.flatnonzero(np.any(Q != 0.0, axis=0))]
+    g = _nonzero_columns(np.frombuffer(q_bytes, dtype=float).reshape(n, q_cols))
     matrix = np.ascontiguousarray(np.hstack([F, g]), dtype=float)
     matrix.flags.writeable = False
     return matrix, g.shape[1]
 
 
+def _nonzero_columns(Q: np.ndarray) -> np.ndarray:
+    return Q[:, np.flatnonzero(np.any(Q != 0.0, axis=0))]
+
+
 def noise_columns(motion: MotionModel) -> np.ndarray:
     """The non-zero columns ``G (n, k)`` of ``Q_sqrt``: the noise a particle filter draws is ``G e``, ``e`` of
     length ``k`` (no ``F`` read)."""
-    Q = np.asarray(motion.Q_sqrt, dtype=float)
-    return Q[:, np.flatnonzero(np.any(Q != 0.0, axis=0))]
+    return _nonzero_columns(np.asarray(motion.Q_sqrt, dtype=float))
 
 
 def propagate_f(x: np.ndarray, motion: MotionModel, who: str = "this particle filter") -> np.ndarray:

@@ -364,6 +364,7 @@ def _read_recorded(path: Path, file: Path, fmt: str, dt: float, steps: int, host
             rec = load_sonar_recording(file, dt=dt)
             if rec.own_ship is None and rec.frame == "polar" and position is not None and \
                     tuple(float(v) for v in position) != (0.0, 0.0):
+                del caught[:]  # the second read gives the first one's warnings again
                 rec = load_sonar_recording(file, dt=dt, sensor=tuple(position))
             data, time_column, unit = Recorded(rec.scans, rec.own_ship), ("time" if rec.key == "time" else ""), "pings"
             # the reader places a polar file's detections from the sensor's position, or holds it to the own ship

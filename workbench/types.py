@@ -29,6 +29,7 @@ __all__ = [
     "InputError",
     "check_covariance",
     "check_size",
+    "real_scalar",
 ]
 
 #: Origin label of a detection that came from clutter (metrics only; filters never see it).
@@ -94,11 +95,11 @@ def _as_array(name: str, value, dtype=float) -> np.ndarray:
 _NONE = object()
 
 
-def _real_scalar(name: str, value) -> float:
+def real_scalar(name: str, value) -> float:
     """A real number (not complex, text, a date or a boolean) as a float; :class:`InputError` naming ``name``."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         if isinstance(value, np.ndarray) and value.ndim == 0:
-            return _real_scalar(name, value[()])
+            return real_scalar(name, value[()])
         hint = (" (times are seconds as floats: convert first, e.g. (t - t0) / np.timedelta64(1, 's'))"
                 if isinstance(value, (np.datetime64, np.timedelta64)) else "")
         raise InputError(f"{name} must be a real number, got {type(value).__name__} {value!r}{hint}")
@@ -394,7 +395,7 @@ class Scan:
         for key, value in fields_.items():
             object.__setattr__(self, key, value)
         object.__setattr__(self, "cov", _scan_cov("Scan", self.cov, self.z, self.valid))
-        object.__setattr__(self, "time", _real_scalar("Scan.time", self.time))
+        object.__setattr__(self, "time", real_scalar("Scan.time", self.time))
         if not np.isfinite(self.time):
             raise InputError(f"Scan.time must be finite, got {self.time}")
 

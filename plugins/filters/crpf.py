@@ -374,12 +374,13 @@ def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: flo
                         float(box), backend)
     spread = (f"adaptive sigma^2 from sigma0={params.sigma0:g}" if params.adaptive
               else f"fixed sigma^2=kappa/N^(2/n), kappa={params.kappa:g}")
+    label = name or f"crpf-{params.particles}"
     return FilterSpec(
-        name=name or f"crpf-{params.particles}",
+        name=label,
         summary=(f"Cost-reference particle filter, N={params.particles}, {params.cost} cost, lam={params.lam:g}, "
                  f"q={params.q:g}, beta={params.beta:g}, {params.delta_mode} delta={params.delta:g}, {spread}"),
         init=partial(init, params=params),
-        predict=partial(predict, params=params, who=name or f"crpf-{params.particles}"),
+        predict=partial(predict, params=params, who=label),
         update=partial(update, params=params),
         estimate=estimate,
         # the arc-length cost reads a range and a bearing: it needs a range-bearing sensor

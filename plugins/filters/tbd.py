@@ -82,11 +82,11 @@ from scipy.stats import chi2
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.kalman_core import ekf_update, measurement_covariance
+from workbench.kalman_core import ekf_update, linearised, measurement_covariance
 from workbench.kernels.backend import BACKENDS
 from workbench.kernels.tbd_weights import PRECISIONS, tbd_log_weight_sums
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
-from workbench.models import MeasurementModel, MotionModel, require_jacobian
+from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
 from workbench.particle_core import (ParticleState, combine_columns, component_major, diagnostics, estimate, init,
                                      log_likelihood_cov, noise_columns, predict, propagate_f)
@@ -258,13 +258,11 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     g = noise_columns(motion)  # non-zero columns of W^(1/2)
     e = rng.standard_normal((B, N, g.shape[1]))
     e *= np.where(mode > 0, scale, 1.0)[..., None]
-    if motion.linear:
-        # x_i <- F x_i + s_i W^(1/2) e_i  (small products written out per component, no threaded BLAS call)
-        moved = combine_columns(component_major(B, N, n), np.hstack([motion.F, g]), x, e)
-    else:
-        # x_i <- f(x_i) + s_i W^(1/2) e_i
-        moved = combine_columns(component_major(B, N, n), np.hstack([np.eye(n), g]),
-                                propagate_f(x, motion, "the two-mode particle prediction"), e)
+    # x_i <- F x_i + s_i W^(1/2) e_i, or f(x_i) + s_i W^(1/2) e_i for a model that overrides f  (small products
+    # written out per component, no threaded BLAS call)
+    base, A = (x, motion.F) if motion.linear else (propagate_f(x, motion, "the two-mode particle prediction"),
+                                                   np.eye(n))
+    moved = combine_columns(component_major(B, N, n), np.hstack([A, g]), base, e)
     return ModeState(Particles.trusted(moved, state.cloud.log_weights), state.resamples, state.underflows, mode)
 
 
@@ -601,11 +599,7 @@ def nis_predict(state: AdaptiveGaussian, motion: MotionModel, rng=None, *, scale
         # P- = F P F^T + q_b W
         cov = symmetrise(motion.F @ g.cov @ motion.F.T + q[:, None, None] * motion.Q)
         return AdaptiveGaussian(Gaussian(mean, cov), state.manoeuvre)
-    J = np.asarray(require_jacobian(motion, who)(g.mean), dtype=float)
-    mean = np.asarray(motion.f(g.mean), dtype=float)  # x- = f(x)
-    if mean.shape != g.mean.shape or J.shape != g.cov.shape:
-        raise InputError(f"filter {who!r}: motion model {motion.name!r} gave f of shape {mean.shape} and a jacobian "
-                         f"of shape {J.shape} for states {g.mean.shape}")
+    mean, J = linearised(g.mean, motion, who)  # x- = f(x), J = df/dx at x
     # P- = J P J^T + q_b W
     cov = symmetrise(J @ g.cov @ np.swapaxes(J, -1, -2) + q[:, None, None] * motion.Q)
     return AdaptiveGaussian(Gaussian(mean, cov), state.manoeuvre)
@@ -676,11 +670,12 @@ def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float 
     if manoeuvre_scale < 1.0 or nis_threshold <= 0.0:
         raise InputError(f"ekf-nis: need manoeuvre_scale >= 1 and nis_threshold > 0, got "
                          f"{manoeuvre_scale}, {nis_threshold}")
+    label = name or "ekf-nis"
     return FilterSpec(
-        name=name or "ekf-nis",
+        name=label,
         summary=f"EKF with NIS-switched process noise (x{manoeuvre_scale:g} above NIS {nis_threshold:.2f})",
         init=nis_init,
-        predict=partial(nis_predict, scale=manoeuvre_scale, who=name or "ekf-nis"),
+        predict=partial(nis_predict, scale=manoeuvre_scale, who=label),
         update=partial(nis_update, nis_threshold=nis_threshold),
         estimate=nis_estimate,
         capabilities=frozenset({"gaussian", "needs_jacobian", "detection_covariance", "clutter_density",

@@ -85,28 +85,30 @@ def resolve(backend: str = "auto", arch: str | None = None) -> str:
     return "numba" if arch == "cpu" and numba_available() else "taichi"
 
 
+class _PerThread(threading.local):
+    def __init__(self) -> None:
+        self.last: str | None = None
+        self.counts: Counter = Counter()
+
+
 class BackendRecord:
     """Which code a function with a silent fallback actually ran, per thread: the last call's backend and a tally
     of calls per backend (``"numba"``, ``"numpy"``, ...).  A module that may fall back from its compiled loops to
     its NumPy code notes each call here, so that tests can assert which path ran rather than trust it."""
 
     def __init__(self) -> None:
-        self._local = threading.local()
+        self._local = _PerThread()
 
     def note(self, backend: str) -> None:
         """Record that one call ran ``backend``."""
-        self._local.last = backend
-        self._counts()[backend] += 1
-
-    def _counts(self) -> Counter:
-        if not hasattr(self._local, "counts"):
-            self._local.counts = Counter()
-        return self._local.counts
+        local = self._local
+        local.last = backend
+        local.counts[backend] += 1
 
     def last(self) -> str | None:
         """The backend of this thread's last call (``None`` before the first)."""
-        return getattr(self._local, "last", None)
+        return self._local.last
 
     def counts(self) -> dict:
         """Calls per backend in this thread so far (a copy)."""
-        return dict(self._counts())
+        return dict(self._local.counts)

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..tracking.multi import CONFIRMED, TrackLog
-from ..types import InputError, Truth
+from ..types import InputError, Truth, real_scalar
 
 __all__ = ["OSPA", "GOSPA", "ospa", "gospa", "track_positions", "truth_positions", "track_ospa", "track_gospa"]
 
@@ -97,11 +97,7 @@ POWER_DECADES = 290.0
 
 
 def _check_order(c: float, p: float) -> tuple[float, float]:
-    c, p = (v[()] if isinstance(v, np.ndarray) and v.ndim == 0 else v for v in (c, p))
-    for key, value in (("the cut-off c", c), ("the order p", p)):
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise InputError(f"{key} must be a real number, got {type(value).__name__} {value!r}")
-    c, p = float(c), float(p)
+    c, p = real_scalar("the cut-off c", c), real_scalar("the order p", p)
     if not (np.isfinite(c) and c > 0):
         raise InputError(f"the cut-off c must be a finite number > 0, got {c}")
     if not (np.isfinite(p) and p >= 1):

@@ -55,7 +55,7 @@ from .cache import (CacheEntryUnreadable, TaskCache, code_version, components_di
 
 __all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
-           "dask_executor", "component_failure", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
+           "dask_executor", "component_failure", "component_errors", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
            "report_lock", "recording_host"]
 
 #: The file, inside ``OUT/paperNNN``, that keeps a paper's rendered outcome.

@@ -24,6 +24,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..criteria import VERDICTS
 from ..plugins import PluginHost
 from .cache import distribution_versions, write_text_atomic
 
@@ -147,7 +148,7 @@ _SCRIPT = """
 
 _CLASS = {"met": "v-met", "not met": "v-not-met", "inconclusive": "v-inconclusive",
           "not attainable": "v-not-attainable", "not judgeable": "v-not-judgeable"}
-_ORDER = ("met", "not met", "inconclusive", "not attainable", "not judgeable")
+_ORDER = VERDICTS
 
 
 # -- values --------------------------------------------------------------------------------------------------
@@ -353,11 +354,11 @@ def _scoreboard(p) -> str:
         if c.interval is not None and not any(math.isnan(v) for v in c.interval):
             interval = f"[{format_value(c.interval[0])}, {format_value(c.interval[1])}]"
         verdict = _badge(c.verdict)
-        failed = _failed_preconditions(c)
+        failed = c.failed_preconditions
         if failed:
             verdict += f"<div class='would'>failed: {_esc(', '.join(p.name for p in failed))}</div>"
-            if _verdict_if_judged(c):
-                verdict += f"<div class='would'>numbers alone: {_esc(_verdict_if_judged(c))}</div>"
+            if c.verdict_if_judged:
+                verdict += f"<div class='would'>numbers alone: {_esc(c.verdict_if_judged)}</div>"
         if c.indicative:
             verdict += "<br><span class='ind'>indicative (quick run)</span>"
             if c.quick_verdict == "met":
@@ -367,7 +368,7 @@ def _scoreboard(p) -> str:
         statement += "".join(
             f"<div class='pre {'ok' if p.holds else 'fail'}'>precondition {'holds' if p.holds else 'fails'}: "
             f"{_esc(p.name)}{f' ({_esc(p.detail)})' if p.detail else ''}</div>"
-            for p in getattr(c, "preconditions", ()))
+            for p in c.preconditions)
         row = [c.id, c.text, c.verdict, c.ours, c.published, c.n, interval, c.threshold or None]
         n_cell = None
         if min_n is not None and c.n is not None:
@@ -395,20 +396,12 @@ def _scoreboard(p) -> str:
     return _table(columns, rows, cls="scoreboard", row_classes=classes, html_cells=cells, numeric=numeric)
 
 
-def _failed_preconditions(c) -> tuple:
-    return tuple(p for p in getattr(c, "preconditions", ()) if not p.holds)
-
-
-def _verdict_if_judged(c) -> str | None:
-    return c.extra.get("verdict_if_judged") if c.verdict == "not judgeable" else None
-
-
 def _not_judgeable_cell(criteria) -> tuple[str | None, str]:
     """The at-a-glance cell of a paper's criteria that are not judgeable: per failed precondition, the criteria ids
     (text, html); ``(None, "n/a")`` when every criterion could be judged."""
     by_name: dict[str, list[str]] = {}
     for c in criteria:
-        for p in _failed_preconditions(c):
+        for p in c.failed_preconditions:
             by_name.setdefault(p.name, []).append(str(c.id))
     if not by_name:
         return None, "n/a"

@@ -22,11 +22,11 @@ from scipy import stats
 from ..frames import FRAMES
 from ..rng import generator
 from ..params import format_value
-from ..specs import BoundFunction, ClutterGeneratorSpec, ClutterRemoverSpec
+from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec
 from ..types import CLUTTER, Scans, Truth
 from ._common import Check, Outcome, check_parameters, fail, frame_problems, kit_truth, normal_p, poisson_p, \
     run_kit, scans_equal
-from .sensors import trial_setup
+from .sensors import _raw, trial_setup
 
 __all__ = ["GENERATOR_CHECKS", "REMOVER_CHECKS", "generator_checks_for", "remover_checks_for",
            "run_generator_checks", "run_remover_checks", "remover_scene", "check_count_poisson",
@@ -263,10 +263,6 @@ def _same_output(x, y) -> bool:
         return len(x) == len(y) and all(_same_output(u, v) for u, v in zip(x, y))
     x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
     return x.shape == y.shape and bool(np.array_equal(x, y, equal_nan=True))
-
-
-def _raw(fn):
-    return fn.raw if isinstance(fn, BoundFunction) else fn
 
 
 def check_generator_configured_values(spec: ClutterGeneratorSpec) -> str:

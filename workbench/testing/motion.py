@@ -11,7 +11,7 @@ The states the checks evaluate ``f`` at are drawn at a scale that follows each c
 (:data:`UNIT_SCALES`: 100 m, 10 m/s, 0.1 rad/s, ...), with the zero state among them (the ``omega -> 0`` limit of
 a turn model is where its formulas divide by zero).
 
-``exact_discretisation`` (a class or instance attribute the kit reads with ``getattr``; undeclared is ``None``):
+``exact_discretisation`` (the class attribute :attr:`workbench.models.MotionModel.exact_discretisation`; ``None``: not declared):
 
 - ``True``: the model is the exact discretisation of a continuous-time linear SDE (e.g. continuous white-noise
   acceleration, Singer), so ``F`` and ``Q`` both compose over two intervals (``check_transition_composes``,
@@ -26,11 +26,10 @@ a turn model is where its formulas divide by zero).
 
 from __future__ import annotations
 
-import inspect
 import numpy as np
-from scipy import stats
 
-from ..models import MotionModel
+from ..metrics import chi2_band
+from ..models import MotionModel, _model_label as _label
 from ..rng import generator
 from ..units import UNITS
 from ._common import Check, Outcomes, chi2_p, fail, normal_p, run_kit
@@ -58,29 +57,10 @@ RANK_RTOL = 1e-9
 PSD_RTOL = 1e-10
 
 
-def _label(model) -> str:
-    kind = type(model).__name__
-    return f"motion model {getattr(model, 'name', '?')!r}" + (f" ({kind})" if kind != "MotionModel" else "")
-
-
-def _call(fn, model, x):
-    """``fn(x)``, or ``fn(x, t=0, dt=model.dt)`` for a method that takes the time and interval."""
-    try:
-        params = inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        params = {}
-    kwargs = {}
-    if "t" in params:
-        kwargs["t"] = 0.0
-    if "dt" in params:
-        kwargs["dt"] = float(model.dt)
-    return fn(x, **kwargs)
-
-
 def _scales(model) -> np.ndarray:
     """One scale per state component from its declared unit (1 where the unit is unknown or undeclared)."""
     n = model.dim
-    units = tuple(getattr(model, "state_units", ()) or ())
+    units = tuple(model.state_units)
     out = np.ones(n)
     if len(units) == n:
         for i, unit in enumerate(units):
@@ -91,7 +71,7 @@ def _scales(model) -> np.ndarray:
 
 
 def _rate_components(model) -> np.ndarray:
-    units = tuple(getattr(model, "state_units", ()) or ())
+    units = tuple(model.state_units)
     if len(units) != model.dim:
         return np.zeros(model.dim, bool)
     return np.array([u in UNITS and UNITS[u][0] == "angular_rate" for u in units])
@@ -110,7 +90,7 @@ def kit_states(model, count: int, seed: int, *key) -> np.ndarray:
 
 def _f(model, x, check: str) -> np.ndarray:
     try:
-        out = _call(model.f, model, x)
+        out = model.f(x)
     except Exception as exc:  # noqa: BLE001 - the model's own error is the finding
         raise fail(check, f"{_label(model)}: f raised {type(exc).__name__} on states of shape {np.shape(x)}: "
                           f"{exc}") from None
@@ -136,7 +116,7 @@ def _finite(model, x, out, what: str, check: str) -> None:
 
 def _jac(model, x, check: str) -> np.ndarray:
     try:
-        out = _call(model.jacobian, model, x)
+        out = model.jacobian(x)
     except Exception as exc:  # noqa: BLE001
         raise fail(check, f"{_label(model)}: jacobian raised {type(exc).__name__} on states of shape "
                           f"{np.shape(x)}: {exc}") from None
@@ -313,7 +293,7 @@ def check_noise_samples(model) -> str:
     level = LEVEL / len(tests)
     bad = [(what, p) for what, p in tests if p < level]
     if bad:
-        lo, hi = stats.chi2.ppf([LEVEL / 2, 1 - LEVEL / 2], N * rank) / N
+        lo, hi = chi2_band(rank, N, 1 - LEVEL)
         raise fail(name, f"{_label(model)}: {N} samples f(x) + Q_sqrt e are not distributed as N(f(x), Q) "
                          f"(rank {rank}, band of the mean squared distance [{lo:.4f}, {hi:.4f}] at level "
                          f"{LEVEL:g}): " + "; ".join(f"{what}, p = {p:.2g} < {level:.2g}" for what, p in bad))
@@ -432,7 +412,7 @@ def check_no_mutation(model) -> str:
     for label, fn in methods:
         work = x.copy()
         try:
-            _call(fn, model, work)
+            fn(work)
         except Exception as exc:  # noqa: BLE001
             raise fail(name, f"{_label(model)}: {label} raised {type(exc).__name__} on states of shape "
                              f"{work.shape}: {exc}") from None
@@ -444,7 +424,7 @@ def check_no_mutation(model) -> str:
         frozen = x.copy()
         frozen.setflags(write=False)
         try:
-            _call(fn, model, frozen)
+            fn(frozen)
         except Exception as exc:  # noqa: BLE001
             raise fail(name, f"{_label(model)}: {label} fails on a read-only input ({type(exc).__name__}: "
                              f"{exc}); it must not write into its input") from None
@@ -455,7 +435,7 @@ def check_no_mutation(model) -> str:
 
 
 def _rebuilds(model) -> bool:
-    return getattr(model, "rebuild", None) is not None
+    return model.rebuild is not None
 
 
 MOTION_CHECKS: tuple[Check, ...] = (
@@ -466,11 +446,11 @@ MOTION_CHECKS: tuple[Check, ...] = (
     Check("check_noise_factor", check_noise_factor.__doc__, lambda m: True, check_noise_factor),
     Check("check_noise_samples", check_noise_samples.__doc__, lambda m: True, check_noise_samples),
     Check("check_transition_composes", check_transition_composes.__doc__,
-          lambda m: bool(m.linear) and _rebuilds(m) and getattr(m, "exact_discretisation", None) is not False,
+          lambda m: bool(m.linear) and _rebuilds(m) and m.exact_discretisation is not False,
           check_transition_composes,
           "a linear model with a rebuild function, not declaring exact_discretisation = False"),
     Check("check_noise_composes", check_noise_composes.__doc__,
-          lambda m: bool(m.linear) and _rebuilds(m) and getattr(m, "exact_discretisation", None) is True,
+          lambda m: bool(m.linear) and _rebuilds(m) and m.exact_discretisation is True,
           check_noise_composes,
           "a linear model with a rebuild function that declares exact_discretisation = True (the built-in "
           "DWNA constant-velocity and random-walk models are discretised with an acceleration held over each "

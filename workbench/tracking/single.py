@@ -186,8 +186,7 @@ class Gated(SingleTarget):
             motion = carry.extra["motion"]
             if not motion.linear:
                 # a nonlinear model: the filter's own prediction (its F is not the model's transition)
-                carry.extra["previous"] = super().predicted_mean(carry, k)
-                return carry.extra["previous"]
+                return super().predicted_mean(carry, k)
             # p_{k|k-1} = F x_{k-1|k-1}
             carry.extra["previous"] = carry.extra["previous"] @ motion.F.T
         return carry.extra["previous"]

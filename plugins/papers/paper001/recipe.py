@@ -44,7 +44,7 @@ from workbench.metrics import (TrackCounts, continuity, false_track_sums, pooled
                                removal_ratio, track_counts, track_truth_match)
 from workbench.models import MeasurementModel, constant_velocity
 from workbench.plugins import PluginHost
-from workbench.report.engine import COMPONENT_ERROR_PREFIX, component_failure
+from workbench.report.engine import component_errors, component_failure
 from workbench.recorded.sonar import load_sonar_csv, write_sonar_csv
 from workbench.rng import generator
 from workbench.specs import Criterion, FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
@@ -613,12 +613,12 @@ def summary(before: TrackCounts, after: TrackCounts, post: np.ndarray) -> dict:
     return {
         "rate": rate, "rate_all": false_track_sums(before.false, after.false),
         "rate_total": false_track_sums(before.confirmed, after.confirmed, post),
-        "false_before_runs": before.false[:, post].mean(axis=1), "false_before_sum": int(before.false[:, post].sum()),
+        "false_before_runs": before.false[:, post].mean(axis=1), "false_before_sum": int(rate[0].sum()),
         "cont_before": cont_b, "cont_after": cont_a,
         "held80_before": int(np.sum(cont_b >= TRUE_FRACTION)), "held80_after": int(np.sum(cont_a >= TRUE_FRACTION)),
         "rmse_before": pooled_rmse(sq_b), "rmse_after": pooled_rmse(sq_a), "pairs": int(np.isfinite(sq_a).sum()),
         "sq_before": sq_b, "sq_after": sq_a,
-        "false_before": float(before.false[:, post].mean()), "false_after": float(after.false[:, post].mean()),
+        "false_after": float(after.false[:, post].mean()),
         "runs": int(before.false.shape[0]),
     }
 
@@ -872,10 +872,8 @@ def _failed_arms(results: Mapping) -> dict[str, str]:
     out; the report names the failure in the paper's errors too)."""
     failed: dict[str, str] = {}
     for key in (k for k in results if k.startswith("sim/")):
-        for name, value in results[key].items():
-            if name.startswith(COMPONENT_ERROR_PREFIX):
-                arm = name[len(COMPONENT_ERROR_PREFIX):]
-                failed.setdefault(arm, f"{key}: {np.asarray(value).reshape(-1)[0]}")
+        for arm, message in component_errors(results[key]):
+            failed.setdefault(arm, f"{key}: {message}")
     return failed
 
 
@@ -1175,7 +1173,7 @@ def c1_criterion(before_false: np.ndarray, after_false: np.ndarray, post: np.nda
     interval a percentile bootstrap over runs (each run's two sums resampled together), judged within
     [0.60, 0.95] from at least ``MIN_RUNS["1"]`` runs.  Beside it: the false tracks per ping before removal (mean
     over runs and pings, bootstrap interval over runs) and their sum.  The population precondition: with fewer
-    than ``min_false`` false tracks before removal summed over the runs and pings, the verdict is inconclusive
+    than ``min_false`` false tracks before removal summed over the runs and pings, the verdict is not judgeable
     (never met, never not met), the reason in the detail and ``extra["precondition"]``.
     """
     sums = false_track_sums(before_false, after_false, post)
@@ -1196,22 +1194,20 @@ def c1_criterion(before_false: np.ndarray, after_false: np.ndarray, post: np.nda
             + suffix)
     name = "false tracks before removal, summed"
     # a failed precondition makes the verdict "not judgeable"
-    general = {"preconditions": (Precondition(name, held, f"{total} summed over {per_run.size} runs x {pings}; "
-                                              f"needs >= {min_false}", {"needs": min_false, "has": total}),)}
+    population_holds = Precondition(name, held, f"{total} summed over {per_run.size} runs x {pings}; needs >= "
+                                    f"{min_false}", {"needs": min_false, "has": total})
     crit = criterion_from_runs(
         "1", "mean false-track removal rate in simulation is in 60-95 % (paper 78 %)", sums, removal_ratio,
         (0.60, 0.95), "within", min_n=MIN_RUNS["1"], published="78 %", detail_fmt=_detail(text, RUNS_DETAIL),
         threshold_text="removal rate (ratio of sums) within [0.60, 0.95]",
-        replication=_replication(sums, _c1_holds), **general)
+        replication=_replication(sums, _c1_holds), preconditions=(population_holds,))
     extra = dict(crit.extra, false_per_ping_before=mean if np.isfinite(mean) else None,
                  false_per_ping_before_interval=(float(lo), float(hi)) if np.isfinite(lo) else None,
                  precondition={"name": name, "needs": min_false, "has": total, "holds": held})
     if held:
         return replace(crit, extra=extra)
-    judged_as = extra.get("verdict_if_judged", crit.verdict)
-    extra["verdict_if_judged"] = judged_as
     reason = (f"; NOT JUDGEABLE: {total} false tracks before removal summed over the runs, fewer than the "
-              f"{min_false} the rate needs (verdict {judged_as!r} from the interval alone set aside)")
+              f"{min_false} the rate needs (verdict {crit.verdict_if_judged!r} from the interval alone set aside)")
     return replace(crit, detail=crit.detail + reason, extra=extra)
 
 

@@ -83,8 +83,7 @@ def test_aspect_changes_the_rcs_by_the_offsets(sensor):
 def test_measurement_model_and_declared_detection_quality(sensor):
     model = sensor.measurement_model(**sensor.params)
     state = np.array([30e3, 4e3, 2e3, -150.0, 20.0, 0.0])
-    np.testing.assert_allclose(model.h(state[None])[0], [*state[:3], (30e3 * -150.0 + 4e3 * 20.0) / np.sqrt(30e3 ** 2
-                                                                                                     + 4e3 ** 2 + 2e3 ** 2)])
+    np.testing.assert_allclose(model.h(state[None])[0], [*state[:3], _radial_velocity(state)])
     assert model.jacobian(state[None]).shape == (1, 4, 6) and model.detection.pfa == 1e-6
     assert model.frame == "position-doppler-3d" and model.detection.doppler_sigma == 2.0
     np.testing.assert_allclose(model.R, np.diag([300.0**2] * 3 + [10.0**2]))

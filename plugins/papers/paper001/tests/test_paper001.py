@@ -304,7 +304,7 @@ def test_c1_counts_false_tracks_after_removal_on_pings_without_one_before():
     assert np.isclose(c.ours, 0.5) and c.verdict == "not met"
 
 
-def test_c1_is_inconclusive_below_its_population_minimum():
+def test_c1_is_not_judgeable_below_its_population_minimum():
     before, after, post = _identical_runs()
     c = paper001.c1_criterion(before, after, post, min_false=601)  # 600 false tracks before removal
     assert c.interval == pytest.approx((0.8, 0.8)) and c.verdict == UNJUDGED
