@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..metrics import chi2_band
-from ..models import MotionModel, _model_label as _label
+from ..models import MotionModel, model_label as _label
 from ..rng import generator
 from ..units import UNITS
 from ._common import Check, Outcomes, chi2_p, fail, normal_p, run_kit
