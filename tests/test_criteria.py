@@ -431,3 +431,72 @@ def test_tost_agrees_with_the_t_based_two_one_sided_tests_on_a_normal_sample(mu)
         assert 0.025 < (p_equiv if abs(mu) < 0.3 else p_diff) < 0.05
     expected = "met" if p_equiv < 0.05 else "not met" if p_diff < 0.05 else "inconclusive"
     assert criterion_equivalent("E", "x", x, np.mean, m, min_n=20, seed=3).verdict == expected
+
+
+# -- declared unknowns: verdicts across a grid (issue 24, item 2) ---------------------------------------------
+
+def _at(verdict, failed=None):
+    from workbench.criteria import Criterion, Precondition
+
+    pre = (Precondition(failed, False, "numbers"),) if failed else ()
+    return Criterion("C", "claim", verdict, n=100, ours=1.0, interval=(0.9, 1.1), preconditions=pre)
+
+
+def test_where_it_holds_reads_every_verdict_pattern_from_hand_made_records():
+    from workbench.criteria import Criterion, DeclaredUnknown, judge_across, where_it_holds
+
+    u = DeclaredUnknown("delta", "", 0.1, (0.1, 0.3, 1.0), "withheld by the paper; the tuning rule's pick")
+
+    def line(*verdicts, failed=None):
+        records = {v: _at(x, failed if x == "not judgeable" else None) for v, x in zip(u.grid, verdicts)}
+        return where_it_holds(Criterion("C", "claim", "met", across=judge_across(u, records)))
+
+    assert line("met", "met", "met") == "holds everywhere"
+    assert line("not met", "not met", "not met") == "holds nowhere"
+    assert line("not met", "inconclusive", "met") == \
+        "holds for delta in {1}; not met at {0.1}; inconclusive at {0.3}"
+    assert line("met", "met", "not met") == "holds for delta in {0.1, 0.3}; not met at {1}"
+    assert line("met", "not judgeable", "met", failed="reference converged") == \
+        "holds for delta in {0.1, 1}; not judgeable at {0.3} (reference converged failed)"
+    assert line("not judgeable", "not judgeable", "not judgeable", failed="judged rows track") == \
+        "not judgeable at every value of delta (judged rows track failed)"
+    assert line("not attainable", "not met", "not met") == "holds nowhere; not met at {0.3, 1}; not attainable at {0.1}"
+    assert line("inconclusive", "inconclusive", "inconclusive") == \
+        "shown to hold at no value; inconclusive at {0.1, 0.3, 1}"
+    assert line("not met", "inconclusive", "not met") == \
+        "shown to hold at no value; not met at {0.1, 1}; inconclusive at {0.3}"
+    assert where_it_holds(()) == ""
+
+
+def test_verdicts_across_an_unknown_round_trip_and_never_say_met_in_a_quick_report():
+    from workbench.criteria import Criterion, DeclaredUnknown, UnknownVerdict, judge_across, where_it_holds
+
+    u = DeclaredUnknown("rate", "per scan", 50, (50, 100), "brief's value and the paper's")
+    assert u.primary == 50.0 and u.grid == (50.0, 100.0) and u.label(100) == "rate = 100 per scan"
+    across = judge_across(u, {50: _at("met"), 100: _at("not judgeable", "reference converged")},
+                          {50: "first 10 runs", 100: "first 10 runs"})
+    assert [(a.value, a.verdict, a.failed) for a in across] == [(50.0, "met", ()),
+                                                                (100.0, "not judgeable", ("reference converged",))]
+    c = Criterion("C", "claim", "met", across=across)
+    assert Criterion.from_dict(json.loads(json.dumps(c.to_dict()))) == c
+    assert DeclaredUnknown.from_dict(json.loads(json.dumps(u.to_dict()))) == u
+    quick = c.as_indicative()
+    assert [a.verdict for a in quick.across] == ["inconclusive", "not judgeable"]
+    assert quick.across[0].quick_verdict == "met" and quick.across[0].indicative
+    assert where_it_holds(quick) == ("shown to hold at no value; inconclusive at {50}; not judgeable at {100} "
+                                     "(reference converged failed) "
+                                     "(indicative: the quick numbers alone pass at {50})")
+    # a grid value left out, or one outside the grid, is refused rather than read as "holds nowhere"
+    with pytest.raises(ValueError, match="no verdict at the grid values"):
+        judge_across(u, {50: _at("met")})
+    with pytest.raises(ValueError, match="not grid values"):
+        judge_across(u, {50: _at("met"), 100: _at("met"), 7: _at("met")})
+    # a not-judgeable record needs the failed precondition, and only it
+    with pytest.raises(ValueError, match="exactly when a precondition failed"):
+        UnknownVerdict("rate", 50, "not judgeable")
+    with pytest.raises(ValueError, match="not in its grid"):
+        DeclaredUnknown("rate", "", 10, (50, 100), "why")
+    with pytest.raises(ValueError, match="say why"):
+        DeclaredUnknown("rate", "", 50, (50, 100), " ")
+    with pytest.raises(ValueError, match="repeats"):
+        DeclaredUnknown("rate", "", 50, (50, 50.0), "why")

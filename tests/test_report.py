@@ -391,3 +391,46 @@ def test_scoreboard_and_at_a_glance_show_not_judgeable_with_the_failed_precondit
     assert "<b>judged rows track</b> fails for 1" in glance
     nav = index.split("<nav")[1].split("</nav>")[0]
     assert "1 not judgeable" in nav
+
+
+def test_declared_unknowns_and_the_verdicts_across_them_are_rendered(tmp_path, demo_host):
+    from dataclasses import replace
+
+    from fixtures import demo_plugin
+    from workbench.criteria import DeclaredUnknown, criterion_from_runs, judge_across
+    from workbench.report.engine import ReportOutcome, load_outcome, run_recipe
+    from workbench.report.html import write_index, write_summary
+
+    unknown = DeclaredUnknown("gain", "dimensionless", 1.0, (0.5, 1.0, 2.0),
+                              "the paper gives no value; 1 is the brief's")
+    c = np.linspace(90.0, 110.0, 20)
+
+    def judged(scale):
+        return criterion_from_runs("1", "C below 150", scale * c, np.mean, 150.0, "<", min_n=20)
+
+    def criteria(results):
+        main = judged(1.0)
+        return [replace(main, across=judge_across(unknown, {g: judged(g) for g in unknown.grid})),
+                criterion_from_runs("2", "C below 500", c, np.mean, 500.0, "<", min_n=20)]
+
+    paper = run_recipe(replace(demo_plugin.RECIPE, criteria=criteria, unknowns=(unknown,)), demo_host, tmp_path,
+                       size="full", progress=False)
+    assert paper.unknowns == [unknown]
+    back = load_outcome(tmp_path / "paperdemo" / "outcome.json", tmp_path)
+    assert back.unknowns == [unknown] and back.criteria[0].across == paper.criteria[0].across
+    report = ReportOutcome(tmp_path, [paper], 0.0, "", 0, "full")
+    write_summary(report, demo_host)
+    write_index(report, demo_host)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    entry = next(p for p in summary["papers"] if p["paper"] == "demo")
+    assert entry["unknowns"] == [unknown.to_dict()]
+    crit = _criteria_by_id(summary)
+    assert [a["verdict"] for a in crit["1"]["across"]] == ["met", "met", "not met"]  # 50, 100, 200 against 150
+    assert crit["1"]["where_it_holds"] == {"gain": "holds for gain in {0.5, 1}; not met at {2}"}
+    assert crit["2"]["across"] == [] and crit["2"]["where_it_holds"] == {}
+    index = (tmp_path / "index.html").read_text()
+    section = index.split("id='paperdemo-unknowns'")[1].split("id='paperdemo-differs'")[0]
+    assert "the paper gives no value; 1 is the brief&#x27;s" in section and "0.5, 1, 2" in section
+    assert "gain = 1 (primary)" in section and "holds for gain in {0.5, 1}; not met at {2}" in section
+    assert section.count(">met</span>") == 3 and section.count(">not met</span>") == 1  # primary + two grid values
+    assert ">2</td>" not in section  # criterion 2 does not hinge on the unknown: no row

@@ -52,7 +52,8 @@ import numpy as np
 __all__ = ["VERDICTS", "NOT_JUDGEABLE", "DIRECTIONS", "Criterion", "Precondition", "bootstrap_interval",
            "binomial_interval", "judge", "criterion_from_runs", "criterion_from_counts", "replication_rate",
            "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL", "equivalence_band",
-           "judge_equivalent", "criterion_equivalent", "EQUIVALENCE_DETAIL"]
+           "judge_equivalent", "criterion_equivalent", "EQUIVALENCE_DETAIL", "DeclaredUnknown", "UnknownVerdict",
+           "judge_across", "where_it_holds"]
 
 #: The verdict of a criterion whose precondition fails.
 NOT_JUDGEABLE = "not judgeable"
@@ -148,6 +149,10 @@ class Criterion:
         What must hold for the criterion to be judged.  Where any fails the verdict is ``"not judgeable"``
         (set here, whatever verdict the record was built with); ``"not judgeable"`` without a failed
         precondition is refused.
+    across : tuple of UnknownVerdict
+        The same criterion judged at each grid value of the recipe's declared unknowns (:class:`DeclaredUnknown`,
+        :func:`judge_across`); the verdict above is the one at the primary values.  Empty where the criterion
+        does not hinge on an unknown, or the size judges none.
     """
 
     id: str
@@ -166,8 +171,11 @@ class Criterion:
     statistics: str = ""
     extra: dict = field(default_factory=dict)
     preconditions: tuple[Precondition, ...] = ()
+    across: tuple["UnknownVerdict", ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "across", tuple(
+            a if isinstance(a, UnknownVerdict) else UnknownVerdict.from_dict(a) for a in (self.across or ())))
         verdict = self.verdict
         if isinstance(verdict, (bool, np.bool_)):
             verdict = "met" if bool(verdict) else "not met"
@@ -228,7 +236,8 @@ class Criterion:
         extra = dict(self.extra)
         extra.setdefault("quick_verdict", self.verdict)
         verdict = "inconclusive" if self.verdict == "met" else self.verdict
-        return replace(self, verdict=verdict, indicative=True, extra=extra)
+        return replace(self, verdict=verdict, indicative=True, extra=extra,
+                       across=tuple(a.as_indicative() for a in self.across))
 
     def to_dict(self) -> dict:
         """A JSON-ready dict of every field, plus ``met`` (bool) for older readers.
@@ -237,11 +246,14 @@ class Criterion:
         -------
         dict
             ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication, min_n,
-            method, statistics, detail, extra, preconditions`` (each ``name, holds, detail, values``); numpy
+            method, statistics, detail, extra, preconditions`` (each ``name, holds, detail, values``), ``across``
+            (each :meth:`UnknownVerdict.to_dict`); numpy
             scalars become Python numbers, tuples become lists.
         """
-        out = {f.name: _plain(getattr(self, f.name)) for f in fields(self) if f.name != "preconditions"}
+        out = {f.name: _plain(getattr(self, f.name)) for f in fields(self)
+               if f.name not in ("preconditions", "across")}
         out["preconditions"] = [p.to_dict() for p in self.preconditions]
+        out["across"] = [a.to_dict() for a in self.across]
         out["met"] = bool(self.met)
         return out
 
@@ -266,6 +278,7 @@ class Criterion:
         if kw.get("extra") is None:
             kw["extra"] = {}
         kw["preconditions"] = tuple(Precondition.from_dict(p) for p in kw.get("preconditions") or ())
+        kw["across"] = tuple(UnknownVerdict.from_dict(a) for a in kw.get("across") or ())
         return cls(**kw)
 
 
@@ -862,3 +875,263 @@ def reference_converged(at_n: Any, at_4n: Any, *, particles: int, tolerance: flo
     return Precondition(name, holds, detail, {"particles": int(particles), "particles_4n": 4 * int(particles),
                                               "n": n, "ratio": ratio, "interval": list(interval),
                                               "tolerance": float(tolerance), "band": list(band), "min_n": min_n})
+
+
+# -- declared unknowns: the values a paper withholds, judged across a grid ---------------------------------------
+
+def _value_text(value: Any) -> str:
+    """A grid value in words: ``0.1``, ``1e-4``, ``"rad"``."""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return f"{float(value):g}"
+    return str(value)
+
+
+def _grid_value(value: Any) -> float | str:
+    """A grid value as stored: a finite float, or a non-empty string (a named choice)."""
+    if isinstance(value, str):
+        if not value.strip():
+            raise ValueError("a grid value may not be an empty string")
+        return value
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"a grid value must be a number or a name, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"a grid value must be finite, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class DeclaredUnknown:
+    """A value the paper withholds that the reproduction had to choose, declared with the grid it is judged on.
+
+    A recipe declares its unknowns (``RecipeSpec.unknowns``); its criteria that hinge on one are judged at every
+    grid value (:func:`judge_across`) and the report shows, per criterion, where it holds
+    (:func:`where_it_holds`) beside the verdict at the primary value.
+
+    Attributes
+    ----------
+    name : str
+        The value's name as the report writes it, e.g. ``"delta"``.
+    unit : str
+        Its unit or scale in words (``""`` for a pure number).
+    primary : float or str
+        The value the primary verdicts use (the pre-registered choice).
+    grid : tuple of float or str
+        The values every criterion that hinges on it is judged at; the primary is one of them.
+    why : str
+        Why the paper withholds it, where the primary came from, and what the grid spans.
+    """
+
+    name: str
+    unit: str
+    primary: Any
+    grid: tuple
+    why: str
+
+    def __post_init__(self) -> None:
+        if not str(self.name).strip():
+            raise ValueError("a declared unknown needs a name")
+        grid = tuple(_grid_value(v) for v in (self.grid or ()))
+        if not grid:
+            raise ValueError(f"declared unknown {self.name!r}: the grid is empty")
+        if len(set(grid)) != len(grid):
+            raise ValueError(f"declared unknown {self.name!r}: the grid repeats a value: {grid}")
+        primary = _grid_value(self.primary)
+        if primary not in grid:
+            raise ValueError(f"declared unknown {self.name!r}: the primary value {_value_text(primary)} is not in "
+                             f"its grid {[_value_text(v) for v in grid]}")
+        if not str(self.why).strip():
+            raise ValueError(f"declared unknown {self.name!r}: say why the paper withholds it and where the primary "
+                             "came from")
+        object.__setattr__(self, "grid", grid)
+        object.__setattr__(self, "primary", primary)
+
+    def label(self, value: Any) -> str:
+        """``"delta = 0.1"`` (with the unit where there is one)."""
+        return f"{self.name} = {_value_text(value)}" + (f" {self.unit}" if self.unit else "")
+
+    def to_dict(self) -> dict:
+        """``name, unit, primary, grid, why`` (JSON-ready)."""
+        return {"name": self.name, "unit": self.unit, "primary": self.primary, "grid": list(self.grid),
+                "why": self.why}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "DeclaredUnknown":
+        """Rebuild a declared unknown written by :meth:`to_dict`."""
+        return cls(str(data["name"]), str(data.get("unit", "")), data["primary"], tuple(data["grid"]),
+                   str(data["why"]))
+
+
+@dataclass(frozen=True)
+class UnknownVerdict:
+    """A criterion's verdict at one grid value of a declared unknown (a row of ``Criterion.across``).
+
+    Attributes
+    ----------
+    unknown : str
+        The declared unknown's name.
+    value : float or str
+        The grid value.
+    verdict : str
+        One of :data:`VERDICTS`, as the criterion judged at that value gave it.
+    ours, n, interval
+        The criterion's statistic, runs and interval at that value.
+    failed : tuple of str
+        The names of the preconditions that failed there (non-empty exactly when the verdict is not judgeable).
+    detail : str
+        A short note of the recipe's (e.g. the runs it was judged on).
+    indicative : bool
+        True in a quick report (the verdict is never ``"met"`` then).
+    quick_verdict : str or None
+        For an indicative record, the verdict the quick numbers gave before marking.
+    """
+
+    unknown: str
+    value: Any
+    verdict: str
+    ours: Any = None
+    n: int | None = None
+    interval: tuple[float, float] | None = None
+    failed: tuple[str, ...] = ()
+    detail: str = ""
+    indicative: bool = False
+    quick_verdict: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"unknown {self.unknown!r} = {self.value!r}: verdict must be one of {VERDICTS}, got "
+                             f"{self.verdict!r}")
+        object.__setattr__(self, "value", _grid_value(self.value))
+        object.__setattr__(self, "failed", tuple(str(f) for f in (self.failed or ())))
+        if (self.verdict == NOT_JUDGEABLE) != bool(self.failed):
+            raise ValueError(f"unknown {self.unknown!r} = {self.value!r}: a verdict is not judgeable exactly when a "
+                             "precondition failed")
+        if self.interval is not None:
+            object.__setattr__(self, "interval", tuple(float(v) for v in self.interval))
+
+    @classmethod
+    def of(cls, unknown: str, value: Any, criterion: Criterion, detail: str = "") -> "UnknownVerdict":
+        """The record of ``criterion`` (the criterion judged at ``unknown = value``)."""
+        return cls(unknown, value, criterion.verdict, criterion.ours, criterion.n, criterion.interval,
+                   tuple(p.name for p in criterion.failed_preconditions), detail, criterion.indicative,
+                   criterion.quick_verdict)
+
+    def as_indicative(self) -> "UnknownVerdict":
+        """Marked as a quick-mode indication: ``"met"`` becomes ``"inconclusive"``, the quick verdict is kept."""
+        if self.indicative:
+            return self
+        return replace(self, verdict="inconclusive" if self.verdict == "met" else self.verdict, indicative=True,
+                       quick_verdict=self.verdict)
+
+    def to_dict(self) -> dict:
+        return {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "UnknownVerdict":
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in data.items() if k in names}
+        if kw.get("interval") is not None:
+            kw["interval"] = tuple(kw["interval"])
+        kw["failed"] = tuple(kw.get("failed") or ())
+        return cls(**kw)
+
+
+def judge_across(unknown: DeclaredUnknown, judged: Mapping[Any, Criterion],
+                 notes: Mapping[Any, str] | None = None) -> tuple[UnknownVerdict, ...]:
+    """A criterion's verdicts across ``unknown``'s grid, in grid order.
+
+    Parameters
+    ----------
+    unknown : DeclaredUnknown
+    judged : mapping
+        Grid value -> the criterion judged with the unknown at that value.  Every grid value must be present
+        (a grid value left out would read as "holds nowhere" there): a missing one raises.
+    notes : mapping, optional
+        Grid value -> a short note (e.g. the runs it was judged on).
+
+    Returns
+    -------
+    tuple of UnknownVerdict
+        For ``Criterion.across``.
+    """
+    keyed = {_grid_value(k): v for k, v in judged.items()}
+    notes = {_grid_value(k): v for k, v in (notes or {}).items()}
+    missing = [v for v in unknown.grid if v not in keyed]
+    if missing:
+        raise ValueError(f"{unknown.name}: no verdict at the grid values {[_value_text(v) for v in missing]}")
+    extra = [k for k in keyed if k not in unknown.grid]
+    if extra:
+        raise ValueError(f"{unknown.name}: {[_value_text(v) for v in extra]} are not grid values "
+                         f"{[_value_text(v) for v in unknown.grid]}")
+    return tuple(UnknownVerdict.of(unknown.name, v, keyed[v], notes.get(v, "")) for v in unknown.grid)
+
+
+def _set_text(values) -> str:
+    return "{" + ", ".join(_value_text(v) for v in values) + "}"
+
+
+def where_it_holds(across: Any, unknown: str | None = None) -> str:
+    """Where a criterion holds across one declared unknown's grid, in one line.
+
+    ``"holds everywhere"`` (met at every grid value), ``"holds nowhere"`` (not met, or not attainable, at every
+    one), ``"holds for delta in {0.3, 1}"`` (met at some), ``"shown to hold at no value"`` (met at none, but not
+    shown to fail at every one), followed by what it is elsewhere (``"not met at {0.1}"``, ``"inconclusive at
+    {...}"``, ``"not attainable at {...}"``, ``"not judgeable at {...} (reference converged failed)"``).  Where no
+    grid value could be judged the line is ``"not judgeable at every value ..."``.  For indicative (quick)
+    records the line adds where the quick numbers alone would pass.
+
+    Parameters
+    ----------
+    across : Criterion or sequence of UnknownVerdict
+    unknown : str, optional
+        Which unknown (default: the only one in ``across``; several raise).
+
+    Returns
+    -------
+    str
+        ``""`` where there are no records.
+    """
+    records = list(across.across if isinstance(across, Criterion) else across)
+    if not records:
+        return ""
+    names = list(dict.fromkeys(r.unknown for r in records))
+    if unknown is None:
+        if len(names) > 1:
+            raise ValueError(f"several unknowns {names}: name the one to describe")
+        unknown = names[0]
+    records = [r for r in records if r.unknown == unknown]
+    if not records:
+        return ""
+    by: dict[str, list] = {}
+    for r in records:
+        by.setdefault(r.verdict, []).append(r.value)
+    judged = [r for r in records if r.verdict != NOT_JUDGEABLE]
+    met = by.get("met", [])
+    failing = by.get("not met", []) + by.get("not attainable", [])
+    if not judged:
+        head = f"not judgeable at every value of {unknown}"
+    elif len(met) == len(records):
+        head = "holds everywhere"
+    elif len(failing) == len(records):
+        head = "holds nowhere"
+    elif not met:
+        head = "shown to hold at no value"
+    else:
+        head = f"holds for {unknown} in {_set_text(met)}"
+    rest = []
+    for verdict in ("not met", "inconclusive", "not attainable"):
+        if by.get(verdict) and not (len(by[verdict]) == len(records) and verdict == "not met"):
+            rest.append(f"{verdict} at {_set_text(by[verdict])}")
+    nj = [r for r in records if r.verdict == NOT_JUDGEABLE]
+    if nj and judged:
+        why = sorted({f for r in nj for f in r.failed})
+        rest.append(f"not judgeable at {_set_text([r.value for r in nj])} ({', '.join(why)} failed)")
+    elif nj:
+        head += f" ({', '.join(sorted({f for r in nj for f in r.failed}))} failed)"
+    line = head + (f"; {'; '.join(rest)}" if rest else "")
+    quick = [r.value for r in records if r.indicative and r.quick_verdict == "met"]
+    if quick:
+        line += f" (indicative: the quick numbers alone pass at {_set_text(quick)})"
+    return line

@@ -480,6 +480,9 @@ class RecipeSpec:
         The paper's published numbers or claims this recipe compares against (shown in the report).
     notes : str
         Choices the recipe made where the paper is silent (shown in the report).
+    unknowns : tuple of workbench.criteria.DeclaredUnknown
+        The values the paper withholds that the recipe had to choose (name, unit, primary value, grid, why); its
+        criteria that hinge on one carry their verdicts across the grid (``Criterion.across``).
     """
 
     paper: str
@@ -492,6 +495,7 @@ class RecipeSpec:
     default_filters: tuple[str, ...] = ()
     published: Mapping[str, Any] = field(default_factory=dict)
     notes: str = ""
+    unknowns: tuple[Any, ...] = ()
 
     def __post_init__(self) -> None:
         # a figure and a table (or two of either) with one id would write the same files of the report

@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from ..plugins import PluginHost, UnknownComponent
-from ..criteria import Criterion
+from ..criteria import Criterion, DeclaredUnknown
 from ..specs import RecipeOptions, RecipeSpec, Table, TaskContext
 from ..types import InputError
 if TYPE_CHECKING:
@@ -161,7 +161,8 @@ class PaperOutcome:
     """One paper's rendered outcome: what ``index.html`` and ``summary.json`` show of it.
 
     ``figures`` entries hold ``id, caption, png, svg, data`` (paths), ``tables`` entries ``id, caption,
-    columns, rows, csv``, ``tasks`` entries ``key, seconds, cached, error``.  ``saved`` is True for an
+    columns, rows, csv``, ``tasks`` entries ``key, seconds, cached, error``; ``unknowns`` are the recipe's
+    declared unknowns (the criteria's verdicts across them are in ``Criterion.across``).  ``saved`` is True for an
     outcome read back from an earlier run's ``outcome.json`` (a paper not re-run this time).
     """
 
@@ -182,6 +183,7 @@ class PaperOutcome:
     command: str = ""
     finished: str = ""  # UTC time stamp
     saved: bool = False
+    unknowns: list[DeclaredUnknown] = field(default_factory=list)
 
 
 @dataclass
@@ -252,6 +254,7 @@ def outcome_dict(outcome: PaperOutcome, out: Path) -> dict:
         "tables": [{"id": t["id"], "caption": t["caption"], "columns": _jsonable(t["columns"]),
                     "rows": _jsonable(t["rows"]), "csv": _rel(t.get("csv"), out)} for t in outcome.tables],
         "criteria": [c.to_dict() for c in outcome.criteria],
+        "unknowns": [u.to_dict() for u in outcome.unknowns],
         "tasks": [_jsonable(t) for t in outcome.tasks],
     }
 
@@ -288,7 +291,8 @@ def load_outcome(path: Path, out: Path) -> PaperOutcome:
         tasks=list(data.get("tasks", [])), errors=list(data.get("errors", [])),
         warnings=list(data.get("warnings", [])),
         seconds=float(data.get("seconds", 0.0)), seed=data.get("seed"), command=str(data.get("command", "")),
-        finished=str(data.get("finished", "")), saved=True)
+        finished=str(data.get("finished", "")), saved=True,
+        unknowns=[DeclaredUnknown.from_dict(u) for u in data.get("unknowns", [])])
 
 
 def saved_outcomes(out: Path, skip: Iterable[str] = ()) -> tuple[list[PaperOutcome], list[str]]:
@@ -356,7 +360,7 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     chosen = resolve_filters(recipe.default_filters, filters, host) if recipe.default_filters else ()
     options = RecipeOptions(size=size, values=dict(recipe.sizes[size]), seed=seed, filters=chosen, arch=arch)
     outcome = PaperOutcome(recipe.paper, recipe.title, size, chosen, recipe.notes, dict(recipe.published),
-                           seed=seed, command=command)
+                           seed=seed, command=command, unknowns=list(getattr(recipe, "unknowns", ()) or ()))
     paper_dir = out / f"paper{recipe.paper}"
     paper_dir.mkdir(parents=True, exist_ok=True)
     cache = TaskCache(out / "cache")

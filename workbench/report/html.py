@@ -18,13 +18,14 @@ import os
 import platform
 import re
 import struct
+from dataclasses import replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from ..criteria import VERDICTS
+from ..criteria import VERDICTS, where_it_holds
 from ..plugins import PluginHost
 from .cache import distribution_versions, write_text_atomic
 
@@ -396,6 +397,67 @@ def _scoreboard(p) -> str:
     return _table(columns, rows, cls="scoreboard", row_classes=classes, html_cells=cells, numeric=numeric)
 
 
+def _verdict_at(record) -> str:
+    """One grid value's verdict cell: the badge, the failed preconditions, ours and the interval."""
+    cell = _badge(record.verdict)
+    if record.failed:
+        cell += f"<div class='would'>failed: {_esc(', '.join(record.failed))}</div>"
+    if record.indicative and record.quick_verdict == "met":
+        cell += "<div class='would'>quick-run numbers pass</div>"
+    nums = []
+    if isinstance(record.ours, (int, float)) and not isinstance(record.ours, bool):
+        nums.append(format_value(record.ours))
+    if record.interval is not None and not any(math.isnan(v) for v in record.interval):
+        nums.append(f"[{format_value(record.interval[0])}, {format_value(record.interval[1])}]")
+    if record.n is not None:
+        nums.append(f"n = {format_value(record.n)}")
+    if nums:
+        cell += f"<div class='detail'>{_esc(' '.join(nums))}</div>"
+    if record.detail:
+        cell += f"<div class='detail'>{_esc(record.detail)}</div>"
+    return cell
+
+
+def _unknowns(p) -> str:
+    """The declared unknowns of a paper (name, unit, primary, grid, why) and, per criterion that hinges on one,
+    its verdict at the primary values beside its verdict at every grid value and where it holds."""
+    unknowns = list(getattr(p, "unknowns", None) or ())
+    if not unknowns:
+        return ""
+    parts = [f"<h3 id='{_anchor(p.paper, 'unknowns')}'>Declared unknowns: values the paper withholds</h3>",
+             "<p class='meta'>Values the paper does not give, which this reproduction had to choose. The scoreboard's "
+             "verdicts use the primary value; the criteria that hinge on an unknown are judged again at every grid "
+             "value below.</p>"]
+    parts.append(_table(["unknown", "unit", "primary", "grid", "why (and where the primary came from)"],
+                        [(u.name, u.unit or "-", format_value(u.primary), ", ".join(format_value(v) for v in u.grid),
+                          u.why) for u in unknowns],
+                        numeric=[False, False, True, False, False]))
+    for u in unknowns:
+        crit = [c for c in p.criteria if any(a.unknown == u.name for a in c.across)]
+        if not crit:
+            parts.append(f"<p class='meta'>No criterion of this report was judged across {_esc(u.name)}.</p>")
+            continue
+        columns = ["id", "verdict at the primary values",
+                   *(f"{u.name} = {format_value(v)}" + (" (primary)" if v == u.primary else "") for v in u.grid),
+                   f"where it holds across {u.name}"]
+        notes = {a.detail for c in crit for a in c.across if a.unknown == u.name}
+        shared = notes.pop() if len(notes) == 1 else None  # one note for every cell: said once, under the table
+        rows, cells = [], []
+        for c in crit:
+            at = {a.value: a for a in c.across if a.unknown == u.name}
+            if shared is not None:
+                at = {v: replace(a, detail="") for v, a in at.items()}
+            line = where_it_holds(c.across, u.name)
+            rows.append([c.id, c.verdict, *(at[v].verdict if v in at else None for v in u.grid), line])
+            cells.append([None, _badge(c.verdict), *(_verdict_at(at[v]) if v in at else "n/a: not judged"
+                                                     for v in u.grid), f"<b>{_esc(line)}</b>"])
+        parts.append(f"<p class='meta'>Verdicts across {_esc(u.name)} ({_esc(u.unit or 'no unit')})"
+                     + (f": {_esc(shared)}" if shared else "") + ".</p>")
+        parts.append(_table(columns, rows, cls="scoreboard", html_cells=cells,
+                            numeric=[False] * len(columns)))
+    return "".join(parts)
+
+
 def _not_judgeable_cell(criteria) -> tuple[str | None, str]:
     """The at-a-glance cell of a paper's criteria that are not judgeable: per failed precondition, the criteria ids
     (text, html); ``(None, "n/a")`` when every criterion could be judged."""
@@ -478,6 +540,7 @@ def _paper_section(p, out: Path) -> str:
         parts.append("<p class='callout'>Quick run: every verdict below is an <b>indication</b> from a small "
                      "sample. None is declared <i>met</i>; run <code>workbench report --full</code> to decide.</p>")
     parts.append(_scoreboard(p))
+    parts.append(_unknowns(p))
     parts.append(_differs(p, out))
     for t in p.tables:
         parts.append(f"<h3 id='{_anchor(p.paper, 'table', t['id'])}'>{_esc(t['id'])}: {_esc(t['caption'])}</h3>")
@@ -594,6 +657,8 @@ def write_index(report, host: PluginHost) -> None:
 def _criterion_summary(c) -> dict:
     d = c.to_dict()
     d["statement"] = c.text
+    names = list(dict.fromkeys(a.unknown for a in c.across))
+    d["where_it_holds"] = {name: where_it_holds(c.across, name) for name in names}
     return d
 
 
@@ -620,6 +685,7 @@ def write_summary(report, host: PluginHost) -> None:
             "paper": p.paper, "title": p.title, "size": p.size, "seed": p.seed, "filters": list(p.filters),
             "seconds": p.seconds, "finished": p.finished, "from_saved": bool(p.saved), "errors": p.errors,
             "criteria": [_criterion_summary(c) for c in p.criteria],
+            "unknowns": [u.to_dict() for u in getattr(p, "unknowns", None) or ()],
             "tables": [{"id": t["id"], "columns": t["columns"], "rows": t["rows"]} for t in p.tables],
             "figures": [f["id"] for f in p.figures],
             "published": p.published,

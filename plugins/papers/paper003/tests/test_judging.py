@@ -69,22 +69,39 @@ def test_criterion_4_verdicts():
     # CRPF-100 at twice the best Kalman MSE while the reference beats the Kalman filters: not met
     c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 10.0, "L3": 100.0}), "C4-L2")
     assert c["C4-L2"].verdict == "not met"
-    # ... while the reference itself only ties with them: no evidence either way, the CRPF's own verdict stands
-    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 20.3, "L3": 100.0}), "C4-L2")
-    assert c["C4-L2"].verdict == "not met"
-    assert c["C4-L2"].extra["reference"]["verdict"] == "inconclusive" and "ties with" in c["C4-L2"].detail
-    # ... or is shown to be worse than them (and is not degenerate), and has converged: not attainable
-    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}, ref4n={"L2": 1.0}), "C4-L2")
-    assert c["C4-L2"].verdict == "not attainable" and c["C4-L2"].extra["reference"]["verdict"] == "not met"
-    assert "Not attainable" in c["C4-L2"].detail
-    (pre,) = c["C4-L2"].preconditions
+    # ... while the converged reference is equivalent to them (TOST, 5 %): the Kalman filter is already optimal,
+    # so the criterion is not attainable
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 20.0, "L3": 100.0}, ref_runs=1000, ref4n={"L2": 1.0}),
+              "C4-L2")
+    crit = c["C4-L2"]
+    assert crit.extra["reference"]["equivalent"] == "met"
+    lo90, hi90 = crit.extra["reference"]["interval90"]
+    assert 1 / 1.05 < lo90 < 1.0 < hi90 < 1.05
+    assert crit.verdict == "not attainable" and "Not attainable" in crit.detail and "equivalent" in crit.detail
+    (pre,) = crit.preconditions
     assert pre.name == "reference converged" and pre.holds and pre.values["particles_4n"] == 20000
     assert 0.99 < pre.values["ratio"] < 1.01
+    # L2 is matched by construction, and the detail says so
+    assert "matched by construction" in crit.detail
+    # ... a converged reference only straddling the equivalence band (ratio 1.05, wide interval) shows nothing:
+    # the CRPF's own verdict stands
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 21.0, "L3": 100.0}, ref_runs=100, ref4n={"L2": 1.0}),
+              "C4-L2")
+    assert c["C4-L2"].extra["reference"]["equivalent"] == "inconclusive"
+    assert c["C4-L2"].verdict == "not met" and "not shown" in c["C4-L2"].detail
+    # ... a converged reference shown worse than them beyond the margin (not degenerate) is no near-optimal bound:
+    # not "not attainable" (the rule rewarded such a reference before), the CRPF's own verdict stands
+    c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}, ref4n={"L2": 1.0}), "C4-L2")
+    assert c["C4-L2"].extra["reference"]["verdict"] == "not met"
+    assert c["C4-L2"].extra["reference"]["equivalent"] == "not met"
+    assert c["C4-L2"].verdict == "not met" and "no near-optimal bound" in c["C4-L2"].detail
+    assert "Not attainable" not in c["C4-L2"].detail
     # ... the same, but 4N particles lower the reference's MSE by 8 %: not converged, so not judgeable (never
     # "not attainable", nor "not met"), naming the ratio and its interval
     c = _crit(_results(_means(crpf_l2=40.0), ref={"L2": 30.0, "L3": 100.0}, ref4n={"L2": 1 / 1.08}), "C4-L2")
     crit = c["C4-L2"]
     assert crit.verdict == "not judgeable" and crit.verdict_if_judged == "not attainable"
+    assert crit.extra["reference"]["equivalent"] == "not met"  # over-stated: not converged, so it cannot count
     (pre,) = crit.failed_preconditions
     assert pre.name == "reference converged" and pre.values["ratio"] == pytest.approx(1.08, rel=0.01)
     assert pre.values["interval"][0] > 1.05 and "converged if the interval lies within [0.95, 1.05]" in pre.detail
@@ -264,3 +281,46 @@ def test_timing_criteria():
         res[f"timing/{n}"]["batched_per_run_s"] = res[f"timing/{n}"]["batched_per_run_s"][:3]
     c = {x.id: x for x in judging._timing_criteria(res)}
     assert c["C5-slower-batched"].verdict == "inconclusive"  # 3 repetitions < MIN_REPEATS
+
+
+def _with_delta(results, crpf_by_value, n=RUNS, k=1000):
+    """Add the ``delta/`` rows of the radians reading: ``crpf_by_value[value][level]`` the CRPF-100 mean (CRPF-300
+    and 500 at 0.8 and 0.7 of it), on the first ``k`` runs."""
+    from workbench_papers.paper003.recipe import delta_key
+
+    out = dict(results)
+    for value, means in crpf_by_value.items():
+        for j, (name, f) in enumerate(zip(CRPF_FILTERS, (1.0, 0.8, 0.7))):
+            row = {}
+            for i, lv in enumerate(LEVELS):
+                r = _runs(means[lv] * f, k, seed=5000 + 100 * i + 10 * j)
+                row.update({f"{lv}:run_mse": r, f"{lv}:mse_t": np.full(5, r.mean()), f"{lv}:runs": np.array(k),
+                            f"{lv}:lost": np.zeros(k, dtype=bool)})
+            out[delta_key("rad", value, name)] = row
+    return out
+
+
+def test_criteria_are_judged_across_the_declared_delta():
+    from workbench_papers.paper003.scenario import DELTA
+
+    assert DELTA.primary == 0.1 and DELTA.grid == (0.1, 0.3, 1.0)
+    # primary delta: CRPF-100 at 1.5 x the best Kalman at L3 (not met); delta = 1: at half of it (met); 0.3: a tie
+    base = _results(_means(crpf_l2=40.0, crpf_l3=300.0), ref={"L2": 10.0, "L3": 100.0})
+    results = _with_delta(base, {0.3: {"L1": 1.5, "L2": 40.0, "L3": 200.5}, 1.0: {"L1": 1.5, "L2": 40.0, "L3": 100.0}})
+    assert judging.delta_runs(results, "rad") == 1000 and judging.delta_runs(results, "deg") is None
+    crit = {c.id: c for c in judging.criteria(results)}
+    c4 = crit["C4-L3"]
+    assert c4.verdict == "not met" and c4.n == RUNS  # the primary verdict, on all runs
+    assert [(a.value, a.verdict, a.n) for a in c4.across] == [(0.1, "not met", 1000), (0.3, "inconclusive", 1000),
+                                                             (1.0, "met", 1000)]
+    assert "first 1000 runs" in c4.across[0].detail
+    # each grid value's statistic is CRPF-100 over the best Kalman filter on the same first 1000 runs
+    kf = min(results[f"mc/L3/{n}/mismatched"]["run_mse"][:1000].mean() for n in KALMAN_TYPE)
+    assert c4.across[2].ours == pytest.approx(results["delta/rad/1/crpf-100"]["L3:run_mse"].mean() / kf)
+    assert c4.across[0].ours == pytest.approx(results["mc/L3/crpf-100/mismatched"]["run_mse"][:1000].mean() / kf)
+    # C2 (Kalman-type filters only) and the degrees reading (no delta rows here) carry no verdicts across delta
+    assert crit["C2"].across == () and crit["C4-L3-deg"].across == ()
+    assert {cid for cid, c in crit.items() if c.across} == {"C1", "C4-L2", "C4-L3", "C4-N"}
+    from workbench.criteria import where_it_holds
+    assert where_it_holds(c4) == "holds for delta in {1}; not met at {0.1}; inconclusive at {0.3}"
+    assert where_it_holds(crit["C4-L2"]) == "holds nowhere"

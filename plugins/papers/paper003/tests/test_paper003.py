@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from workbench.filtering import run_filter
 from workbench.models import random_walk_velocity
 from workbench.plugins import load_host
 from workbench.rng import generator
@@ -21,7 +22,7 @@ HOST = load_host()
 RECIPE = HOST.recipe("003")
 TINY = {"runs": 6, "steps": 30, "chunk": 3, "examples": 6, "grid_runs": 2, "change_runs": 2, "tuning_runs": 2,
         "reference_runs": 4, "reference_check_runs": 3, "timing_runs": 2, "timing_repeats": 2,
-        "particle_budget": 600}
+        "particle_budget": 600, "delta_runs": 4}
 
 
 def _run_all(filters=None, values=TINY, seed=1, keep=lambda key: True):
@@ -89,7 +90,47 @@ def test_lost_rule_uses_one_measurements_own_error():
         assert scenario.measurement_error_rms(np.array(r), sr, st) == pytest.approx(rms, rel=0.01)
     final = np.array([[60.0, 80.0, 0.0, 0.0]])  # 100 m from the sensor
     rho = np.sqrt(1.0 + 2 * 100.0 ** 2 * (1 - np.exp(-0.1 ** 2 / 2)))
-    assert scenario.lost_threshold(final, (0.1, 1.0, 0.1))[0] == pytest.approx(scenario.LOST_FACTOR * rho)
+    assert scenario.lost_threshold(final, (0.1, 1.0, 0.1), 100)[0] == pytest.approx(scenario.LOST_FACTOR * rho)
+
+
+def test_no_measurement_spread_against_dead_reckoning():
+    # the closed form (the prior's covariance carried by the matrix recursion) against a Monte Carlo: start states
+    # drawn from the prior, paths sampled with the level's motion, the error of the prior mean carried by F
+    rng = np.random.default_rng(1)
+    steps, B = 60, 40_000
+    for sigma_a in (0.01, 1.0):
+        x0 = rng.multivariate_normal(p3.XHAT0, np.diag(p3.P0), B)
+        truth = sample_motion(x0, random_walk_velocity(2, p3.DT, sigma_a), steps, rng)
+        t = (steps - 1) * p3.DT
+        mean_xy = np.array(p3.XHAT0[:2]) + t * np.array(p3.XHAT0[2:])
+        rms = np.sqrt(np.mean(np.sum((truth.states[:, -1, :2] - mean_xy) ** 2, axis=1)))
+        assert scenario.no_measurement_rms(sigma_a, steps) == pytest.approx(rms, rel=0.02)
+
+
+def test_lost_rule_marks_a_diverged_run_lost_and_a_tracking_one_not_at_every_level():
+    # tracking runs: the UKF given the level's true noise (a filter that follows the target); diverged runs: the
+    # same estimates drifting away at 20 m/s from the start (an EKF-style divergence).  The rule (written before
+    # the reported results) must tell them apart at every level of both readings, L3 in radians included, where
+    # the former 10 x one-measurement rule (about 6 km) could not mark a diverged run.
+    steps, runs = 100, 20
+    ukf = HOST.filter("ukf")
+    drift = 20.0 * np.arange(steps) * p3.DT
+    for reading in p3.READINGS:
+        for level in p3.LEVELS:
+            sigmas = scenario.level_sigmas(reading, level)
+            truth, scans = scenario.simulate_chunk(HOST, 11, f"lost-test-{reading}-{level}", sigmas, 0, runs, steps)
+            motion, model = scenario.filter_models(HOST, sigmas, "matched")
+            est = run_filter(ukf, scenario.prior(runs), motion, model, scans, np.random.default_rng(0)).mean
+            final = truth.states[:, -1]
+            good = np.hypot(*(est[:, -1, :2] - final[:, :2]).T)
+            assert scenario.is_lost(good, final, sigmas, steps).sum() <= 1, (reading, level)
+            diverged_xy = est[:, :, :2].copy()
+            diverged_xy[:, :, 0] += drift
+            bad = np.hypot(*(diverged_xy[:, -1] - final[:, :2]).T)
+            assert scenario.is_lost(bad, final, sigmas, steps).all(), (reading, level)
+            if level == "L1":  # precise measurements: a track 20 m off (2 x the prior's spread) has lost the target
+                off = np.hypot(*(est[:, -1, :2] + [20.0, 0.0] - final[:, :2]).T)
+                assert scenario.is_lost(off, final, sigmas, steps).all(), reading
 
 
 def test_common_random_numbers():
@@ -379,3 +420,40 @@ def test_notes_and_docs_record_the_choices():
         assert word in RECIPE.notes.lower() and word in doc.lower()
     # the rule of the tuning is written in the docs with its candidates and seed
     assert str(p3.TUNING_SEED) in doc and "geometric mean" in doc
+
+
+def test_delta_grid_tasks_share_the_main_rows_data():
+    # the declared unknown delta: every CRPF at each non-primary grid value, on a prefix of the same runs (same
+    # seed, stream and chunking as the main rows), only the filter's delta configured
+    assert RECIPE.unknowns == (scenario.DELTA,)
+    assert HOST.filter("crpf-100").params["delta"] == scenario.DELTA.primary  # the registered default is the primary
+    options = RecipeOptions(size="full", values=RECIPE.sizes["full"], seed=0, filters=RECIPE.default_filters)
+    tasks = {t.key: t for t in RECIPE.tasks(options)}
+    keys = [k for k in tasks if k.startswith("delta/")]
+    assert sorted(keys) == sorted(p3.delta_key(r, v, n) for r in p3.READINGS for v in (0.3, 1.0)
+                                  for n in p3.CRPF_FILTERS)
+    d, m = tasks[p3.delta_key("rad", 1.0, "crpf-300")].params, tasks["mc/L2/crpf-300/mismatched"].params
+    assert d["configure"] == {"delta": 1.0} and d["runs"] == RECIPE.sizes["full"]["delta_runs"] == 1000
+    assert d["of_runs"] == m["runs"] and d["chunk"] == m["chunk"] and "data_seed" not in d and "stream" not in d
+    assert [c["case"] for c in d["cases"]] == ["L1", "L2", "L3"]
+    # at the quick size too (fewer grid runs than a chunk: the chunking must still be the main rows')
+    quick = {t.key: t for t in RECIPE.tasks(RecipeOptions(size="quick", values=RECIPE.sizes["quick"], seed=0,
+                                                          filters=RECIPE.default_filters))}
+    dq, mq = quick[p3.delta_key("deg", 0.3, "crpf-100")].params, quick["mc/deg-L3/crpf-100/mismatched"].params
+    assert dq["runs"] < mq["chunk"] and (dq["chunk"], dq["of_runs"]) == (mq["chunk"], mq["runs"])
+    # the same chunks: the first 1000 runs of the delta task are the first 1000 runs of the main task
+    assert scenario.units(d["cases"], d["runs"], d["chunk"], d["of_runs"])[:4] == \
+        [(0, k, 250, 250) for k in range(4)]
+
+
+def test_delta_table_and_across_in_a_tiny_report(tiny, monkeypatch):
+    monkeypatch.setattr(judging, "RESAMPLES", 200)  # no interval is asserted here
+    _, results = tiny
+    table = next(t for t in RECIPE.tables if t.id == "delta").make(results)
+    assert len(table.rows) == 2 * 3 * 3  # readings x CRPFs x grid values
+    row = next(r for r in table.rows if r[:3] == ("rad", "crpf-100", "1"))
+    mse = results[p3.delta_key("rad", 1.0, "crpf-100")]["L3:run_mse"][:TINY["delta_runs"]].mean()
+    assert row[3] == TINY["delta_runs"] and row[6].startswith(f"{mse:.4g}")
+    crit = {c.id: c for c in RECIPE.criteria(results)}
+    assert [a.value for a in crit["C4-L3"].across] == [0.1, 0.3, 1.0]
+    assert all(a.n == TINY["delta_runs"] for a in crit["C4-N-deg"].across)
