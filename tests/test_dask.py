@@ -18,28 +18,51 @@ from workbench.specs import Task  # noqa: E402
 TESTS = Path(__file__).parent
 
 
-@pytest.fixture
-def worker_path(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def worker_path(tmp_path_factory):
     """Workers are new processes: they find the demo plugin through an entry point on PYTHONPATH."""
-    site = tmp_path / "site"
+    site = tmp_path_factory.mktemp("site")
     info = site / "demo_fixture-1.0.dist-info"
     info.mkdir(parents=True)
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-fixture\nVersion: 1.0\n")
     (info / "entry_points.txt").write_text("[workbench]\ndemo = fixtures.demo_plugin\n")
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PYTHONPATH", os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))
+        yield site
 
 
-@pytest.mark.parametrize("workers", [1, 2])
-def test_local_cluster_gives_bit_identical_results(tmp_path, demo_host, worker_path, workers):
-    run_report(demo_host, tmp_path / "inproc", papers=["demo"], filters="+sir", seed=4, progress=False)
-    executor = dask_executor(demo_host, workers=workers)
+@pytest.fixture(scope="module")
+def one_worker(worker_path):
+    """One local cluster of one worker, shared by the tests of this module (starting one costs seconds)."""
+    from workbench.plugins import load_host
+
+    executor = dask_executor(load_host(extra_plugins=[("demo", demo_plugin)]), workers=1)
+    yield executor
+    executor.close()
+
+
+@pytest.fixture(scope="module")
+def inproc_fig1(tmp_path_factory):
+    """The in-process report's figure data, the reference every cluster size must reproduce bit for bit."""
+    from workbench.plugins import load_host
+
+    out = tmp_path_factory.mktemp("inproc")
+    run_report(load_host(extra_plugins=[("demo", demo_plugin)]), out, papers=["demo"], filters="+sir", seed=4,
+               progress=False)
+    return load_arrays(out / "paperdemo" / "fig1.npz")
+
+
+@pytest.mark.parametrize("workers", [2, 1])  # 2 first: the shared one-worker cluster starts after it closes
+def test_local_cluster_gives_bit_identical_results(tmp_path, demo_host, worker_path, inproc_fig1, request, workers):
+    executor = request.getfixturevalue("one_worker") if workers == 1 else dask_executor(demo_host, workers=workers)
     try:
         report = run_report(demo_host, tmp_path / "dask", papers=["demo"], filters="+sir", seed=4, progress=False,
                             executor=executor)
     finally:
-        executor.close()
+        if workers != 1:
+            executor.close()
     assert not report.papers[0].errors
-    a = load_arrays(tmp_path / "inproc" / "paperdemo" / "fig1.npz")
+    a = inproc_fig1
     b = load_arrays(tmp_path / "dask" / "paperdemo" / "fig1.npz")
     assert list(a["filters"]) == list(b["filters"]) == ["ekf", "kf", "sir"]
     assert np.array_equal(a["mse"], b["mse"])  # bit-identical, the particle filter included
@@ -50,16 +73,11 @@ def _recipe_with(tmp_path, *extra):
 
 
 @pytest.mark.parametrize("use_dask", [False, True])
-def test_a_task_failing_once_is_retried_and_one_failing_always_is_reported(tmp_path, demo_host, worker_path,
-                                                                            use_dask):
+def test_a_task_failing_once_is_retried_and_one_failing_always_is_reported(tmp_path, demo_host, request, use_dask):
     recipe = _recipe_with(tmp_path, Task("flaky", {"marker": str(tmp_path / "marker")}, demo_plugin.flaky_task),
                           Task("doomed", {}, demo_plugin.always_fails))
-    executor = dask_executor(demo_host, workers=1) if use_dask else InProcess(demo_host)
-    try:
-        outcome = run_recipe(recipe, demo_host, tmp_path / "out", progress=False, executor=executor)
-    finally:
-        if use_dask:
-            executor.close()
+    executor = request.getfixturevalue("one_worker") if use_dask else InProcess(demo_host)
+    outcome = run_recipe(recipe, demo_host, tmp_path / "out", progress=False, executor=executor)
     status = {t["key"]: t["error"] for t in outcome.tasks}
     assert status["mse-kf"] == "" and status["flaky"] == ""
     assert "this chunk always fails" in status["doomed"]

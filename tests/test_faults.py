@@ -100,8 +100,12 @@ def test_a_full_disk(tmp_path, capsys, monkeypatch):
     _one_error_line(capsys, "no space left on the device")
 
 
-def test_an_unreachable_scheduler(tmp_path, capsys):
+def test_an_unreachable_scheduler(tmp_path, capsys, monkeypatch):
     pytest.importorskip("distributed", reason="the dask extra is not installed")
+    from workbench.report import engine
+
+    # the connection is refused at once, and Dask retries it until the timeout: a shorter one names the same fault
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", "1s")
     code = main(["report", "--paper", "003", "--out", str(tmp_path), "--no-progress", "--scheduler", "tcp://127.0.0.1:9"])
     assert code == EXIT["network"]
     _one_error_line(capsys, "cannot reach the Dask scheduler tcp://127.0.0.1:9")

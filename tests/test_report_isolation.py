@@ -51,13 +51,17 @@ def _plugin(*filters):
 
 # -- a filter that raises inside paper 001's shared simulation task -------------------------------------------
 
+#: The runs of each seed block in the paper-001 tests below: what they check holds at any count of runs.
+SMALL_RUNS = 2
+
 
 def test_a_filter_raising_inside_paper_001s_tracker_loses_only_its_own_rows(tmp_path):
     host = load_host(extra_plugins=[("boom", _plugin(BOOM))])
     recipe = host.recipe("001")
-    # the recipe as it is, with a small size of its own (3 runs), and its figures' data computed and saved but drawn
-    # blank: matplotlib's layout of 11 figures would take most of the time, and drawing only reads the data
-    small = {"runs": 3, "seeds": 1, "tuning_runs": 3, "variant_seeds": 1}
+    # the recipe as it is, with a small size of its own (2 runs: the fewest with a spread), and its figures' data
+    # computed and saved but drawn blank: matplotlib's layout of 11 figures would take most of the time, and drawing
+    # only reads the data
+    small = {"runs": SMALL_RUNS, "seeds": 1, "tuning_runs": SMALL_RUNS, "variant_seeds": 1}
     recipe = replace(recipe, sizes={**recipe.sizes, "small": small},
                      figures=tuple(replace(f, draw=_blank, size=(1.0, 1.0)) for f in recipe.figures))
     outcome = run_recipe(recipe, host, tmp_path, size="small", seed=2, filters="+boom-kf", progress=False)
@@ -78,7 +82,7 @@ def test_a_filter_raising_inside_paper_001s_tracker_loses_only_its_own_rows(tmp_
     rows = {r[0]: r for r in next(t for t in outcome.tables if t["id"] == "rows")["rows"]}
     for arm in ("paper", "principled", "tuned", "previous"):
         (row,) = [r for label, r in rows.items() if label.startswith(arm)]
-        assert "%" in row[1] and row[-1] == 3
+        assert "%" in row[1] and row[-1] == SMALL_RUNS
     assert rows["filter:boom-kf"][1].startswith("FAILED, no rows: sim/0: RuntimeError: deliberate failure")
 
     # the rows kept are the rows the task gives without the failing filter: run the task alone, without it
@@ -133,7 +137,7 @@ def _telling_the_block(recipe):
 def test_a_filter_raising_in_a_later_seed_block_of_paper_001_loses_only_its_own_rows(tmp_path):
     host = load_host(extra_plugins=[("boom", _plugin(BOOM_IN_ONE))])
     recipe = _telling_the_block(host.recipe("001"))
-    small = {"runs": 3, "seeds": 2, "tuning_runs": 3, "variant_seeds": 1}
+    small = {"runs": SMALL_RUNS, "seeds": 2, "tuning_runs": SMALL_RUNS, "variant_seeds": 1}
     recipe = replace(recipe, sizes={**recipe.sizes, "small": small},
                      figures=tuple(replace(f, draw=_blank, size=(1.0, 1.0)) for f in recipe.figures))
     outcome = run_recipe(recipe, host, tmp_path, size="small", seed=2, filters="+boom-in-one", progress=False)
@@ -147,13 +151,13 @@ def test_a_filter_raising_in_a_later_seed_block_of_paper_001_loses_only_its_own_
     assert [f["id"] for f in outcome.figures] == [f.id for f in recipe.figures]
     assert [t["id"] for t in outcome.tables] == [t.id for t in recipe.tables]
     assert [c.id for c in outcome.criteria] == ["1", "2", "3"]
-    assert all("2 seed block(s) of 3 runs" in c.detail for c in outcome.criteria)
+    assert all(f"2 seed block(s) of {SMALL_RUNS} runs" in c.detail for c in outcome.criteria)
     tables = {t["id"]: t["rows"] for t in outcome.tables}
-    # the paper's arms keep their rows over both blocks (6 runs); the filter, with rows in block 0 only, has no
+    # the paper's arms keep their rows over both blocks (2 x SMALL_RUNS runs); the filter, with rows in block 0 only, has no
     # numbers (half its runs would be a different experiment) and is marked FAILED, naming the block
     for arm in ("paper", "principled", "tuned", "previous"):
         (row,) = [r for r in tables["rows"] if r[0].startswith(arm)]
-        assert "%" in row[1] and row[-1] == 6
+        assert "%" in row[1] and row[-1] == 2 * SMALL_RUNS
     (failed,) = [r for r in tables["rows"] if "boom-in-one" in r[0]]
     assert failed[0] == "filter:boom-in-one"
     assert failed[1].startswith("FAILED, no rows: sim/1: RuntimeError: deliberate failure in seed block 1")
@@ -161,7 +165,7 @@ def test_a_filter_raising_in_a_later_seed_block_of_paper_001_loses_only_its_own_
     assert failed[:2] == ["simulation", "filter:boom-in-one"] and failed[2].startswith("FAILED, no rows: sim/1")
     gospa = tables["gospa"]
     assert not [r for r in gospa if "boom-in-one" in r[0]]
-    assert [r[1] for r in gospa if r[0].startswith("paper")] == ["before", "after"] and gospa[0][-1] == 6
+    assert [r[1] for r in gospa if r[0].startswith("paper")] == ["before", "after"] and gospa[0][-1] == 2 * SMALL_RUNS
 
 
 def _blank(data, fig):

@@ -57,10 +57,16 @@ def test_the_stated_accuracy_row_reads_the_sensors_declared_model():
 # -- the report ----------------------------------------------------------------------------------------------
 
 
+#: The runs of the report below (and of its tuning): fewer than the quick size's 10, for the suite's time; every check
+#: below recomputes its figures from the raw counts of these runs, and run 0 is the same at any count of runs.
+RUNS = 5
+
+
 @pytest.fixture(scope="module")
 def report():
     recipe = HOST.recipe("001")
-    options = RecipeOptions(size="quick", values=recipe.sizes["quick"], seed=1, filters=recipe.default_filters)
+    values = {**recipe.sizes["quick"], "runs": RUNS, "tuning_runs": RUNS}
+    options = RecipeOptions(size="test", values=values, seed=1, filters=recipe.default_filters)
     results = {t.key: {k: np.asarray(v) for k, v in t.run(TaskContext(params=t.params, seed=1, host=HOST)).items()}
                for t in recipe.tasks(options)}
     return recipe, results
@@ -103,7 +109,7 @@ def test_count_figures_agree_with_the_xy_figures(report):
         np.testing.assert_array_equal(false_per_ping, figs[count]["run0_false"])
         assert figs[count]["ping"].tolist() == list(range(1, 21))
     assert np.all(figs["fig10"]["mean"][:5] == 0)  # no output during the warm-up
-    assert int(figs["fig9"]["runs"]) == 10 and int(figs["fig11"]["runs"]) == 1
+    assert int(figs["fig9"]["runs"]) == RUNS and int(figs["fig11"]["runs"]) == 1
     # the band is the 10 % and 90 % points of the paper rows' counts per ping ("10-90 % of N runs"), each
     # written out here as the order statistics it is: sorted counts c_(0) <= ... <= c_(n-1), position h = (n - 1) p,
     # c_(floor h) + (h - floor h) (c_(floor h + 1) - c_(floor h)); the other rows' means are those of their own counts
@@ -111,7 +117,7 @@ def test_count_figures_agree_with_the_xy_figures(report):
         f = figs[fid]
         phase = "before" if fid == "fig9" else "after"
         c = _counts(results, "paper", phase).confirmed
-        assert c.shape[0] == 10 and np.any(np.ptp(c, axis=0) > 0)  # ten runs whose counts differ somewhere
+        assert c.shape[0] == RUNS and np.any(np.ptp(c, axis=0) > 0)  # runs whose counts differ somewhere
         for key, p in (("q10", 0.1), ("q90", 0.9)):
             np.testing.assert_allclose(f[key], [_order_statistic(sorted(c[:, k].tolist()), p)
                                                 for k in range(c.shape[1])], rtol=1e-12, atol=1e-12)
@@ -156,22 +162,22 @@ def test_criteria_recomputed_from_the_raw_counts(report):
     b, a = _counts(results, "paper", "before"), _counts(results, "paper", "after")
     post = np.arange(20) >= 5
     # criterion 1: every false track of pings 6-20 of every run, before and after, counted here one by one
-    before = sum(int(b.false[r, k]) for r in range(10) for k in range(20) if post[k])
-    after = sum(int(a.false[r, k]) for r in range(10) for k in range(20) if post[k])
-    assert before > 0 and np.isclose(crit["1"].ours, 1 - after / before) and crit["1"].n == 10
+    before = sum(int(b.false[r, k]) for r in range(RUNS) for k in range(20) if post[k])
+    after = sum(int(a.false[r, k]) for r in range(RUNS) for k in range(20) if post[k])
+    assert before > 0 and np.isclose(crit["1"].ours, 1 - after / before) and crit["1"].n == RUNS
     pre = crit["1"].extra["precondition"]
     assert pre["has"] == before and pre["needs"] == paper001.MIN_FALSE_BEFORE
     assert pre["holds"] == (before >= paper001.MIN_FALSE_BEFORE)
-    assert np.isclose(crit["1"].extra["false_per_ping_before"], before / (10 * 15))
+    assert np.isclose(crit["1"].extra["false_per_ping_before"], before / (RUNS * 15))
     assert f"{before} false tracks before removal summed" in crit["1"].detail
     k = int(np.sum(continuity(a.held) >= 0.8))
-    assert np.isclose(crit["2"].ours, k / 10) and crit["2"].n == 10
-    ci = binomtest(k, 10).proportion_ci(method="exact")
+    assert np.isclose(crit["2"].ours, k / RUNS) and crit["2"].n == RUNS
+    ci = binomtest(k, RUNS).proportion_ci(method="exact")
     assert np.allclose(crit["2"].interval, (ci.low, ci.high))
     both = b.held & a.held
     diff = pooled_rmse(np.where(both, a.sq_error, np.nan)) - pooled_rmse(np.where(both, b.sq_error, np.nan))
     assert np.isclose(crit["3"].ours, diff, equal_nan=True)
-    # 10 runs are fewer than every criterion needs: no firm verdict, and no 20-run replication fits
+    # RUNS (5) runs are fewer than every criterion needs: no firm verdict, and no 20-run replication fits
     assert all(c.verdict in ("inconclusive", UNJUDGED) and c.replication is None for c in crit.values())
     assert crit["1"].verdict == ("inconclusive" if pre["holds"] else UNJUDGED)
 
@@ -185,10 +191,10 @@ def test_tables_hold_every_row_and_the_tuning_choice(report):
     # criterion 2's share in the rows table, recomputed for the stated-accuracy row
     s = _counts(results, "stated", "after")
     k = int(np.sum(continuity(s.held) >= 0.8))
-    assert tables["rows"].rows[1][4].startswith(f"{100 * k / 10:.0f} % ({k}/10)")
+    assert tables["rows"].rows[1][4].startswith(f"{100 * k / RUNS:.0f} % ({k}/{RUNS})")
     # beside each row's removal rate: its false tracks per ping before removal (pings 6-20, mean over runs)
     for i, arm in enumerate(("paper", "stated")):
-        per_ping = _counts(results, arm, "before").false[:, 5:].sum() / (10 * 15)
+        per_ping = _counts(results, arm, "before").false[:, 5:].sum() / (RUNS * 15)
         assert tables["rows"].rows[i][2].startswith(f"{per_ping:.2f}")
     # the removal-rate table: false tracks before removal summed over runs and pings 6-20, per row
     paper_row = tables["removal-rate"].rows[0]
@@ -232,7 +238,7 @@ def test_notes_and_published_values_are_stated(report):
     assert str(results["sim/0"]["paper/model_used"][0]).startswith("polar")
     # the confirmed tracks of the log are what the counts count
     b = _counts(results, "paper", "before")
-    assert b.confirmed.shape == (10, 20) and np.all(b.false <= b.confirmed)
+    assert b.confirmed.shape == (RUNS, 20) and np.all(b.false <= b.confirmed)
 
 
 def test_gospa_terms_agree_with_the_track_counts(report):
@@ -255,7 +261,7 @@ def test_gospa_terms_agree_with_the_track_counts(report):
     post = np.arange(20) >= 5
     for phase in ("before", "after"):
         mean = res[f"paper/{phase}/gospa"][:, post].mean(axis=1).mean()
-        assert rows[("paper", phase)][2].startswith(paper001._f(mean)) and rows[("paper", phase)][6] == 10
+        assert rows[("paper", phase)][2].startswith(paper001._f(mean)) and rows[("paper", phase)][6] == RUNS
     # removal takes false tracks away: GOSPA's false-track part falls (its missed part may rise: the remover also
     # drops some of the target's detections, so the distance itself need not fall)
     fig = next(f for f in recipe.figures if f.id == "gospa-per-ping").data(results)
