@@ -107,6 +107,8 @@ WRONG = [
      ["'stuck-rebuild'", "F(dt1 + dt2) = F(dt2) F(dt1) fails", "entry (0, 2) is 1 from for_interval(2.27), 2 composed"]),
     (wrong.dwna_claims_exact, "check_noise_composes",
      ["'dwna-claims-exact' (ExactCV)", "Q(dt1 + dt2) = F(dt2) Q(dt1) F(dt2)^T + Q(dt2) fails"]),
+    (wrong.argument_ignoring_growth, "check_time_arguments",
+     ["'ignores-time' (ArgumentIgnoringGrowth)", "f(x, t=3.7, dt=1) differs from at(3.7, 1).f(x)"]),
     (wrong.bad_layout, "check_state_layout",
      ["'bad-layout'", "state_names declares 2 names ('x', 'y') for a state of dimension 4", "'metres/s'"]),
 ]

@@ -5,7 +5,9 @@ The public API (stable names; everything else is reached through its module):
 - records: :class:`Gaussian`, :class:`Particles`, :class:`Scan`, :class:`Scans`, :class:`Truth`, :data:`CLUTTER`,
   :class:`InputError`
 - models: :class:`MotionModel`, :class:`MeasurementModel`, :func:`constant_velocity`,
-  :func:`random_walk_velocity`, :func:`range_rate_model`, :func:`linear_measurement`, :func:`range_bearing`
+  :func:`random_walk_velocity`, :func:`range_rate_model`, :func:`constant_acceleration`, :func:`singer`,
+  :func:`coordinated_turn`, :func:`coordinated_turn_rate`, :func:`growth_model`, :func:`linear_measurement`,
+  :func:`range_bearing`, :func:`quadratic_measurement` (``docs/motion-models.md``)
 - simulation: :func:`sample_motion`, :func:`piecewise_trajectory`, :class:`Leg`, :func:`generator` (keyed random
   streams)
 - components: :func:`load_host` (the installed filters, sensors, clutter models, papers), :class:`FilterSpec`,
@@ -23,8 +25,9 @@ from importlib.metadata import PackageNotFoundError, version
 from .filtering import run_filter
 from .hookspecs import hookimpl
 from .metrics import nees, position_sq_error, rmse
-from .models import (MeasurementModel, MotionModel, constant_velocity, linear_measurement, random_walk_velocity,
-                     range_bearing, range_rate_model)
+from .models import (MeasurementModel, MotionModel, constant_acceleration, constant_velocity, coordinated_turn,
+                     coordinated_turn_rate, growth_model, linear_measurement, quadratic_measurement,
+                     random_walk_velocity, range_bearing, range_rate_model, singer)
 from .params import Param
 from .plugins import load_host
 from .rng import generator
@@ -44,7 +47,8 @@ __all__ = [
     "Gaussian", "Particles", "Scan", "Scans", "Truth", "CLUTTER", "InputError",
     # models
     "MotionModel", "MeasurementModel", "constant_velocity", "random_walk_velocity", "range_rate_model",
-    "linear_measurement", "range_bearing",
+    "constant_acceleration", "singer", "coordinated_turn", "coordinated_turn_rate", "growth_model",
+    "linear_measurement", "range_bearing", "quadratic_measurement",
     # simulation
     "sample_motion", "piecewise_trajectory", "Leg", "generator",
     # components

@@ -74,18 +74,34 @@ def piecewise_trajectory(position: Sequence[float], velocity: Sequence[float], l
     return Truth(states, dt * np.arange(states.shape[1]))
 
 
-def sample_motion(x0: np.ndarray, motion: MotionModel, steps: int, rng: np.random.Generator) -> Truth:
-    """Random paths ``x_k = f(x_{k-1}) + Q_sqrt e_k`` from start states ``x0 (B, n)``; ``steps`` samples each
-    (``f(x) = F x`` for a linear model, the model's own ``f`` where a subclass overrides it)."""
+def sample_motion(x0: np.ndarray, motion: MotionModel, steps: int, rng: np.random.Generator, *,
+                  t0: float = 0.0) -> Truth:
+    """Random paths ``x_k = f(x_{k-1}; t_{k-1}, dt) + Q_sqrt e_k`` from start states ``x0 (B, n)`` at time ``t0``;
+    ``steps`` samples each, at ``t_k = t0 + k dt`` (``dt``: the model's step).
+
+    ``f(x) = F x`` for a linear model; the model's own ``f`` where a subclass overrides it, called on the model
+    bound to each step (``motion.at(t_{k-1}, dt)``), so a time-varying model (e.g. the growth model) is sampled
+    at the right time.
+    """
     x0 = np.atleast_2d(np.asarray(x0, dtype=float))
     B, n = x0.shape
     if n != motion.dim:
         raise InputError(f"start states have dimension {n} but the motion model has {motion.dim}")
+    try:
+        t0 = float(t0)
+    except (TypeError, ValueError):
+        raise InputError(f"sample_motion: t0 must be a time in seconds, got {t0!r}") from None
+    if not np.isfinite(t0):
+        raise InputError(f"sample_motion: t0 must be finite, got {t0}")
     steps = check_size("sample_motion: steps", steps, 2 * 8.0 * B * n)
     noise = rng.standard_normal((B, steps - 1, n)) @ motion.Q_sqrt.T
     states = np.empty((B, steps, n))
     states[:, 0] = x0
+    times = t0 + motion.dt * np.arange(steps)
     for k in range(1, steps):
-        moved = states[:, k - 1] @ motion.F.T if motion.linear else motion.f(states[:, k - 1])
+        if motion.linear:
+            moved = states[:, k - 1] @ motion.F.T
+        else:
+            moved = motion.at(float(times[k - 1])).f(states[:, k - 1])
         states[:, k] = moved + noise[:, k - 1]
-    return Truth(states, motion.dt * np.arange(steps))
+    return Truth(states, times)

@@ -22,6 +22,7 @@ __all__ = [
     "range_bearing_jacobian",
     "polar_to_cartesian",
     "converted_covariance",
+    "quadratic_measurement",
 ]
 
 
@@ -267,3 +268,28 @@ def converted_covariance(r: np.ndarray, b: np.ndarray, sigma_r: float, sigma_b: 
     out[..., 1, 1] = sr2 * s * s + rb2 * c * c  # R22 = sr^2 sin^2 b + r^2 sb^2 cos^2 b
     out[..., 0, 1] = out[..., 1, 0] = (sr2 - rb2) * s * c  # R12 = (sr^2 - r^2 sb^2) sin b cos b
     return out
+
+
+def quadratic_measurement(scale: float = 1.0 / 20.0, sigma: float = 1.0) -> MeasurementModel:
+    """``z = scale x^2 + w``, ``w ~ N(0, sigma^2)``, of a univariate state ``[x]``: the measurement of the growth
+    model benchmark of Gordon, Salmond & Smith (1993) (``scale = 1/20``, ``sigma = 1``; see
+    :func:`workbench.models.motion.growth_model`).  Jacobian ``2 scale x``; the frame is undeclared (``""``).
+    The sign of ``x`` is not observed, so the posterior is bimodal: a benchmark for particle filters."""
+    try:
+        a, sd = float(scale), float(sigma)
+    except (TypeError, ValueError):
+        raise InputError(f"quadratic_measurement needs numbers, got scale={scale!r}, sigma={sigma!r}") from None
+    if not (np.isfinite(a) and a != 0.0):
+        raise InputError(f"quadratic_measurement needs a finite, non-zero scale, got {scale!r}")
+    if not (np.isfinite(sd) and sd >= 0.0):
+        raise InputError(f"quadratic_measurement needs a finite sigma >= 0, got {sigma!r}")
+
+    def h(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        return a * x * x
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        return (2.0 * a * x)[..., None, :]
+
+    return MeasurementModel(name="quadratic", h=h, R=np.array([[sd * sd]]), jacobian=jacobian, std=(sd,))

@@ -5,8 +5,8 @@
     carry = association.start(context, prior)
     for k, scan in enumerate(scans):                  # the filter never sees scan.origin
         if k > 0 (or predict_first):
-            motion_k = motion.for_interval(t_k - t_{k-1})  # irregular time stamps honoured
-            carry = association.predict(carry, motion_k, k)
+            motion_k = motion.at(t_{k-1}, t_k - t_{k-1})   # the step's start time and interval bound
+            carry = association.predict(carry, motion_k, k)  # (predict_first: t_0 - dt, dt before scan 0)
         carry = association.update(carry, scan, k)
     return association.finish(carry)
 
@@ -99,7 +99,9 @@ def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementM
     ----------
     filt : the filter (any :class:`~workbench.specs.FilterSpec`)
     scans : the detections, ``z (B, T, M, m)``; their ``origin`` labels are stripped before any step sees them
-    motion : the motion model; rebuilt for every step whose interval differs from its own ``dt``
+    motion : the motion model; each predict gets ``motion.at(t_{k-1}, t_k - t_{k-1})`` (rebuilt where the interval
+        differs from its own ``dt``, the step's absolute start time bound, so a time-varying model sees it;
+        with ``predict_first``, the step before the first scan is ``motion.at(t_0 - dt, dt)``)
     model : the measurement model the filter is given
     association : the role that chooses what the filter is updated with (see the module docstring)
     prior : the belief at the first scan, ``(B, n)`` (a role may build its own, e.g. from the first scan)
@@ -128,11 +130,15 @@ def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementM
     ctx = Context(filt, model, motion, scans.batch, T, scans.times, rng)
     carry = association.start(ctx, prior, scans.scan(0).for_filter() if T else Scan.empty(scans.batch,
                                                                                            scans.z.shape[-1]))
-    intervals = scans.intervals
+    times = np.asarray(scans.times, dtype=float)
     for k in range(T):
         scan = scans.scan(k).for_filter()
-        if k > 0 or predict_first:
-            carry = association.predict(carry, motion.for_interval(float(intervals[k])) if T > 1 else motion, k)
+        if k > 0:
+            # the step from t_{k-1} to t_k: its absolute start time and interval bound into the model
+            carry = association.predict(carry, motion.at(float(times[k - 1]), float(times[k] - times[k - 1])), k)
+        elif predict_first:
+            # the prior is the belief one nominal step before the first scan
+            carry = association.predict(carry, motion.at(float(times[0]) - motion.dt, motion.dt), k)
         carry = association.update(carry, scan, k)
         if progress is not None:
             progress((k + 1) / T)
