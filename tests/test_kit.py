@@ -107,7 +107,7 @@ def test_check_plugin_command_fits_the_kit_to_the_kind(capsys):
     out = capsys.readouterr().out
     assert "PASSED   sonar-poisson-check_count_poisson: " in out and "PASSED   hough-check_causal: " in out
     assert main(["check-plugin", "no-such-thing"]) == 2
-    assert "no filter, sensor, clutter generator or clutter remover named 'no-such-thing'" in capsys.readouterr().err
+    assert "no filter, sensor, clutter generator, clutter remover or motion model named 'no-such-thing'" in capsys.readouterr().err
     assert main(["check-plugin", "kf", "--kind", "sensor"]) == 2
 
 
@@ -352,3 +352,55 @@ def test_check_plugin_prints_each_line_as_its_check_finishes():
     check_plugin(host, "kf-counted", out=lambda line: printed.append((line, len(calls))))
     shapes = next(n for line, n in printed if "check_shapes" in line)
     assert shapes <= 2 < len(calls), (shapes, len(calls))  # printed after check_shapes only, not after them all
+
+
+# -- filters that serve a motion model of their own: checked on its truths, not excused ----------------------------
+
+UKF = load_host().filter("ukf")
+#: the built-in UKF declared as serving the coordinated turn with the rate in the state
+UKF_CT = replace(UKF, name="ukf-ct-rate", motion_models=("ct-rate",))
+
+
+def _linear_copy(motion):
+    """The same F and Q as a plain (linear) MotionModel: a filter that hands this on ignores the model's f."""
+    from workbench.models import MotionModel
+
+    return MotionModel(motion.name, motion.F, motion.Q, motion.Q_sqrt, motion.dt, state_names=motion.state_names,
+                       state_units=motion.state_units)
+
+
+def test_a_filter_serving_ct_rate_draws_5d_truths_from_the_registered_model():
+    from workbench.models import coordinated_turn_rate
+
+    truth, scans, prior, motion, model = kit._problem(UKF_CT, 3, seed=1, steps=6)
+    assert truth.states.shape == (3, 6, 5) and prior.mean.shape == (3, 5) and not motion.linear
+    direct = coordinated_turn_rate(1.0, 0.5, 0.01)  # the registered defaults, written out
+    np.testing.assert_array_equal(motion.Q, direct.Q)
+    np.testing.assert_array_equal(motion.f(truth.states[:, 0]), direct.f(truth.states[:, 0]))
+    # the truth turns: its velocity rotates by the state's own rate each step (the model's f, not F)
+    v0, v1 = truth.states[:, 0, 2:4], truth.states[:, 1, 2:4]
+    turned = np.arctan2(v1[:, 1], v1[:, 0]) - np.arctan2(v0[:, 1], v0[:, 0])
+    np.testing.assert_allclose(turned, truth.states[:, 0, 4], atol=0.05)
+
+
+def test_a_filter_serving_ct_rate_is_checked_not_excused():
+    names = {c.name for c in checks_for(UKF_CT)}
+    assert {"check_shapes", "check_batch_consistency", "check_partially_measured_batch", "check_served_accuracy",
+            "check_served_nees", "check_previous_state_unchanged"} <= names
+    assert not ({"check_bearing_wrap", "check_irregular_time_steps", "check_nis_consistency"} & names)
+    assert not UKF_CT.expected_failures
+    for name in ("check_shapes", "check_served_accuracy", "check_served_nees"):
+        next(c for c in checks_for(UKF_CT) if c.name == name)(UKF_CT)  # raises AssertionError on failure
+
+
+def test_a_filter_that_ignores_the_served_models_f_fails_the_served_nees_check():
+    ignores_f = replace(UKF_CT, name="ukf-ignores-f", predict=lambda s, m, r: UKF.predict(s, _linear_copy(m), r))
+    with pytest.raises(AssertionError, match=r"NEES inconsistent on truths of motion model 'ct-rate'"):
+        kit.check_served_nees(ignores_f)
+
+
+def test_a_filter_serving_an_unknown_motion_model_is_refused_naming_it():
+    ghost = replace(UKF, name="ukf-warp", motion_models=("warp-drive",))
+    with pytest.raises(ValueError, match=r"filter 'ukf-warp' serves the motion model 'warp-drive', which no plugin "
+                                         r"provides \(installed motion models: ca2d, "):
+        run_checks(ghost)

@@ -165,3 +165,24 @@ def test_a_plugin_names_what_it_cannot_provide_here_and_why():
                           ("filter", "kf"): "must not hide an installed filter"}
     # a blocked plugin says nothing of what it would provide
     assert mine(load_host(block=["optional"], extra_plugins=[("optional", optional)])) == {}
+
+
+def test_a_filter_serving_a_motion_model_no_plugin_provides_makes_its_plugin_broken():
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from workbench import hookimpl
+
+    ukf = load_host().filter("ukf")
+    served = SimpleNamespace(workbench_filters=hookimpl(lambda: [
+        replace(ukf, name="ukf-turns", motion_models=("ct-rate",)),
+        replace(ukf, name="ukf-warp", motion_models=("ct-rate", "warp-drive"))]))
+    host = load_host(extra_plugins=[("served", served)])
+    info = next(p for p in host.plugins if p.name == "served")
+    assert info.status == "broken"
+    assert ("filter 'ukf-warp' serves the motion model 'warp-drive', which no plugin provides (installed motion "
+            "models: ca2d, ca3d, ct, ct-rate, ") in info.error
+    assert "ukf-turns" not in host.filters and "ukf-warp" not in host.filters and "ukf" in host.filters
+    fine = SimpleNamespace(workbench_filters=hookimpl(lambda: [replace(ukf, name="ukf-turns",
+                                                                       motion_models=("ct-rate",))]))
+    assert load_host(extra_plugins=[("fine", fine)]).filter("ukf-turns").motion_models == ("ct-rate",)

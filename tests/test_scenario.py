@@ -243,3 +243,95 @@ def test_run_writes_a_track_file_per_filter_that_reads_back(tmp_path, demo_host)
         np.testing.assert_array_equal(mean, data[f"mean_{name}"])  # repr-exact floats
         np.testing.assert_array_equal(cov, data[f"cov_{name}"])
         assert tracks.names[:2] == ("x", "y") and tracks.units[:4] == ("m", "m", "m/s", "m/s")
+
+
+# -- motion models named as plugins, with parameters ---------------------------------------------------------------
+
+TURN = """
+[scenario]
+name = "turn"
+runs = 3
+steps = 6
+dt = "2 s"
+
+[motion]
+model = "ct-rate(sigma_omega=0.01)"
+
+[truth]
+initial_state = [1000.0, 600.0, -15.0, 20.0, 0.1]
+
+[sensor]
+plugin = "range-bearing"
+
+[prior]
+mean = [1000.0, 600.0, -15.0, 20.0, 0.1]
+std = [10.0, 10.0, 2.0, 2.0, 0.02]
+
+[filters]
+names = ["ukf"]
+"""
+
+
+def test_a_scenario_naming_a_motion_model_with_parameters_builds_that_model(tmp_path, demo_host):
+    from workbench.models import coordinated_turn_rate
+
+    text = TURN.replace("sigma_omega=0.01", "sigma_omega=0.03")
+    sc = load_scenario(_write(tmp_path, text), demo_host)
+    direct = coordinated_turn_rate(2.0, 0.5, 0.03)  # dt from [scenario], sigma_a the registered default
+    assert type(sc.motion) is type(direct) and sc.motion.dt == 2.0 and sc.truth_motion is None
+    np.testing.assert_array_equal(sc.motion.F, direct.F)
+    np.testing.assert_array_equal(sc.motion.Q, direct.Q)
+    x = np.array([[1.0, 2.0, 3.0, -4.0, 0.2], [0.0, 0.0, 1.0, 1.0, 0.0]])
+    np.testing.assert_array_equal(sc.motion.f(x), direct.f(x))
+    # the same model with its parameters as keys beside the name, and a unit string
+    keys = _write(tmp_path, TURN.replace('model = "ct-rate(sigma_omega=0.01)"',
+                                         'model = "ct-rate"\nsigma_omega = 0.03\nsigma_a = "0.5 m/s^2"'))
+    np.testing.assert_array_equal(load_scenario(keys, demo_host).motion.Q, direct.Q)
+
+
+def test_the_truth_can_move_by_its_own_motion_model(tmp_path, demo_host):
+    from workbench.models import coordinated_turn
+    from workbench.scenario import simulate
+
+    text = (TURN.replace('model = "ct-rate(sigma_omega=0.01)"', 'model = "cv2d(sigma_a=1)"')
+            .replace("[truth]\n", '[truth]\nmotion = "ct(omega=3 deg/s, sigma_a=0)"\n')
+            .replace("[1000.0, 600.0, -15.0, 20.0, 0.1]", "[1000.0, 600.0, -15.0, 20.0]")
+            .replace("[10.0, 10.0, 2.0, 2.0, 0.02]", "[10.0, 10.0, 2.0, 2.0]"))
+    sc = load_scenario(_write(tmp_path, text), demo_host)
+    F = coordinated_turn(2.0, np.radians(3.0), 0.0).F
+    np.testing.assert_allclose(sc.truth_motion.F, F, rtol=1e-15, atol=0)
+    assert sc.motion.name == "cv2d"
+    truth, _ = simulate(sc, demo_host, seed=0)
+    x = np.array([1000.0, 600.0, -15.0, 20.0])
+    for k in range(sc.steps):  # no truth noise: the truth turns exactly as the known-rate turn says
+        np.testing.assert_allclose(truth.states[:, k], np.broadcast_to(x, (3, 4)), rtol=1e-12)
+        x = F @ x
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('"ct-rate(sigma_omega=0.01)"', '"ct-rate(sigma_omega=3 deg/s)"',
+     r"\[motion\] model: motion model 'ct-rate': sigma_omega: '3 deg/s' carries the unit 'deg/s', but this key takes "
+     r"a bare number in rad/s/sqrt\(s\)"),
+    ('"ct-rate(sigma_omega=0.01)"', '"ct(omega=3 km)"',
+     r"\[motion\] model: motion model 'ct': omega: '3 km' is a length, but this key expects an angular rate"),
+    ('"ct-rate(sigma_omega=0.01)"', '"warp(speed=9)"',
+     r"\[motion\] model: expected one of the installed motion models \(ca2d, ca3d, ct, ct-rate, cv2d, cv3d, growth, "
+     r"rwv2d, singer2d, singer3d\), .* or one of the older forms constant_velocity, random_walk_velocity, range_rate; "
+     r"got 'warp\(speed=9\)'"),
+    ('"ct-rate(sigma_omega=0.01)"', '"ukf"', r"got 'ukf' \('ukf' is a filter, not a motion model\)"),
+    ('"ct-rate(sigma_omega=0.01)"', '"ct-rate(sigma_omega=0.01)"\nsigma_omega = 0.02',
+     r"\[motion\] sigma_omega: given twice, here and in the reference 'ct-rate\(sigma_omega=0.01\)'"),
+    ('"ct-rate(sigma_omega=0.01)"', '"ct-rate(sigma_omga=0.01)"',
+     r"motion model 'ct-rate': unknown parameter 'sigma_omga' \(parameters: sigma_a, sigma_omega\)"),
+    ('[truth]\n', '[truth]\nmotion = "cv2d"\n',
+     r"\[truth\] motion: the truth's motion model 'cv2d' has a state of 4 components \(x, y, vx, vy\), but \[motion\] "
+     r"model 'ct-rate\(sigma_omega=0.01\)' has 5"),
+    ('[truth]\n', '[truth]\nlegs = [{kind = "straight", duration = 4}]\n',
+     r"\[truth\] legs: legs make states of 2 positions and 2 velocities, but the truth's motion model 'ct-rate' has "
+     r"the state \(x, y, vx, vy, omega\)"),
+])
+def test_bad_motion_models_name_the_file_and_key(tmp_path, demo_host, old, new, message):
+    path = _write(tmp_path, TURN.replace(old, new))
+    with pytest.raises(InputError, match=message) as info:
+        load_scenario(path, demo_host)
+    assert str(path) in str(info.value)

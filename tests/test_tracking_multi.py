@@ -10,9 +10,9 @@ from workbench.models import constant_velocity, linear_measurement, range_bearin
 from workbench.plugins import load_host
 from workbench.rng import generator
 from workbench.tracking.multi import (CONFIRMED, TENTATIVE, TrackerConfig, TrackLog, box_pairs, detection_covariance,
-                                      gated_pairs, greedy_assign, join_items, measurement_covariance, mofn_step,
+                                      gated_pairs, greedy_assign, measurement_covariance, mofn_step,
                                       position_covariance, rectangular_pairs, run_tracker, speed_course_prior,
-                                      take_items, two_point_prior)
+                                      two_point_prior)
 from workbench.types import CLUTTER, Gaussian, InputError, Scans
 
 HOST = load_host()
@@ -195,8 +195,11 @@ def test_position_and_detection_covariances_invert_each_other():
 
 
 def test_take_and_join_filter_states():
+    """The tracker's take / join of a declared state (workbench.specs.take_batch / join_batch): the declared
+    batch-first fields are sliced and concatenated (nested records walked), everything else is the first state's."""
     from dataclasses import dataclass
 
+    from workbench.specs import join_batch, take_batch
     from workbench.types import Particles
 
     @dataclass(frozen=True)
@@ -204,16 +207,18 @@ def test_take_and_join_filter_states():
         cloud: Particles
         count: int = 7
 
+        batch_fields = ("cloud",)
+
     rng = generator(6, "tree")
     a = State(Particles(rng.normal(size=(3, 5, 4)), np.full((3, 5), -np.log(5))))
     b = State(Particles(rng.normal(size=(2, 5, 4)), np.full((2, 5), -np.log(5))), count=1)
-    j = join_items(a, b, 3, 2)
+    j = join_batch([a, b])
     assert j.cloud.particles.shape == (5, 5, 4) and j.count == 7
-    t = take_items(j, np.array([4, 0]), 5)
+    t = take_batch(j, np.array([4, 0]))
     assert np.array_equal(t.cloud.particles, np.stack([b.cloud.particles[1], a.cloud.particles[0]]))
     g = Gaussian(np.arange(8.0).reshape(2, 4), np.repeat(np.eye(4)[None], 2, 0))
-    assert np.array_equal(take_items(g, np.array([1]), 2).mean, g.mean[1:])
-    assert np.array_equal(join_items(g, g, 2, 2).cov, np.concatenate([g.cov, g.cov]))
+    assert np.array_equal(take_batch(g, np.array([1])).mean, g.mean[1:])
+    assert np.array_equal(join_batch([g, g]).cov, np.concatenate([g.cov, g.cov]))
 
 
 # -- whole runs ----------------------------------------------------------------------------------------------

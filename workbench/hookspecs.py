@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from .specs import BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec, SensorSpec
+    from .specs import (BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, MotionModelSpec, RecipeSpec,
+                        SensorSpec)
 
 PROJECT = "workbench"
 ENTRY_POINT_GROUP = "workbench"
@@ -47,6 +48,17 @@ def workbench_sensors() -> list["SensorSpec"]:
     A :class:`~workbench.specs.SensorSpec` simulates target detections from a truth trajectory and
     publishes the :class:`~workbench.models.MeasurementModel` (``h``, Jacobian, ``R``, angular
     components) that filters use.
+    """
+
+
+@hookspec
+def workbench_motion_models() -> list["MotionModelSpec"]:
+    """Return the motion models this plugin provides.
+
+    Each :class:`~workbench.specs.MotionModelSpec` builds a :class:`~workbench.models.MotionModel` for a time step
+    from its declared parameters (``build(dt, **params)``).  Scenario files and references name a model with its
+    parameters (``"ct-rate(sigma_omega=0.01)"``); filters declare the models they serve
+    (:attr:`~workbench.specs.FilterSpec.motion_models`).  Names must be unique across plugins.
     """
 
 

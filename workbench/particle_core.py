@@ -55,6 +55,9 @@ class ParticleState:
     resamples: int = 0  # total resampling events over the batch
     underflows: int = 0  # updates in which every weight of an item underflowed
 
+    #: The batch-first fields (the counters are the whole batch's; a tracker's take and join keep the first state's).
+    batch_fields = ("cloud",)
+
 
 def component_major(batch: int, particles: int, dim: int) -> np.ndarray:
     """An empty ``(B, N, n)`` array stored as ``(n, B, N)``: each ``x[..., j]`` is one contiguous block."""

@@ -13,12 +13,13 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from typing import Any, Iterable, Mapping
 
+import numpy as np
 import pluggy
 
 from . import hookspecs
 from .params import check_value
-from .specs import (CAPABILITIES, BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, RecipeSpec,
-                    SensorSpec)
+from .specs import (CAPABILITIES, BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, MotionModelSpec,
+                    RecipeSpec, SensorSpec)
 from .types import InputError
 
 __all__ = ["PluginInfo", "PluginHost", "load_host", "blocked_from_env", "UnknownComponent", "BUILTIN_DISTRIBUTION"]
@@ -33,6 +34,7 @@ BUILTIN_DISTRIBUTION = "workbench"
 KINDS: dict[str, tuple[str, type, str]] = {
     "workbench_filters": ("filter", FilterSpec, "name"),
     "workbench_sensors": ("sensor", SensorSpec, "name"),
+    "workbench_motion_models": ("motion model", MotionModelSpec, "name"),
     "workbench_clutter_generators": ("clutter generator", ClutterGeneratorSpec, "name"),
     "workbench_clutter_removers": ("clutter remover", ClutterRemoverSpec, "name"),
     "workbench_report_recipes": ("recipe", RecipeSpec, "paper"),
@@ -106,6 +108,21 @@ class PluginHost:
     def sensor(self, name: str) -> SensorSpec:
         return self._get("workbench_sensors", name)
 
+    def motion_model_spec(self, name: str) -> MotionModelSpec:
+        """The installed motion model ``name``, or a configured one: ``"ct-rate(sigma_omega=0.01)"`` is ``ct-rate``
+        with that value (checked against its declared parameters: type, unit, range)."""
+        if "(" in name:
+            from .params import parse_reference
+
+            base, values = parse_reference(name, "motion model")
+            return self._get("workbench_motion_models", base).configure(**values)
+        return self._get("workbench_motion_models", name)
+
+    def motion_model(self, name: str, dt: float = 1.0, **params):
+        """The :class:`~workbench.models.MotionModel` built by the installed motion model ``name`` (a name or a
+        reference ``"name(key=value, ...)"``) over steps of ``dt`` seconds, with ``params`` set (checked, SI)."""
+        return self.motion_model_spec(name).model(dt, **params)
+
     def clutter_generator(self, name: str) -> ClutterGeneratorSpec:
         return self._get("workbench_clutter_generators", name)
 
@@ -127,14 +144,24 @@ class PluginHost:
 
     def find(self, name: str) -> list[tuple[str, Any]]:
         """Every component called ``name``, whatever its kind: ``[(kind, spec), ...]``; a configured filter label
-        (``"sir(particles=300)"``) is that filter, configured (:meth:`filter`)."""
+        (``"sir(particles=300)"``) is that filter, configured (:meth:`filter`), and a configured motion model
+        (``"ct-rate(sigma_omega=0.01)"``) that model, configured (:meth:`motion_model_spec`)."""
         if "(" in name:
+            from .params import parse_reference
+
+            base, _ = parse_reference(name, "component")
+            if base in self.components["workbench_motion_models"] and base not in self.filters:
+                return [("motion model", self.motion_model_spec(name))]
             return [("filter", self.filter(name))]
         return [(KINDS[h][0], table[name]) for h, table in self.components.items() if name in table]
 
     @property
     def filters(self) -> Mapping[str, FilterSpec]:
         return self.components["workbench_filters"]
+
+    @property
+    def motion_models(self) -> Mapping[str, MotionModelSpec]:
+        return self.components["workbench_motion_models"]
 
     @property
     def recipes(self) -> Mapping[str, RecipeSpec]:
@@ -303,6 +330,20 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
                                 tuple((KINDS[h][0], c) for h, c, _ in provided), tuple(warnings)))
         for key, why in _unavailable_of(obj):
             unavailable.setdefault(key, why)
+    # a filter may serve only motion models some plugin provides; known once every plugin has registered
+    why_by_plugin: dict[str, list[str]] = {}
+    for comp, why in _filters_serving_unknown_models(components).items():
+        why_by_plugin.setdefault(owner[("workbench_filters", comp)], []).append(why)
+    for plugin_name, whys in why_by_plugin.items():
+        for key in [k for k, v in owner.items() if v == plugin_name]:
+            components[key[0]].pop(key[1], None)
+            owner.pop(key)
+        i = next(i for i, p in enumerate(infos) if p.name == plugin_name)
+        info = infos[i]
+        pm.unregister(name=plugin_name)
+        infos[i] = PluginInfo(info.name, info.module, info.distribution, info.version, "broken",
+                              f"plugin {info.name!r} ({info.module}, distribution {info.distribution} {info.version}): "
+                              + "; ".join(whys))
     pm.check_pending()
     infos.sort(key=lambda p: p.name)
     return PluginHost(tuple(infos), components, owner, pm, unavailable)
@@ -326,6 +367,7 @@ def _unavailable_of(obj) -> list[tuple[tuple[str, str], str]]:
 
 #: The functions each kind of component must provide (checked at load: a spec missing one is broken).
 REQUIRED_FUNCTIONS = {FilterSpec: ("init", "predict", "update", "estimate"), SensorSpec: ("measurement_model", "simulate"),
+                      MotionModelSpec: ("build",),
                       ClutterGeneratorSpec: ("generate",), ClutterRemoverSpec: ("remove",),
                       RecipeSpec: ("tasks",), BenchmarkSpec: ("run",)}
 
@@ -345,9 +387,56 @@ def _declaration_problem(spec) -> str:
             close = {c: difflib.get_close_matches(c, sorted(CAPABILITIES), n=1) for c in unknown}
             hints = "".join(f"; {c!r}: did you mean {m[0]!r}?" for c, m in close.items() if m)
             return (f"unknown capabilities {unknown} (known: {', '.join(sorted(CAPABILITIES))}){hints}")
+        served = spec.motion_models
+        if not isinstance(served, tuple) or not all(isinstance(m, str) and m.strip() == m and m for m in served):
+            return f"motion_models must be a tuple of motion-model names, got {served!r}"
     parameters = getattr(spec, "parameters", None)
-    if not parameters:
-        return ""
+    problem = _parameters_problem(spec, parameters) if parameters else ""
+    if problem or not isinstance(spec, MotionModelSpec):
+        return problem
+    return _motion_model_problem(spec)
+
+
+def _motion_model_problem(spec: MotionModelSpec) -> str:
+    """What is wrong with a motion model's declarations: it must build a MotionModel with its own values (over
+    1 s), and its ``dims`` and example state must fit that model's state."""
+    from .models import MotionModel
+
+    try:
+        model = spec.build(1.0)
+    except Exception as exc:  # noqa: BLE001 - any failure to build with its own values is the finding
+        return f"building it with its own parameter values over 1 s raised {_short_error(exc)}"
+    if not isinstance(model, MotionModel):
+        return f"its build function returned a {type(model).__name__}, not a MotionModel"
+    n = model.dim
+    if spec.dims is not None and (isinstance(spec.dims, bool) or not isinstance(spec.dims, int)
+                                  or not 1 <= spec.dims <= n):
+        return f"dims must be a whole number of position axes from 1 to the state dimension {n}, got {spec.dims!r}"
+    state, std = tuple(spec.example_state), tuple(spec.example_std)
+    if state or std:
+        if len(state) != n or len(std) != n:
+            return (f"example_state and example_std must each give the {n} components of its state "
+                    f"({', '.join(model.state_names) or 'unnamed'}), got {len(state)} and {len(std)}")
+        values = np.asarray(state + std, dtype=float)
+        if not np.all(np.isfinite(values)) or min(std) < 0:
+            return f"example_state must be finite and example_std finite and >= 0, got {state} and {std}"
+    return ""
+
+
+def _filters_serving_unknown_models(components: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
+    """filter name -> why it cannot be registered: a motion model it declares to serve that no plugin provides."""
+    models = components["workbench_motion_models"]
+    out = {}
+    for name, spec in components["workbench_filters"].items():
+        missing = [m for m in spec.motion_models if m not in models]
+        if missing:
+            out[name] = (f"filter {name!r} serves the motion model{'s' if len(missing) > 1 else ''} "
+                         f"{', '.join(map(repr, missing))}, which no plugin provides (installed motion models: "
+                         f"{', '.join(sorted(models)) or 'none'})")
+    return out
+
+
+def _parameters_problem(spec, parameters) -> str:
     params = dict(getattr(spec, "params", {}) or {})
     names = [p.name for p in parameters]
     if len(set(names)) != len(names):

@@ -105,6 +105,8 @@ class Scenario:
     recorded: Any = field(default=None, compare=False, repr=False)
     #: warnings about the scenario's inputs (implausible recorded values), with the numbers
     notes: tuple[str, ...] = ()
+    #: the truth's own motion model (``[truth] motion``), or None: the truth moves as :attr:`motion` says
+    truth_motion: MotionModel | None = None
 
     @property
     def filter_names(self) -> tuple[str, ...]:
@@ -200,6 +202,48 @@ def _filters(path: Path, table: Mapping, host: PluginHost) -> tuple[Component, .
     return tuple(Component(r.base, dict(r.changed), r.key) for r in refs)
 
 
+def _older_motion(mo: _Reader, kind: str, dt: float) -> MotionModel:
+    """The scenario's older motion keys (still read): ``model = "constant_velocity"`` with ``dims`` and ``sigma_a``,
+    ``"random_walk_velocity"`` with ``dims`` and ``sigma_v``, ``"range_rate"`` with ``sigma_a``."""
+    if kind == "range_rate":
+        return range_rate_model(dt, mo.quantity("sigma_a", "acceleration", minimum=0.0))
+    dims = mo.integer("dims", 2, 1)
+    if kind == "constant_velocity":
+        return constant_velocity(dims, dt, mo.quantity("sigma_a", "acceleration", minimum=0.0))
+    return random_walk_velocity(dims, dt, mo.quantity("sigma_v", "speed", minimum=0.0))
+
+
+def _motion_model(host: PluginHost, where: str, entry: Any, dt: float, keys: Mapping[str, Any],
+                  key_where: Callable[[str], str]) -> tuple[MotionModel, int | None]:
+    """An installed motion model named by ``entry`` (``"name"`` or ``"name(key=value, ...)"``, read as
+    ``--filters`` reads a filter), its parameters also given as ``keys`` beside it; built for steps of ``dt``.
+    Returns the model and its declared number of position axes."""
+    from .params import parse_reference
+    from .plugins import UnknownComponent
+
+    installed = sorted(host.motion_models)
+    forms = (f"one of the installed motion models ({', '.join(installed) or 'none'}), written as a name or "
+             f"'name(key=value, ...)', or one of the older forms {', '.join(MOTION_MODELS)}")
+    if not isinstance(entry, str) or not entry.strip():
+        raise InputError(f"{where}: expected {forms}; got {entry!r}")
+    base, values = parse_reference(entry, where)
+    if base not in host.motion_models:
+        try:
+            host.motion_model_spec(base)
+        except UnknownComponent as exc:
+            other = str(exc).split(" (installed")[0] if " is a " in str(exc) else ""
+            raise InputError(f"{where}: expected {forms}; got {entry!r}" + (f" ({other})" if other else "")) from None
+    both = sorted(set(values) & set(keys))
+    if both:
+        raise InputError(f"{key_where(both[0])}: given twice, here and in the reference {entry!r}; give it once")
+    spec = host.motion_models[base]
+    try:
+        configured = spec.configure(**values, **keys)
+        return configured.model(dt), spec.dims
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+
+
 def check_request_size(path: Path, runs: int, steps: int, n: int, filters: int, detections: int = 1) -> None:
     """Refuse a scenario whose arrays would not fit: truth, detections and every filter's means and covariances,
     ``8 x runs x steps x (n + 4 detections + filters (n + n^2))`` bytes, against half the machine's memory."""
@@ -274,23 +318,39 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
 
     mo = _Reader(path, raw["motion"], "motion")
     kind = mo.get("model")
-    if kind not in MOTION_MODELS:
-        raise InputError(f"{mo.where('model')}: expected one of {MOTION_MODELS}, got {kind!r}")
-    if kind == "range_rate":
-        motion = range_rate_model(dt, mo.quantity("sigma_a", "acceleration", minimum=0.0))
+    if kind in MOTION_MODELS:
+        motion, axes = _older_motion(mo, kind, dt), None
     else:
-        dims = mo.integer("dims", 2, 1)
-        if kind == "constant_velocity":
-            motion = constant_velocity(dims, dt, mo.quantity("sigma_a", "acceleration", minimum=0.0))
-        else:
-            motion = random_walk_velocity(dims, dt, mo.quantity("sigma_v", "speed", minimum=0.0))
+        motion, axes = _motion_model(host, mo.where("model"), kind, dt,
+                                     {k: v for k, v in mo.table.items() if k != "model"}, mo.where)
+        mo.used.update(mo.table)
     mo.done()
     n = motion.dim
 
     tr = _Reader(path, raw.get("truth", {"initial_state": [0.0] * n}), "truth")
+    truth_motion, truth_axes = None, axes
+    if "motion" in tr.table:
+        entry = tr.get("motion")
+        if not isinstance(entry, str):
+            raise InputError(f"{tr.where('motion')}: expected a motion model such as \"ct-rate\" or "
+                             f"\"ct-rate(sigma_omega=0.01)\", got {entry!r}")
+        truth_motion, truth_axes = _motion_model(host, tr.where("motion"), entry, dt, {}, tr.where)
+        if truth_motion.dim != n:
+            raise InputError(f"{tr.where('motion')}: the truth's motion model {entry!r} has a state of "
+                             f"{truth_motion.dim} components ({', '.join(truth_motion.state_names) or 'unnamed'}), "
+                             f"but [motion] model {kind!r} has {n} ({', '.join(motion.state_names) or 'unnamed'}): the "
+                             f"filters estimate the truth's state, so the two must share it")
     x0 = tr.vector("initial_state", n)
     x0_std = tr.vector("initial_std", n, [0.0] * n, nonneg=True)
     legs_raw = tr.get("legs", [])
+    if legs_raw:
+        moved_by = truth_motion or motion
+        d = truth_axes if truth_axes is not None else moved_by.dim // 2
+        if moved_by.dim != 2 * d:
+            raise InputError(f"{tr.where('legs')}: legs make states of {d} positions and {d} velocities, but the "
+                             f"truth's motion model {moved_by.name!r} has the state "
+                             f"({', '.join(moved_by.state_names) or f'{moved_by.dim} components'}); use a "
+                             f"constant-velocity model (cv2d, cv3d) with legs, or drop the legs")
     legs = []
     for i, leg in enumerate(legs_raw):
         lr = _Reader(path, leg, f"truth.legs[{i}]")
@@ -327,7 +387,7 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
         check_request_size(path, runs, steps, n, len(filters), 1 + len(clutter))
     return Scenario(path, name, seed, runs, steps, dt, motion, x0, x0_std, tuple(legs), sensor, clutter,
                     removers, prior_mean, prior_std, filters, tracker, gate, detections, det_format, frame, data,
-                    tuple(notes))
+                    tuple(notes), truth_motion)
 
 
 @dataclass(frozen=True)
@@ -540,15 +600,16 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | N
             scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
         return None, scans
     rng = generator(seed, "scenario", scenario.name)
+    moved_by = scenario.truth_motion or scenario.motion
     if scenario.legs:
-        dims = scenario.motion.dim // 2
+        dims = moved_by.dim // 2
         one = piecewise_trajectory(scenario.initial_state[:dims], scenario.initial_state[dims:], scenario.legs,
                                    scenario.dt)
         states = np.repeat(one.states, scenario.runs, axis=0)[:, : scenario.steps]
         truth = Truth(states, one.times[: scenario.steps])
     else:
-        start = scenario.initial_state + rng.standard_normal((scenario.runs, scenario.motion.dim)) * scenario.initial_std
-        truth = sample_motion(start, scenario.motion, scenario.steps, rng)
+        start = scenario.initial_state + rng.standard_normal((scenario.runs, moved_by.dim)) * scenario.initial_std
+        truth = sample_motion(start, moved_by, scenario.steps, rng)
     sensor = host.sensor(scenario.sensor.plugin)
     # in draw order: the sensor, then each clutter generator; merged in one pass
     scans = Scans.merge_all([sensor.simulate(truth, rng, **scenario.sensor.params)]

@@ -7,6 +7,8 @@ report recipes, the CLI and the test kit.  See ``docs/writing-a-plugin.md``.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import functools
 import inspect
 from dataclasses import dataclass, field, replace
@@ -22,12 +24,13 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from matplotlib.figure import Figure
 
     from .models import MeasurementModel, MotionModel
-    from .types import Gaussian, Scan, Scans, Truth
+    from .types import Gaussian, Scans
 
 __all__ = [
     "CAPABILITIES",
     "FilterSpec",
     "SensorSpec",
+    "MotionModelSpec",
     "ClutterGeneratorSpec",
     "ClutterRemoverSpec",
     "RecipeSpec",
@@ -41,6 +44,8 @@ __all__ = [
     "BenchmarkSpec",
     "Param",
     "configured_name",
+    "take_batch",
+    "join_batch",
 ]
 
 #: Capabilities a filter may declare; the test kit picks its checks from these (never from names).
@@ -167,6 +172,132 @@ class _Configurable:
         return {k: v for k, v in values.items() if k not in self.params or self.params[k] != v}
 
 
+# -- the filter-state contract: how a state's batch items are taken and joined ------------------------------
+
+
+def _replaced(obj: Any, changes: Mapping[str, Any]) -> Any:
+    """``obj`` with some fields replaced, without re-running ``__post_init__``: the values are sub-batches or joins
+    of arrays the filter's own state already validated."""
+    out = copy.copy(obj)
+    for name, value in changes.items():
+        object.__setattr__(out, name, value)
+    return out
+
+
+def _declared_fields(state: Any) -> tuple[str, ...] | None:
+    """The batch-first fields the state's class declares (its ``batch_fields`` class attribute), or ``None``."""
+    declared = getattr(type(state), "batch_fields", None)
+    if declared is None:
+        return None
+    cls = type(state).__name__
+    if not dataclasses.is_dataclass(state) or isinstance(state, type):
+        raise InputError(f"state class {cls} declares batch_fields but is not a dataclass")
+    if isinstance(declared, str) or not all(isinstance(n, str) for n in declared):
+        raise InputError(f"state class {cls}: batch_fields must be a tuple of field names, got {declared!r}")
+    unknown = sorted(set(declared) - {f.name for f in dataclasses.fields(state)})
+    if unknown:
+        raise InputError(f"state class {cls} declares batch_fields {unknown} that are not among its fields")
+    return tuple(declared)
+
+
+def _require_declared(state: Any) -> tuple[str, ...]:
+    names = _declared_fields(state)
+    if names is None:
+        raise InputError(f"state class {type(state).__name__} declares no batch_fields (the names of its batch-first "
+                         f"fields), so its batch items cannot be taken or joined")
+    return names
+
+
+def _leading(state: Any, out: dict, where: str) -> dict:
+    """``{field path: leading length}`` of every declared batch-first array of ``state`` (nested states walked)."""
+    for name in _require_declared(state):
+        value, path = getattr(state, name), f"{where}.{name}"
+        if value is None:
+            continue
+        if isinstance(value, np.ndarray):
+            if value.ndim == 0:
+                raise InputError(f"{path} is declared batch-first but is a 0-d array")
+            out[path] = value.shape[0]
+        elif _declared_fields(value) is not None:
+            _leading(value, out, path)
+        else:
+            raise InputError(f"{path} is declared batch-first but holds a {type(value).__name__}, neither an array "
+                             f"nor a state that declares batch_fields")
+    return out
+
+
+def batch_size(state: Any) -> int:
+    """The batch size of a state whose class declares ``batch_fields``: the common leading length of its declared
+    arrays (refused by name where they differ, or where it declares none that holds an array)."""
+    sizes = _leading(state, {}, type(state).__name__)
+    if not sizes:
+        raise InputError(f"state class {type(state).__name__}: no declared batch field holds an array")
+    if len(set(sizes.values())) > 1:
+        raise InputError(f"state class {type(state).__name__}: the declared batch-first fields have different leading "
+                         f"lengths ({', '.join(f'{k}: {v}' for k, v in sizes.items())})")
+    return next(iter(sizes.values()))
+
+
+def take_batch(state: Any, index) -> Any:
+    """The batch items ``index`` (a 1-D integer array, in that order) of a state whose class declares
+    ``batch_fields``: each declared field is indexed along its leading axis (a nested state that declares its own
+    fields is walked, ``None`` stays ``None``); every other field (counters, settings shared by the batch) is kept."""
+    index = np.asarray(index)
+    if index.ndim != 1 or not (index.size == 0 or np.issubdtype(index.dtype, np.integer)):
+        raise InputError(f"take_batch: index must be a 1-D integer array, got shape {index.shape} "
+                         f"and dtype {index.dtype}")
+    size = batch_size(state)
+    if index.size and (index.min() < -size or index.max() >= size):
+        raise InputError(f"take_batch: index out of range for a batch of {size} items")
+    return _take(state, index)
+
+
+def _take(state: Any, index: np.ndarray) -> Any:
+    changes = {}
+    for name in _require_declared(state):
+        value = getattr(state, name)
+        changes[name] = None if value is None else value[index] if isinstance(value, np.ndarray) else _take(value,
+                                                                                                             index)
+    return _replaced(state, changes)
+
+
+def join_batch(states: Sequence[Any]) -> Any:
+    """The states' batch items one after the other (states of one class that declares ``batch_fields``): each
+    declared field concatenated along its leading axis (nested states walked; a field ``None`` in every state stays
+    ``None``); every other field is the first state's."""
+    states = list(states)
+    if not states:
+        raise InputError("join_batch: no states to join")
+    kinds = sorted({type(s).__name__ for s in states})
+    if len(kinds) > 1:
+        raise InputError(f"join_batch: the states are of different classes ({', '.join(kinds)}); a filter whose "
+                         f"states change class declares its own FilterSpec.join")
+    for s in states:
+        batch_size(s)  # declared, consistent
+    return _join(states)
+
+
+def _join(states: list) -> Any:
+    first = states[0]
+    changes = {}
+    for name in _require_declared(first):
+        values = [getattr(s, name) for s in states]
+        nones = sum(v is None for v in values)
+        if nones == len(values):
+            changes[name] = None
+        elif nones:
+            raise InputError(f"join_batch: {type(first).__name__}.{name} is None in some states and not in others; "
+                             f"a filter whose fields may be missing declares its own FilterSpec.join")
+        elif len({type(v) for v in values}) > 1:
+            raise InputError(f"join_batch: {type(first).__name__}.{name} holds values of different types "
+                             f"({', '.join(sorted({type(v).__name__ for v in values}))}) in the states")
+        elif isinstance(values[0], np.ndarray):
+            changes[name] = np.concatenate(values, axis=0)
+        else:
+            changes[name] = _join(values)
+    return _replaced(first, changes)
+
+
 @dataclass(frozen=True)
 class FilterSpec(_Configurable):
     """A recursive Bayesian filter, batch-first and functional.
@@ -207,6 +338,23 @@ class FilterSpec(_Configurable):
         downdate fallbacks, jitter events, resampling counts).
     expected_failures : mapping
         Test-kit check name -> reason, for checks this filter is known and documented to fail.
+    motion_models : tuple of str
+        The registered motion models (:class:`MotionModelSpec` names, e.g. ``("ct-rate",)``) this filter is built
+        for.  The filter test kit draws its truths, prior and motion model from the first one (through the plugin
+        host) instead of its 4-D constant-velocity reference problem; a name no plugin registers makes the
+        filter's plugin broken at load.  Empty (the default): the filter serves the kit's 4-D constant velocity.
+    take : callable or None
+        ``take(state, index) -> state``: the batch items ``index`` (a 1-D integer array, in that order) of a state.
+    join : callable or None
+        ``join(states) -> state``: the states' batch items one after the other.  ``take`` and ``join`` are the
+        filter-state contract through which a multi-target tracker keeps a filter state per set of live tracks
+        (it deletes tracks with ``take`` and adds new ones with ``join``).  Give both, or neither: then the state's
+        class declares its batch-first fields, ``batch_fields: ClassVar[tuple[str, ...]]`` on a dataclass (as
+        :class:`~workbench.types.Gaussian` does), and :func:`take_batch` / :func:`join_batch` index and concatenate
+        exactly those fields along their leading axis (nested states that declare their own are walked; every other
+        field, a counter or a matrix the batch shares, is kept).  Nothing is inferred from an array's length: a
+        filter whose state declares nothing and that gives no ``take`` / ``join`` is refused by name by the
+        trackers (:meth:`require_batch_contract`).
     """
 
     name: str
@@ -221,8 +369,50 @@ class FilterSpec(_Configurable):
     expected_failures: Mapping[str, str] = field(default_factory=dict)
     parameters: tuple[Param, ...] = ()
     build: Callable[..., "FilterSpec"] | None = None
+    motion_models: tuple[str, ...] = ()
+    take: Callable[[Any, np.ndarray], Any] | None = None
+    join: Callable[[Sequence[Any]], Any] | None = None
 
     kind = "filter"
+
+    def require_batch_contract(self, state: Any, who: str = "tracker") -> None:
+        """Refuse, in one line naming this filter, a state whose batch items cannot be taken and joined: neither
+        ``take`` and ``join`` given nor ``batch_fields`` declared by the state's class (or only one of the two
+        functions given, or a declaration that does not hold)."""
+        if (self.take is None) != (self.join is None):
+            given, missing = ("take", "join") if self.join is None else ("join", "take")
+            raise InputError(f"{who}: filter {self.name!r} gives FilterSpec.{given} without FilterSpec.{missing}; "
+                             f"give both, or neither and declare batch_fields on its state class")
+        if self.take is not None:
+            return
+        if _declared_fields(state) is None:
+            raise InputError(f"{who}: filter {self.name!r} does not declare how its state's batch items are taken and "
+                             f"joined: its state class {type(state).__name__} declares no batch_fields and the filter "
+                             f"gives no FilterSpec.take / FilterSpec.join; declare one of the two")
+        try:
+            batch_size(state)
+        except InputError as exc:
+            raise InputError(f"{who}: filter {self.name!r}: {exc}") from None
+
+    def take_items(self, state: Any, index) -> Any:
+        """The batch items ``index`` of ``state``: the declared ``take``, else :func:`take_batch` (whose refusal
+        names this filter)."""
+        if self.take is not None:
+            return self.take(state, np.asarray(index))
+        try:
+            return take_batch(state, index)
+        except InputError as exc:
+            raise InputError(f"filter {self.name!r}: {exc}") from None
+
+    def join_items(self, states: Sequence[Any]) -> Any:
+        """The states' batch items one after the other: the declared ``join``, else :func:`join_batch` (whose
+        refusal names this filter)."""
+        if self.join is not None:
+            return self.join(list(states))
+        try:
+            return join_batch(states)
+        except InputError as exc:
+            raise InputError(f"filter {self.name!r}: {exc}") from None
 
     def configure(self, name: str | None = None, **values) -> "FilterSpec":
         """This filter with some parameters set: ``spec.configure(particles=2000)``.
@@ -364,6 +554,65 @@ class ClutterRemoverSpec(_Configurable):
     def configure(self, **values) -> "ClutterRemoverSpec":
         """This remover with some parameter values set (checked, converted to SI)."""
         return replace(self, params={**self.params, **self.check(**values)}) if values else self
+
+
+@dataclass(frozen=True)
+class MotionModelSpec(_Configurable):
+    """A motion model a plugin registers (hook ``workbench_motion_models``): how to build a
+    :class:`~workbench.models.MotionModel` for a time step from declared parameters.
+
+    Attributes
+    ----------
+    name : str
+        Unique among the installed motion models, e.g. ``"ct-rate"``; scenario files and references name it,
+        with parameters: ``"ct-rate(sigma_omega=0.01)"``.
+    summary : str
+        One line for ``workbench plugins``.
+    build : callable
+        ``build(dt, **params) -> MotionModel``: the model over steps of ``dt`` seconds.  Bound to ``params``
+        (:class:`BoundFunction`): ``spec.build(1.0)`` builds with the spec's current (configured) values.
+    params, parameters
+        The current values and the declared parameters (each with its unit dimension and range: ``sigma_a`` an
+        acceleration, ``omega`` an angular rate, ``tau`` a time).
+    dims : int or None
+        How many position axes the state has (its first ``dims`` components are the position, in metres); ``None``
+        where the state holds no position.
+    example_state, example_std : tuple of float
+        A typical start state of the model and the standard deviation of each component around it (SI units of the
+        state): the filter kit draws the truths of a filter that serves this model from ``N(example_state,
+        diag(example_std^2))``.  Empty: no kit truths can be drawn from this model.
+    """
+
+    name: str
+    summary: str
+    build: Callable[..., "MotionModel"]
+    params: Mapping[str, Any] = field(default_factory=dict)
+    parameters: tuple[Param, ...] = ()
+    dims: int | None = None
+    example_state: tuple[float, ...] = ()
+    example_std: tuple[float, ...] = ()
+
+    kind = "motion model"
+    _BOUND = ("build",)
+
+    def configure(self, **values) -> "MotionModelSpec":
+        """This motion model with some parameter values set (checked, converted to SI)."""
+        return replace(self, params={**self.params, **self.check(**values)}) if values else self
+
+    def model(self, dt: float = 1.0, **values) -> "MotionModel":
+        """The :class:`~workbench.models.MotionModel` over steps of ``dt`` seconds, with the spec's values and
+        ``values`` (checked against the declarations, converted to SI; an unknown name is refused by name)."""
+        from .models import MotionModel
+        from .units import parse_quantity
+
+        step = parse_quantity(dt, "time", f"motion model {self.name!r}: dt")
+        if not step > 0:
+            raise InputError(f"motion model {self.name!r}: dt must be > 0 s, got {step:g}")
+        built = self.build(step, **self.check(**values))
+        if not isinstance(built, MotionModel):
+            raise InputError(f"motion model {self.name!r}: its build function returned a {type(built).__name__}, "
+                             f"not a MotionModel")
+        return built
 
 
 def _frame_of(frame, params: Mapping[str, Any]) -> str:

@@ -177,6 +177,9 @@ class Gaussian:
     mean: np.ndarray
     cov: np.ndarray
 
+    #: The batch-first fields: how a tracker takes and joins batch items (:func:`workbench.specs.take_batch`).
+    batch_fields = ("mean", "cov")
+
     def __post_init__(self) -> None:
         mean, cov = self._checked(self.mean, self.cov)
         check_covariance("Gaussian.cov", cov)
@@ -241,6 +244,9 @@ class Particles:
 
     particles: np.ndarray
     log_weights: np.ndarray
+
+    #: The batch-first fields: how a tracker takes and joins batch items (:func:`workbench.specs.take_batch`).
+    batch_fields = ("particles", "log_weights")
 
     def __post_init__(self) -> None:
         x, lw = self._checked(self.particles, self.log_weights)

@@ -46,12 +46,18 @@ DIMENSIONS["angle_deg"] = {"deg": 1.0, "rad": 180.0 / math.pi, "mrad": 0.18 / ma
 DIMENSIONS["gate"]["sigma"] = math.nan  # not a factor: d^2 = s^2 (see parse_quantity)
 DIMENSIONS["state"] = {}  # in the SI units of the filter's state components (mixed: m, m/s...): bare numbers
 DIMENSIONS["dimensionless"] = {}
+#: White-noise amplitudes of continuous-time motion models (the square root of a spectral density): a jerk's in
+#: m/s^2/sqrt(s) (constant acceleration), a turn rate's in rad/s/sqrt(s) (the random-walk rate of a coordinated
+#: turn): bare numbers in those units.
+DIMENSIONS["jerk_noise"] = {}
+DIMENSIONS["angular_rate_noise"] = {}
 
 #: The SI unit a dimension's values are held in, for messages and listings.
 SI_LABELS: dict[str, str] = {
     "length": "m", "angle": "rad", "time": "s", "speed": "m/s", "acceleration": "m/s^2", "frequency": "Hz",
     "decibel": "dB", "power": "W", "angular_rate": "rad/s", "area": "m^2", "inverse_volume": "1/m^3",
     "angle_deg": "deg", "gate": "chi2", "state": "", "dimensionless": "",
+    "jerk_noise": "m/s^2/sqrt(s)", "angular_rate_noise": "rad/s/sqrt(s)",
 }
 
 #: The largest magnitude a value of each dimension may have (in its SI unit): generous physical bounds (beyond the
@@ -61,6 +67,7 @@ LIMITS: dict[str, float] = {
     "length": 1e9, "angle": 1e4, "time": 1e9, "speed": 3e8, "acceleration": 1e7, "frequency": 1e15,
     "decibel": 300.0, "power": 1e12, "angular_rate": 1e4, "area": 1e18, "inverse_volume": 1e12,
     "angle_deg": 1e6, "gate": 1e12, "state": 1e12, "dimensionless": 1e15,
+    "jerk_noise": 1e7, "angular_rate_noise": 1e4,
 }
 #: The limit of a number whose key declares no dimension.
 GENERIC_LIMIT = 1e15
@@ -103,7 +110,9 @@ def parse_quantity(value, dimension: str | None, where: str) -> float:
         given = UNITS[unit][0] if unit in UNITS else ("gate in standard deviations" if unit == "sigma" else None)
         if dimension is None or not allowed:
             what = {"dimensionless": "a pure number",
-                    "state": "a bare number in the SI units of the state's components"}.get(
+                    "state": "a bare number in the SI units of the state's components",
+                    "jerk_noise": "a bare number in m/s^2/sqrt(s)",
+                    "angular_rate_noise": "a bare number in rad/s/sqrt(s)"}.get(
                 dimension or "", "a bare number (no unit is declared for it)")
             raise InputError(f"{where}: {value!r} carries the unit {unit!r}, but this key takes {what}")
         if given is None:

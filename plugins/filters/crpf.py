@@ -186,6 +186,10 @@ class CRPFState:
     selections: int = 0
     blind_moves: int = 0
 
+    #: The batch-first fields; ``F`` is the one motion matrix the batch shares and the counters are the batch's,
+    #: kept whole when a tracker takes or joins items (never sliced, whatever the number of items).
+    batch_fields = ("particles", "costs", "variances", "steps", "belief", "pending")
+
 
 def log_pmf(costs: np.ndarray, beta: float, delta: float, relative: bool = False) -> np.ndarray:
     """Unnormalised log PMF ``-beta log(C - min C + delta_C)`` of costs ``(B, N)``.

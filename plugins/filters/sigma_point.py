@@ -166,6 +166,9 @@ class SigmaPointState:
     cov: np.ndarray
     jitters: int = 0
 
+    #: The batch-first fields (the jitter count is the batch's).
+    batch_fields = ("mean", "cov")
+
 
 def _init_full(prior: Gaussian, rng=None) -> SigmaPointState:
     return SigmaPointState(prior.mean, prior.cov)
@@ -307,6 +310,9 @@ class SquareRootState:
     mean: np.ndarray
     chol: np.ndarray
     fallbacks: int = 0
+
+    #: The batch-first fields (the fallback count is the batch's).
+    batch_fields = ("mean", "chol")
 
 
 def _init_sqrt(prior: Gaussian, rng=None) -> SquareRootState:

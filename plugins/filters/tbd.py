@@ -92,7 +92,7 @@ from workbench.particle_core import (ParticleState, combine_columns, component_m
                                      log_likelihood_cov, noise_columns, predict, propagate_f)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
-from workbench.specs import FilterSpec
+from workbench.specs import FilterSpec, join_batch, take_batch
 from workbench.types import Gaussian, InputError, Particles, Scan
 
 #: two-mode process noise [U, chosen on tuning seeds, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre ->
@@ -227,10 +227,24 @@ class ModeState(ParticleState):
 
     mode: np.ndarray | None = None
 
+    #: The batch-first fields; ``mode`` is ``None`` until the first jump-Markov predict (all quiet).
+    batch_fields = ("cloud", "mode")
+
 
 def _modes(state: ParticleState) -> np.ndarray:
     mode = getattr(state, "mode", None)
     return np.zeros(state.cloud.log_weights.shape) if mode is None else mode
+
+
+def join_modes(states) -> ParticleState:
+    """The filter-state contract's join for the two-mode filters, whose states are a :class:`ParticleState` (after
+    ``init``: every particle quiet) or a :class:`ModeState`: all of one class are joined field by field
+    (:func:`workbench.specs.join_batch`); a mix is joined as :class:`ModeState`, a state without modes giving its
+    particles the quiet mode (0), exactly what :func:`_modes` reads for it."""
+    states = list(states)
+    if len({type(s) for s in states}) > 1 or any(isinstance(s, ModeState) and s.mode is None for s in states):
+        states = [ModeState(s.cloud, s.resamples, s.underflows, _modes(s)) for s in states]
+    return join_batch(states)
 
 
 def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.random.Generator, *, switch_on: float,
@@ -481,6 +495,8 @@ def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor: str = "ampl
         diagnostics=diagnostics,
         parameters=TBD_PARAMETERS,
         build=make_tbd_pf,
+        take=take_batch,
+        join=join_modes,
     )
 
 
@@ -571,6 +587,8 @@ def make_sir_jm(particles: int = 600, threshold: float = 0.5, switch_on: float =
         diagnostics=diagnostics,
         parameters=SIR_JM_PARAMETERS,
         build=make_sir_jm,
+        take=take_batch,
+        join=join_modes,
     )
 
 
@@ -580,6 +598,9 @@ class AdaptiveGaussian:
 
     gaussian: Gaussian
     manoeuvre: np.ndarray
+
+    #: The batch-first fields.
+    batch_fields = ("gaussian", "manoeuvre")
 
 
 def nis_init(prior: Gaussian, rng=None) -> AdaptiveGaussian:

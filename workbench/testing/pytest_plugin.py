@@ -2,6 +2,9 @@
 
 - ``workbench_host``: a freshly built plugin host (never a shared global).
 - ``workbench_filter``: factory ``workbench_filter(name)`` returning an installed filter's spec.
+- ``workbench_motion_model``: factory ``workbench_motion_model(name, dt=1.0, **params)`` returning the
+  :class:`~workbench.models.MotionModel` an installed motion model builds (``name`` may carry parameters:
+  ``"ct-rate(sigma_omega=0.01)"``); check it with ``workbench.testing.run_checks`` or ``parametrize_with_checks``.
 """
 
 from __future__ import annotations
@@ -19,3 +22,8 @@ def workbench_host():
 @pytest.fixture
 def workbench_filter(workbench_host):
     return workbench_host.filter
+
+
+@pytest.fixture
+def workbench_motion_model(workbench_host):
+    return workbench_host.motion_model

@@ -38,23 +38,23 @@ conversion ``(r, b) = (|p|, atan2(y, x))``.  The state layout is ``[x, y, vx, vy
 Every step is vectorised across the live tracks: gating (dense below ``dense_limit`` pairs, else candidate
 pairs from a grid over the measurement space with each track's exact gate bounding box,
 :func:`gated_pairs`), the assignment (:func:`greedy_assign`, rounds of mutually cheapest pairs), the M-of-N
-state machine (:func:`mofn_step`, bit histories) and the filter states (:func:`take_items`,
-:func:`join_items`).
+state machine (:func:`mofn_step`, bit histories) and the filter states (one ``take`` and one ``join`` per
+ping and run).
 
 The tracker never sees ``origin``; metrics (:mod:`workbench.metrics`) compare its log with the truth
 afterwards.  Every Monte Carlo run keeps its own tracks and its own random stream (track management is per
 run).  Irregular ping intervals are honoured: the initiation box and the two-point velocity use the actual
 interval.
 
-Filter states are the filter's own business; the tracker subsets and joins them with :func:`take_items`
-and :func:`join_items`, which walk dataclasses, tuples and arrays and treat every array whose leading
-axis is the batch size as batched (the project's batch-first rule).
+Filter states are the filter's own business; the tracker deletes tracks from them and adds new ones through
+the filter-state contract the filter declares (:meth:`~workbench.specs.FilterSpec.take_items`,
+:meth:`~workbench.specs.FilterSpec.join_items`: its own ``take`` / ``join``, or the ``batch_fields`` its state's
+class declares).  Nothing is inferred from an array's length (a ``(4, 4)`` motion matrix is not four tracks); a
+filter that declares neither is refused by name at its first track.
 """
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -88,8 +88,6 @@ __all__ = [
     "greedy_assign",
     "rectangular_pairs",
     "mofn_step",
-    "take_items",
-    "join_items",
     "initial_state",
     "tracker_step",
     "MofN",
@@ -647,47 +645,6 @@ def mofn_step(history: np.ndarray, misses: np.ndarray, age: np.ndarray, status: 
     return history, misses, age, status, delete
 
 
-# -- opaque filter states -------------------------------------------------------------------------
-
-
-def _replaced(obj: Any, changes: dict) -> Any:
-    """``dataclasses.replace(obj, **changes)`` without re-running ``__post_init__``: the values are sub-batches
-    or joins of arrays the filter's own state already validated."""
-    out = copy.copy(obj)
-    for name, value in changes.items():
-        object.__setattr__(out, name, value)
-    return out
-
-
-def take_items(state: Any, index: np.ndarray, batch: int) -> Any:
-    """The sub-batch ``index`` of a filter state (arrays with leading axis ``batch``, walked through
-    dataclasses and tuples; other values are kept)."""
-    if isinstance(state, np.ndarray):
-        return state[index] if state.ndim and state.shape[0] == batch else state
-    if dataclasses.is_dataclass(state) and not isinstance(state, type):
-        return _replaced(state, {f.name: take_items(getattr(state, f.name), index, batch)
-                                 for f in dataclasses.fields(state) if f.init})
-    if isinstance(state, tuple):
-        items = [take_items(v, index, batch) for v in state]
-        return type(state)(*items) if hasattr(state, "_fields") else tuple(items)
-    return state
-
-
-def join_items(a: Any, b: Any, batch_a: int, batch_b: int) -> Any:
-    """Concatenate two filter states along the batch axis (non-batched values are taken from ``a``)."""
-    if isinstance(a, np.ndarray):
-        if a.ndim and a.shape[0] == batch_a and isinstance(b, np.ndarray) and b.ndim and b.shape[0] == batch_b:
-            return np.concatenate([a, b], axis=0)
-        return a
-    if dataclasses.is_dataclass(a) and not isinstance(a, type):
-        return _replaced(a, {f.name: join_items(getattr(a, f.name), getattr(b, f.name), batch_a, batch_b)
-                             for f in dataclasses.fields(a) if f.init})
-    if isinstance(a, tuple):
-        items = [join_items(x, y, batch_a, batch_b) for x, y in zip(a, b)]
-        return type(a)(*items) if hasattr(a, "_fields") else tuple(items)
-    return a
-
-
 # -- the tracker ----------------------------------------------------------------------------------
 
 
@@ -765,7 +722,7 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
                                                          config, slow)
         keep = np.flatnonzero(~delete)
         table = TrackTable(table.ids[keep], status[keep], history[keep], misses[keep], age[keep], mean[keep],
-                           take_items(state, keep, K) if keep.size else None)
+                           filt.take_items(state, keep) if keep.size else None)
         hits_out = hit[keep]
     else:
         hits_out = np.zeros(0, dtype=bool)
@@ -794,6 +751,7 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         else:
             prior = speed_course_prior(p_prev, p_cur, motion.dt, cov_cur, config.sigma_v, config.sigma_c)
         new_state = filt.init(prior, rng)
+        filt.require_batch_contract(new_state, "M-of-N tracker")
         new_mean = filt.estimate(new_state).mean
         Kn = a_c.size
         ids = np.arange(next_id, next_id + Kn, dtype=np.int64)
@@ -802,7 +760,7 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
         status0 = CONFIRMED if h0 >= config.confirm_hits else TENTATIVE
         if status0 == CONFIRMED and config.min_speed is not None:
             status0 = np.where(np.hypot(new_mean[:, 2], new_mean[:, 3]) < config.min_speed, TENTATIVE, CONFIRMED)
-        joined = new_state if table.size == 0 else join_items(table.state, new_state, table.size, Kn)
+        joined = new_state if table.size == 0 else filt.join_items([table.state, new_state])
         table = TrackTable(np.concatenate([table.ids, ids]),
                            np.concatenate([table.status, np.broadcast_to(status0, (Kn,)).astype(np.int8)]),
                            np.concatenate([table.history, np.full(Kn, (1 << h0) - 1, dtype=np.int64)]),
@@ -887,4 +845,6 @@ def run_tracker(scans: Scans, filt: FilterSpec, motion: MotionModel, model: Meas
 
     if scans.z.shape[-1] != 2:
         raise InputError(f"tracker: detections must be Cartesian (x, y), got dimension {scans.z.shape[-1]}")
-    return run(filt, scans, motion, model, association=MofN(config, seed, key))
+    # MofN draws from its own per-run streams; the run's generator is declared (the loop refuses a stochastic filter
+    # without one) and never drawn from
+    return run(filt, scans, motion, model, association=MofN(config, seed, key), rng=generator(seed, *key, "run"))

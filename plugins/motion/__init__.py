@@ -1,0 +1,1 @@
+"""Built-in motion models as plugins."""
