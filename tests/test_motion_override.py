@@ -117,8 +117,19 @@ def _predicted(name: str, model: MotionModel, prior: Gaussian):
 def _follows_or_refuses(name: str, model: MotionModel) -> bool:
     """True when filter ``name`` follows ``f`` over one predict, False when it refuses by name; fails otherwise."""
     prior = Gaussian(MEANS, np.broadcast_to(np.diag([1e-12] * 4 + [1e-14]), (3, N_STATE, N_STATE)).copy())
+    spec = HOST.filters[name]
+    rng = generator(7, "motion-override", name)
     try:
-        spec, _, predicted = _predicted(name, model, prior)
+        state = spec.init(prior, rng)
+    except InputError as exc:
+        # init never sees the motion model: a filter whose own modes cannot serve this state refuses there, naming
+        # itself and the state's dimension
+        message = str(exc)
+        assert repr(name) in message or f"{name}:" in message, f"{name} refused without naming itself: {message}"
+        assert f"{N_STATE} state components" in message, f"{name} refused without naming the dimension: {message}"
+        return False
+    try:
+        predicted = spec.predict(state, model, rng)
     except InputError as exc:
         message = str(exc)
         assert repr(name) in message or f"{name}:" in message, f"{name} refused without naming itself: {message}"
