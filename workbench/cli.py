@@ -79,6 +79,8 @@ def _seconds(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .kernels import backend as kernel_policy  # the one list of arch names (the standard library only)
+
     parser = argparse.ArgumentParser(
         prog="workbench",
         description="Simulate, compare and accelerate target-tracking algorithms in clutter and at low SNR.")
@@ -105,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "recipe's defaults, '-name' or '~name' removes one, a plain list replaces them "
                           "(e.g. --filters '+sir(particles=2000),~ekf')")
     rep.add_argument("--seed", type=int, default=0, help="base seed of every random stream (default 0)")
-    rep.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "auto"],
+    rep.add_argument("--arch", default="cpu", choices=list(kernel_policy.ARCHES),
                      help="Taichi backend for kernels (default cpu; auto falls back to cpu)")
     rep.add_argument("--no-progress", action="store_true", help="no progress bars")
     rep.add_argument("--wait", type=_seconds, default=0.0, metavar="SECONDS",
@@ -132,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="small sizes (seconds, for CI)")
     bench.add_argument("--json", default="workbench-bench.json", help="write the figures here as JSON")
     bench.add_argument("--only", action="append", default=[], help="only this benchmark group (repeatable)")
-    bench.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan"],
+    bench.add_argument("--arch", default="cpu", choices=list(kernel_policy.RUN_ARCHES),
                        help="run the Taichi kernels on this arch (cuda: the GPU; default: cpu)")
     bench.add_argument("--plot", default=None, metavar="DIR",
                        help="draw the scaling figures (PNG, SVG and CSV per figure) into DIR")

@@ -10,15 +10,19 @@ expected.  Quantities may be written with units (``"10 deg"``, ``"2.5 km"``) and
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import inspect
 import math
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from .types import InputError
 from .units import DIMENSIONS, GENERIC_LIMIT, LIMITS, SI_LABELS, parse_quantity
 
 __all__ = ["Param", "AtLeast", "when_text", "when_example", "check_value", "check_values", "infer_params", "describe",
-           "format_value", "defaults", "parse_reference", "split_list", "check_footprint", "memory_limit"]
+           "format_value", "defaults", "declared_values", "declared_factory", "declared_dataclass", "parse_reference",
+           "split_list", "check_footprint", "memory_limit"]
 
 #: The value types a parameter may declare.
 TYPES = ("float", "int", "bool", "str", "vector", "float?", "vector?")
@@ -265,6 +269,73 @@ def check_values(params: Iterable[Param], values: Mapping[str, Any], where: str)
 def defaults(params: Iterable[Param]) -> dict[str, Any]:
     """``{name: default}`` of the declarations."""
     return {p.name: p.default for p in params}
+
+
+def declared_values(params: Sequence[Param], values: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """Every declared parameter's value, in the declared order: ``values`` checked (:func:`check_values`: an
+    undeclared key is refused by name) over the checked defaults."""
+    return {**check_values(params, defaults(params), where), **check_values(params, values, where)}
+
+
+def declared_factory(params: Sequence[Param], where: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Make a component's factory from its declaration, so its parameters are written once (the ``Param`` tuple).
+
+    Decorates ``build(values, *, extra=default, ...)``, which receives every declared parameter's value in a dict
+    (checked, converted to SI, defaults filled in: :func:`declared_values`) and any keyword-only extras of its own
+    (a ``name``).  The factory takes the declared parameters positionally in the declared order or by keyword,
+    with the declared defaults (its ``inspect.signature`` says so), then the extras by keyword.  A default that
+    does not meet its own declaration is refused when the factory is made; an unknown keyword, a value given twice
+    or too many positional values when it is called, each in one line naming ``where``.
+    """
+    params = tuple(params)
+    names = tuple(p.name for p in params)
+    check_values(params, defaults(params), f"{where} (declared defaults)")
+
+    def wrap(build: Callable[..., Any]) -> Callable[..., Any]:
+        extras = list(inspect.signature(build).parameters.values())[1:]
+        clash = sorted({e.name for e in extras} & set(names))
+        if clash or any(e.default is inspect.Parameter.empty for e in extras):
+            raise ValueError(f"{where}: the build function's extras must have defaults and differ from the declared "
+                             f"parameters (clash: {clash})")
+        extra_names = {e.name for e in extras}
+
+        @functools.wraps(build)
+        def factory(*args: Any, **kwargs: Any) -> Any:
+            if len(args) > len(names):
+                raise InputError(f"{where}: takes at most {len(names)} positional values ({', '.join(names)}), got "
+                                 f"{len(args)}")
+            given = dict(zip(names, args))
+            twice = sorted(set(given) & set(kwargs))
+            if twice:
+                raise InputError(f"{where}: {twice[0]!r} is given both by position and by keyword")
+            extra = {k: kwargs.pop(k) for k in list(kwargs) if k in extra_names}
+            return build(declared_values(params, {**given, **kwargs}, where), **extra)
+
+        factory.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+            [inspect.Parameter(p.name, inspect.Parameter.POSITIONAL_OR_KEYWORD, default=p.default) for p in params]
+            + [e.replace(kind=inspect.Parameter.KEYWORD_ONLY) for e in extras],
+            return_annotation=inspect.signature(build).return_annotation)
+        factory.parameters = params  # type: ignore[attr-defined]
+        return factory
+
+    return wrap
+
+
+_PYTHON_TYPES = {"float": "float", "int": "int", "bool": "bool", "str": "str", "vector": "tuple[float, ...]",
+                 "float?": "float | None", "vector?": "tuple[float, ...] | None"}
+
+
+def declared_dataclass(name: str, params: Sequence[Param], module: str, bases: tuple[type, ...] = (),
+                       doc: str | None = None) -> type:
+    """A frozen dataclass whose fields are the declared parameters, in order, with their defaults (so a setting
+    class does not write them a second time).  Methods, and a ``__post_init__`` that checks the values, come from
+    ``bases``; ``module`` is the defining module's ``__name__`` (pickling finds the class there by ``name``)."""
+    fields = [(p.name, _PYTHON_TYPES[p.type], dataclasses.field(default=p.default)) for p in params]
+    cls = dataclasses.make_dataclass(name, fields, bases=bases, frozen=True)
+    cls.__module__ = module  # make_dataclass's own module= is Python 3.12+
+    if doc is not None:
+        cls.__doc__ = doc
+    return cls
 
 
 def infer_params(values: Mapping[str, Any]) -> tuple[Param, ...]:

@@ -58,7 +58,7 @@ and (detection, support) pairs of the inverse step) come from neighbouring squar
 (:func:`_cell_pairs`); when that would give more than ``CELL_PAIRS_PER_POINT`` candidates per point
 (dense clutter) they come from k-d tree queries instead, nearest supports first, so the cost stays
 bounded.  Both routes yield the same pairs, hence the same decisions (tested).  The local rule runs in a
-compiled kernel (:mod:`workbench_clutter.hough_numba`) where Numba is installed (``backend="auto"``); the
+compiled kernel (:mod:`workbench_clutter.hough_numba`) where the backend policy picks Numba (``backend="auto"``); the
 vectorised NumPy code here is its twin, and both are held to the brute-force reference of the tests.  Runs are
 processed one after another.
 """
@@ -72,7 +72,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from workbench import hookimpl
-from workbench.kernels.backend import numba_available
+from workbench.kernels.backend import runs_numba
 from workbench.params import Param
 from workbench.specs import ClutterRemoverSpec
 from workbench.types import InputError, Scans
@@ -996,9 +996,11 @@ def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt
         raise InputError("hough: require_chain applies to the local support rule only (support='local')")
     if backend not in BACKENDS:
         raise InputError(f"hough: backend must be one of {BACKENDS}, got {backend!r}")
-    if backend == "numba" and not numba_available():
-        raise InputError("hough: backend 'numba' needs numba, which this install lacks (pip install numba)")
-    kernel = "numba" if backend == "numba" or (backend == "auto" and numba_available() and window <= 64) else "numpy"
+    try:  # the backend policy's choice (workbench.kernels.backend), on the CPU where this code runs
+        compiled = runs_numba(backend, "cpu")
+    except ValueError as exc:
+        raise InputError(f"hough: {exc}") from None
+    kernel = "numba" if compiled and (backend == "numba" or window <= 64) else "numpy"
     if kernel == "numba" and window > 64:
         raise InputError(f"hough: the numba kernel takes window <= 64, got {window}; use backend='numpy'")
     valid = scans.valid

@@ -43,7 +43,7 @@ Shapes: particles ``(B, N, n)``, costs and variances ``(B, N)``, step counts ``(
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import partial
 
 import numpy as np
@@ -53,7 +53,7 @@ from workbench.filtering import keep_where, single_measurement
 from workbench.kernels.counter_normals import draw_key
 from workbench.kernels.crpf_step import crpf_step, pmf_offset, propagation_normals
 from workbench.models import MeasurementModel, MotionModel, require_linear
-from workbench.params import Param
+from workbench.params import Param, declared_dataclass, declared_factory, declared_values
 from workbench.resampling import normalise_log_weights, systematic_resample
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
@@ -100,48 +100,18 @@ PARAMETERS = (
 )
 
 
-@dataclass(frozen=True)
-class CRPFParams:
-    """The CRPF's setting: ``particles`` N, forgetting ``lam`` (0 < lam <= 1), cost exponent ``q >= 1``,
-    PMF exponent ``beta > 0`` and offset ``delta > 0`` (relative or absolute), the propagation variance
-    (adaptive from ``sigma0``, or fixed ``kappa / N^(2/n)``) with optional per-component ``scale`` (length n),
-    the incremental ``cost`` form and the initial ``box`` (multiples of sqrt(diag P0))."""
-
-    particles: int = 100
-    lam: float = 0.95
-    q: float = 2.0
-    beta: float = 2.0
-    delta: float = PAPER_DELTA
-    delta_mode: str = "relative"
-    variance: str = "adaptive"
-    sigma0: float = PAPER_SIGMA0
-    kappa: float = 1.0
-    scale: tuple[float, ...] | None = None
-    cost: str = "arc-length"
-    box: float = 1.0
-    backend: str = "auto"
+class _CRPFSetting:
+    """The methods of :class:`CRPFParams` (its fields are :data:`PARAMETERS`, declared once)."""
 
     def __post_init__(self) -> None:
-        checks = [
-            (self.particles >= 1, f"particles must be >= 1, got {self.particles}"),
-            (0.0 < self.lam <= 1.0, f"lam (forgetting factor) must be in (0, 1], got {self.lam}"),
-            (self.q >= 1.0, f"q must be >= 1, got {self.q}"),
-            (self.beta > 0.0, f"beta must be > 0, got {self.beta}"),
-            (self.delta > 0.0, f"delta must be > 0, got {self.delta}"),
-            (self.sigma0 > 0.0, f"sigma0 must be > 0, got {self.sigma0}"),
-            (self.kappa > 0.0, f"kappa must be > 0, got {self.kappa}"),
-            (self.box > 0.0, f"box must be > 0, got {self.box}"),
-            (self.cost in COSTS, f"cost must be one of {COSTS}, got {self.cost!r}"),
-            (self.variance in VARIANCES, f"variance must be one of {VARIANCES}, got {self.variance!r}"),
-            (self.delta_mode in DELTA_MODES, f"delta_mode must be one of {DELTA_MODES}, got {self.delta_mode!r}"),
-            (self.backend in BACKENDS, f"backend must be one of {BACKENDS}, got {self.backend!r}"),
-            (self.scale is None or all(s >= 0 for s in self.scale), f"scale entries must be >= 0, got {self.scale}"),
-            (self.scale is None or self.variance == "fixed" or all(s > 0 for s in self.scale),
-             f"the adaptive variance needs every scale entry > 0 (it divides by them), got {self.scale}"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise InputError(f"crpf: {message}")
+        # every value against its declaration (type, range, choices; converted as the factory converts them)
+        values = declared_values(PARAMETERS, {f.name: getattr(self, f.name) for f in fields(self)}, "crpf")
+        for key, value in values.items():
+            object.__setattr__(self, key, value)
+        # what no single declaration can say
+        if self.scale is not None and self.variance != "fixed" and not all(s > 0 for s in self.scale):
+            raise InputError(f"crpf: the adaptive variance needs every scale entry > 0 (it divides by them), got "
+                             f"{self.scale}")
 
     @property
     def adaptive(self) -> bool:
@@ -165,6 +135,14 @@ class CRPFParams:
     def jitter_std(self, dim: int) -> np.ndarray:
         """Per-component propagation standard deviation at the start, ``(n,)``: ``sigma_0 * scale``."""
         return np.sqrt(self.initial_variance(dim)) * self.shape(dim)
+
+
+CRPFParams = declared_dataclass("CRPFParams", PARAMETERS, __name__, bases=(_CRPFSetting,), doc="""The CRPF's setting,
+its fields the declared :data:`PARAMETERS` with their defaults: ``particles`` N, forgetting ``lam`` (0 < lam <= 1),
+cost exponent ``q >= 1``, PMF exponent ``beta > 0`` and offset ``delta > 0`` (relative or absolute), the propagation
+variance (adaptive from ``sigma0``, or fixed ``kappa / N^(2/n)``) with optional per-component ``scale`` (length n),
+the incremental ``cost`` form, the initial ``box`` (multiples of sqrt(diag P0)) and the kernel ``backend``.  Every
+value is checked against its declaration when the setting is made.""")
 
 
 @dataclass(frozen=True)
@@ -336,7 +314,7 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
         c_sel = c.ravel().take(flat).reshape(B, N)
         # x_t ~ N(f(x_{t-1}^(k)), sigma_{t-1}^{2,(k)} diag(s^2)), and sigma_t^2 (Table 6)
         x_new, s2_new = _propagate(parents, s2.ravel().take(flat).reshape(B, N), np.maximum(steps, 1),
-                                   propagation_normals(draw_key(rng), B, N, n), params)
+                                   propagation_normals(draw_key(rng), B, N, n, backend=params.backend), params)
         keep_x = x_new if moving.all() else np.where(moving[:, None, None], x_new, x)
         keep_c = c_sel if moving.all() else np.where(moving[:, None], c_sel, c)
         keep_s2 = s2_new if moving.all() else np.where(moving[:, None], s2_new, s2)
@@ -367,15 +345,14 @@ def diagnostics(state: CRPFState) -> dict:
     return {"selections": state.selections, "blind_moves": state.blind_moves}
 
 
-def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: float = 2.0, delta: float = PAPER_DELTA,
-              delta_mode: str = "relative", variance: str = "adaptive", sigma0: float = PAPER_SIGMA0,
-              kappa: float = 1.0, scale=None, cost: str = "arc-length", box: float = 1.0, name: str | None = None,
-              backend: str = "auto") -> FilterSpec:
+@declared_factory(PARAMETERS, "crpf")
+def make_crpf(values: dict, *, name: str | None = None) -> FilterSpec:
     """A cost-reference particle filter; the defaults are the paper filters' setting (Table 6's adaptive variance,
-    the arc-length cost, a relative delta; sigma0 and delta chosen by the tuning rule of docs/paper003.md)."""
-    params = CRPFParams(int(particles), float(lam), float(q), float(beta), float(delta), delta_mode, variance,
-                        float(sigma0), float(kappa), None if scale is None else tuple(float(s) for s in scale), cost,
-                        float(box), backend)
+    the arc-length cost, a relative delta; sigma0 and delta chosen by the tuning rule of docs/paper003.md).
+
+    Takes the declared :data:`PARAMETERS` (positionally in their order, or by keyword; ``make_crpf(300)`` has 300
+    particles) and ``name``; its signature, checks and ``params`` all come from that declaration."""
+    params = CRPFParams(**values)
     spread = (f"adaptive sigma^2 from sigma0={params.sigma0:g}" if params.adaptive
               else f"fixed sigma^2=kappa/N^(2/n), kappa={params.kappa:g}")
     label = name or f"crpf-{params.particles}"
@@ -389,11 +366,8 @@ def make_crpf(particles: int = 100, lam: float = 0.95, q: float = 2.0, beta: flo
         estimate=estimate,
         # the arc-length cost reads a range and a bearing: it needs a range-bearing sensor
         capabilities=frozenset({"stochastic", "ignores_noise_statistics"}
-                               | ({"range_bearing_input"} if cost == "arc-length" else set())),
-        params={"particles": params.particles, "lam": params.lam, "q": params.q, "beta": params.beta,
-                "delta": params.delta, "delta_mode": params.delta_mode, "variance": params.variance,
-                "sigma0": params.sigma0, "kappa": params.kappa, "scale": params.scale, "cost": params.cost,
-                "box": params.box, "backend": params.backend},
+                               | ({"range_bearing_input"} if params.cost == "arc-length" else set())),
+        params={f.name: getattr(params, f.name) for f in fields(params)},
         diagnostics=diagnostics,
         parameters=PARAMETERS,
         build=make_crpf,

@@ -40,10 +40,10 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
-from workbench.kernels.backend import BackendRecord, numba_available
+from workbench.kernels.backend import BackendRecord, runs_numba
 from workbench.linalg import cholupdate, safe_cholesky, symmetrise, tria
 from workbench.models import MeasurementModel, MotionModel
-from workbench.params import Param
+from workbench.params import Param, declared_factory
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Scan
 
@@ -193,8 +193,9 @@ _RECORD = BackendRecord()  # which code the last full-covariance predict / updat
 
 def last_backend() -> str | None:
     """Which code computed this thread's last full-covariance sigma-point predict or update: ``"numba"`` (the
-    compiled UKF loops of :mod:`workbench.kernels.sigma_numba`) or ``"numpy"`` (the NumPy code below: no Numba, the
-    CDKF, a covariance the compiled Cholesky declines); ``None`` before the first call.  For tests, which must know
+    compiled UKF loops of :mod:`workbench.kernels.sigma_numba`) or ``"numpy"`` (the NumPy code below: the backend
+    policy did not pick Numba, e.g. ``WORKBENCH_BACKEND=numpy``, no Numba or a GPU arch; the CDKF; a covariance the
+    compiled Cholesky declines); ``None`` before the first call.  For tests, which must know
     which path ran."""
     return _RECORD.last()
 
@@ -205,19 +206,19 @@ def backend_counts() -> dict:
     return _RECORD.counts()
 
 
-def _compiled():
-    """The Numba loops of the UKF (:mod:`workbench.kernels.sigma_numba`), or ``None`` without Numba."""
-    if not numba_available():
+def _compiled(weights: SigmaWeights):
+    """The Numba loops of the UKF (:mod:`workbench.kernels.sigma_numba`) where the backend policy picks Numba
+    (:func:`workbench.kernels.backend.runs_numba`) and the weights are unscented, else ``None``."""
+    if weights.kind != "unscented" or not runs_numba():
         return None
     from workbench.kernels import sigma_numba
 
     return sigma_numba
 
 
-def _compiled_points(x: np.ndarray, P: np.ndarray, spread: float) -> np.ndarray | None:
-    """The sigma points ``X`` from the compiled loops, or ``None`` (no Numba, or some ``P`` not positive
-    definite)."""
-    fast = _compiled()
+def _compiled_points(fast, x: np.ndarray, P: np.ndarray, spread: float) -> np.ndarray | None:
+    """The sigma points ``X`` from the compiled loops ``fast``, or ``None`` (no compiled loops, or some ``P`` not
+    positive definite)."""
     if fast is None:
         return None
     B, n = x.shape
@@ -228,11 +229,12 @@ def _compiled_points(x: np.ndarray, P: np.ndarray, spread: float) -> np.ndarray 
 def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weights: SigmaWeights) -> SigmaPointState:
     x, P = state.mean, state.cov
     n = x.shape[1]
-    X = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
+    fast = _compiled(weights)
+    X = _compiled_points(fast, x, P, weights.spread)
     if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
         Xf = np.ascontiguousarray(motion.f(X))
         mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
-        _compiled().predicted_moments(Xf, weights.mean, weights.cov, np.asarray(motion.Q, dtype=float), mean, cov)
+        fast.predicted_moments(Xf, weights.mean, weights.cov, np.asarray(motion.Q, dtype=float), mean, cov)
         _RECORD.note("numba")
         return SigmaPointState(mean, cov, state.jitters)
     _RECORD.note("numpy")
@@ -257,11 +259,12 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
     _check_finite(z, present, who)
     x, P = state.mean, state.cov
     n = x.shape[1]
-    X = _compiled_points(x, P, weights.spread) if weights.kind == "unscented" else None
+    fast = _compiled(weights)
+    X = _compiled_points(fast, x, P, weights.spread)
     if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
         Y = np.ascontiguousarray(model.h(X), dtype=float)
         mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
-        if _compiled().unscented_update(x, P, X, Y, weights.mean, weights.cov, model.angle_mask, model.R,
+        if fast.unscented_update(x, P, X, Y, weights.mean, weights.cov, model.angle_mask, model.R,
                                         np.ascontiguousarray(z, dtype=float), present, mean, cov):
             _RECORD.note("numba")
             return SigmaPointState(mean, cov, state.jitters)
@@ -411,7 +414,7 @@ UKF_PARAMETERS = (
 )
 CDKF_PARAMETERS = (
     Param("h", float(np.sqrt(3.0)), "central-difference step (sqrt(3) is optimal for a Gaussian prior)",
-          unit="dimensionless", above=0.0, maximum=100.0),
+          unit="dimensionless", minimum=1.0, maximum=100.0),
     Param("square_root", False, "propagate a Cholesky factor instead of the covariance", "bool"),
     Param("downdate", "cholupdate", "square-root update: the paper's rank-1 downdates or a downdate-free QR", "str",
           choices=("cholupdate", "qr")),
@@ -450,35 +453,37 @@ def _spec(name, summary, weights_for, square_root, params, who, downdate="cholup
                       parameters=parameters, build=build)
 
 
-def make_ukf(alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, square_root: bool = False,
-             name: str | None = None) -> FilterSpec:
-    """An unscented Kalman filter (or SR-UKF); defaults alpha=1, beta=2, kappa=0 keep every weight >= 0 for L=4."""
+@declared_factory(UKF_PARAMETERS, "ukf")
+def make_ukf(values: dict, *, name: str | None = None) -> FilterSpec:
+    """An unscented Kalman filter (or SR-UKF); defaults alpha=1, beta=2, kappa=0 keep every weight >= 0 for L=4.
+
+    Takes the declared :data:`UKF_PARAMETERS` (positionally in their order, or by keyword) and ``name``; its
+    signature, checks and ``params`` all come from that declaration."""
+    alpha, beta, kappa, square_root = (values[k] for k in ("alpha", "beta", "kappa", "square_root"))
     unscented_weights(4, alpha, beta, kappa)  # validate early
     label = "sr-ukf" if square_root else "ukf"
     return _spec(name or label,
                  f"{'Square-root ' if square_root else ''}unscented Kalman filter (alpha={alpha}, beta={beta}, "
                  f"kappa={kappa}){', QR + cholupdate' if square_root else ''}",
-                 partial(unscented_weights, alpha=alpha, beta=beta, kappa=kappa), square_root,
-                 {"alpha": alpha, "beta": beta, "kappa": kappa, "square_root": square_root}, label,
+                 partial(unscented_weights, alpha=alpha, beta=beta, kappa=kappa), square_root, dict(values), label,
                  parameters=UKF_PARAMETERS, build=make_ukf)
 
 
-def make_cdkf(h: float = float(np.sqrt(3.0)), square_root: bool = False, downdate: str = "cholupdate",
-              name: str | None = None) -> FilterSpec:
+@declared_factory(CDKF_PARAMETERS, "cdkf")
+def make_cdkf(values: dict, *, name: str | None = None) -> FilterSpec:
     """A central difference Kalman filter (or SR-CDKF) with step ``h`` (default sqrt(3)).
 
     ``downdate`` (SR-CDKF): ``"cholupdate"`` (the paper's rank-1 downdates) or ``"qr"`` (the
-    downdate-free ``qr([S- - K A, K B, K sqrt(R)])``).
+    downdate-free ``qr([S- - K A, K B, K sqrt(R)])``).  Takes the declared :data:`CDKF_PARAMETERS` (positionally
+    in their order, or by keyword) and ``name``; its signature, checks and ``params`` come from that declaration.
     """
+    h, square_root, downdate = (values[k] for k in ("h", "square_root", "downdate"))
     central_difference_weights(4, h)  # validate early
-    if downdate not in ("cholupdate", "qr"):
-        raise InputError(f"cdkf: downdate must be 'cholupdate' or 'qr', got {downdate!r}")
     label = "sr-cdkf" if square_root else "cdkf"
-    params = {"h": h, "square_root": square_root, "downdate": downdate}
     return _spec(name or label,
                  f"{'Square-root ' if square_root else ''}central difference Kalman filter (h={h:.4g})"
                  f"{', QR + ' + downdate if square_root else ''}",
-                 partial(central_difference_weights, h=h), square_root, params, label, downdate,
+                 partial(central_difference_weights, h=h), square_root, dict(values), label, downdate,
                  parameters=CDKF_PARAMETERS, build=make_cdkf)
 
 

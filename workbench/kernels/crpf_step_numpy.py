@@ -40,10 +40,14 @@ def _check(x, c, s2, t, F, z, u0, shape):
     return x, c, s2, t, F, z, u0, shape
 
 
-def propagation_normals(key: int, B: int, N: int, n: int, twin: bool = False) -> np.ndarray:
+def propagation_normals(key: int, B: int, N: int, n: int, twin: bool = False, backend: str = "auto") -> np.ndarray:
     """The standard normals ``e (B, N, n)`` of the propagation for stream ``key`` (``twin``: computed by
-    the pure NumPy :func:`~workbench.kernels.counter_normals.counter_normals_numpy`; the same numbers)."""
-    return (counter_normals_numpy if twin else counter_normals)(key, B, N * n).reshape(B, N, n)
+    the pure NumPy :func:`~workbench.kernels.counter_normals.counter_normals_numpy`; else by
+    :func:`~workbench.kernels.counter_normals.counter_normals` for ``backend``, the policy's choice; the same
+    numbers)."""
+    if twin:
+        return counter_normals_numpy(key, B, N * n).reshape(B, N, n)
+    return counter_normals(key, B, N * n, backend).reshape(B, N, n)
 
 
 def pmf_offset(values: np.ndarray, delta: float, relative: bool) -> np.ndarray:

@@ -5,9 +5,10 @@ Importing the workbench never imports or initialises Taichi.  A kernel wrapper c
 A runtime that someone else already started on the same arch is reused as it is (``ti.init`` would
 reset it and invalidate that code's fields and ndarrays).
 
-Arch names: ``"cpu"``, ``"cuda"``, ``"vulkan"`` or ``"auto"`` (the first GPU Taichi finds, else the CPU
-with a one-line notice on stderr).  An explicitly named GPU arch that is not available raises
-:class:`TaichiUnavailable` instead of quietly running somewhere else.
+Arch names are the backend policy's (:data:`workbench.kernels.backend.ARCHES`: the CPU, a GPU arch of
+:data:`~workbench.kernels.backend.GPU_ARCHES`, or ``"auto"``: the first GPU Taichi finds, else the CPU with a
+one-line notice on stderr).  An explicitly named GPU arch that is not available raises :class:`TaichiUnavailable`
+instead of quietly running somewhere else.
 """
 
 from __future__ import annotations
@@ -17,12 +18,12 @@ import io
 import os
 import sys
 
+from .backend import ARCHES, GPU_ARCHES
+
 __all__ = ["ARCHES", "TaichiUnavailable", "ensure_taichi", "current_arch", "taichi_available_arches"]
 
-#: The arch names :func:`ensure_taichi` accepts.
-ARCHES = ("cpu", "cuda", "vulkan", "auto")
-
-_NAMES = {"x64": "cpu", "arm64": "cpu", "cuda": "cuda", "vulkan": "vulkan"}
+#: Taichi's names of its CPU arches (every other arch is named as the policy names it).
+_CPU_NAMES = {"x64": "cpu", "arm64": "cpu"}
 
 
 class TaichiUnavailable(RuntimeError):
@@ -56,7 +57,7 @@ def _import_taichi():
 
 
 def current_arch() -> str | None:
-    """The arch of the running Taichi runtime (``"cpu"``, ``"cuda"``, ``"vulkan"``), or ``None``."""
+    """The arch of the running Taichi runtime (``"cpu"`` or a name of :data:`GPU_ARCHES`), or ``None``."""
     if "taichi" not in sys.modules:
         return None
     from taichi.lang import impl
@@ -66,14 +67,14 @@ def current_arch() -> str | None:
     from taichi._lib import core as _ti_core
 
     name = _ti_core.arch_name(impl.current_cfg().arch)
-    return _NAMES.get(name, name)
+    return _CPU_NAMES.get(name, name)
 
 
 def taichi_available_arches() -> tuple[str, ...]:
     """The arches Taichi can use here, CPU first (tests run kernels on each)."""
     ti = _import_taichi()
     found = ["cpu"]
-    for name in ("cuda", "vulkan"):
+    for name in GPU_ARCHES:
         with contextlib.suppress(Exception):
             if ti.lang.misc.is_arch_supported(getattr(ti, name)):
                 found.append(name)
@@ -85,7 +86,7 @@ def ensure_taichi(arch: str = "cpu") -> str:
 
     Parameters
     ----------
-    arch : ``"cpu"``, ``"cuda"``, ``"vulkan"`` or ``"auto"``.
+    arch : a name of :data:`ARCHES` (the backend policy's list).
 
     ``"auto"`` keeps whatever runtime is already up, else tries the GPUs and falls back to the CPU
     with a one-line notice.  Asking for a different arch than the running one restarts Taichi
@@ -97,10 +98,11 @@ def ensure_taichi(arch: str = "cpu") -> str:
     if running is not None and (arch == "auto" or arch == running):
         return running
     ti = _import_taichi()
-    if arch in ("cuda", "vulkan") and arch not in taichi_available_arches():
+    if arch in GPU_ARCHES and arch not in taichi_available_arches():
         # Checked before ti.init, which would first reset a runtime that is already running.
         raise TaichiUnavailable(f"Taichi cannot start on arch {arch!r} here (not available); use 'cpu' or 'auto'")
-    wanted = {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "auto": [ti.cuda, ti.vulkan]}[arch]
+    # "auto": the GPU arches in the policy's order (ti.init takes the first it can start)
+    wanted = ti.cpu if arch == "cpu" else [getattr(ti, a) for a in GPU_ARCHES] if arch == "auto" else getattr(ti, arch)
     # ti.init turns on flush-to-zero and denormals-are-zero for the whole process (Python and NumPy arithmetic
     # included: 5e-324 * 1.0 becomes 0.0), so results computed after a Taichi kernel would differ from those
     # computed before it.  The calling thread's floating-point environment is restored after it.

@@ -297,3 +297,83 @@ def test_the_adaptive_variance_follows_the_process_noise():
             state = spec.update(state, scans.scan(k).for_filter(), range_bearing(0.5, 0.005), rng)
         sigma[sa] = float(np.median(np.sqrt(state.variances)))
     assert sigma[1.0] > 0.3 > sigma[0.0]
+
+
+# -- the parameters are declared once (PARAMETERS): the factory's signature, checks, setting and params follow it ----
+
+
+def _module_with(path, old, new, monkeypatch):
+    """The module at ``path`` executed afresh with ``old`` (which occurs once) replaced by ``new``."""
+    import importlib.util
+    import sys
+
+    text = path.read_text(encoding="utf-8")
+    assert text.count(old) == 1, old
+    name = f"workbench_filters._patched_{path.stem}"
+    module = importlib.util.module_from_spec(importlib.util.spec_from_loader(name, loader=None))
+    monkeypatch.setitem(sys.modules, name, module)
+    exec(compile(text.replace(old, new), str(path), "exec"), module.__dict__)
+    return module
+
+
+def _crpf_problem(B=3, steps=5):
+    rng = generator(8, "crpf-declared")
+    motion, model = random_walk_velocity(2, 1.0, 0.3), range_bearing(1.0, 0.02, sensor=(0.0, 0.0))
+    truth = sample_motion(np.tile([150.0, 80.0, 1.0, -1.0], (B, 1)), motion, steps, rng)
+    scans = HOST.sensor("range-bearing").simulate(truth, rng, sigma_r=1.0, sigma_theta=0.02)
+    return Gaussian.broadcast([152.0, 78.0, 0.0, 0.0], np.diag([100.0, 100.0, 4.0, 4.0]), B), motion, model, scans
+
+
+def test_a_changed_declared_default_changes_the_built_filter(monkeypatch):
+    from pathlib import Path
+
+    import workbench_filters.crpf as crpf
+
+    path = Path(crpf.__file__)
+    patched = _module_with(path, 'Param("particles", 100,', 'Param("particles", 7,', monkeypatch)
+    spec = patched.make_crpf()
+    assert spec.params["particles"] == 7 and spec.name == "crpf-7" and patched.CRPFParams().particles == 7
+    state = spec.init(Gaussian.broadcast(np.zeros(4), np.eye(4), 2), generator(0, "x"))
+    assert state.particles.shape == (2, 7, 4)
+    # a default the factory body never names: lam, through the setting to the filter's numbers
+    patched = _module_with(path, 'Param("lam", 0.95,', 'Param("lam", 0.5,', monkeypatch)
+    prior, motion, model, scans = _crpf_problem()
+    specs = {"patched": patched.make_crpf(particles=30), "asked": make_crpf(particles=30, lam=0.5),
+             "default": make_crpf(particles=30)}
+    run = {label: run_filter(spec, prior, motion, model, scans, generator(9, "crpf-declared")).mean
+           for label, spec in specs.items()}
+    assert patched.make_crpf().params["lam"] == 0.5 and patched.CRPFParams().lam == 0.5
+    np.testing.assert_array_equal(run["patched"], run["asked"])
+    assert not np.allclose(run["patched"], run["default"])
+
+
+def test_the_factory_comes_from_the_declaration():
+    import inspect
+
+    from workbench.params import defaults
+    from workbench_filters.crpf import PARAMETERS
+
+    sig = inspect.signature(make_crpf)
+    assert [(p.name, p.default) for p in sig.parameters.values()][:-1] == [(p.name, p.default) for p in PARAMETERS]
+    assert sig.parameters["name"].kind is inspect.Parameter.KEYWORD_ONLY
+    assert make_crpf().params == defaults(PARAMETERS) and list(make_crpf().params) == [p.name for p in PARAMETERS]
+    assert make_crpf(300).params["particles"] == 300 and make_crpf(300, 0.9).params["lam"] == 0.9
+    assert make_crpf(particles=40.0).params["particles"] == 40  # an integral float, as the declaration allows
+    with pytest.raises(InputError, match=r"crpf: unknown parameter 'partcles' \(parameters: backend, "):
+        make_crpf(partcles=300)
+    with pytest.raises(InputError, match="unknown parameter 'partcles'"):
+        HOST.filter("crpf-100").configure(partcles=300)
+    with pytest.raises(InputError, match="'particles' is given both by position and by keyword"):
+        make_crpf(300, particles=200)
+    with pytest.raises(InputError, match="crpf: takes at most 13 positional values"):
+        make_crpf(*range(1, 15))
+    with pytest.raises(InputError, match="crpf: box: must be <= 1000"):
+        CRPFParams(box=2e3)  # the setting holds its declaration too, not only the factory
+    assert CRPFParams(particles=12.0).particles == 12 and isinstance(CRPFParams(lam=1).lam, float)
+
+
+def test_a_default_that_breaks_its_own_declaration_is_refused():
+    from workbench.params import Param, declared_factory
+
+    with pytest.raises(InputError, match=r"toy \(declared defaults\): n: must be >= 1, got 0"):
+        declared_factory((Param("n", 0, "count", "int", unit="dimensionless", minimum=1),), "toy")

@@ -152,7 +152,7 @@ def test_sigma_points_reproduce_mean_and_covariance():
 def test_bad_parameters_are_refused():
     with pytest.raises(InputError, match="alpha"):
         make_ukf(alpha=0.0)
-    with pytest.raises(InputError, match="h must be >= 1"):
+    with pytest.raises(InputError, match="cdkf: h: must be >= 1"):
         make_cdkf(h=0.5)
     with pytest.raises(InputError, match="downdate"):
         make_cdkf(square_root=True, downdate="chol")
@@ -233,3 +233,49 @@ def test_ukf_matches_filterpy_when_installed():
 
 def _wrap(a):
     return np.angle(np.exp(1j * np.asarray(a)))
+
+
+def test_a_changed_declared_default_changes_the_built_filter(monkeypatch):
+    """The sigma-point factories take their signature, checks and params from UKF_PARAMETERS / CDKF_PARAMETERS: a
+    default changed there (and nowhere else) is the filter's default, in its params and its numbers."""
+    import importlib.util
+    import inspect
+    import sys
+    from pathlib import Path
+
+    import workbench_filters.sigma_point as sp
+
+    text = Path(sp.__file__).read_text(encoding="utf-8")
+    changes = (('Param("alpha", 1.0,', 'Param("alpha", 0.5,'), ('Param("h", float(np.sqrt(3.0)),', 'Param("h", 2.0,'))
+    for old, new in changes:
+        assert text.count(old) == 1
+        text = text.replace(old, new)
+    name = "workbench_filters._patched_sigma_point"
+    patched = importlib.util.module_from_spec(importlib.util.spec_from_loader(name, loader=None))
+    monkeypatch.setitem(sys.modules, name, patched)
+    exec(compile(text, sp.__file__, "exec"), patched.__dict__)
+    motion = constant_velocity(2, 1.0, 0.7)
+    prior = Gaussian.broadcast([10.0, -5.0, 1.0, 2.0], np.diag([25.0, 16.0, 4.0, 1.0]), 2)
+    model = range_bearing(1.0, 0.05, sensor=(-30.0, 20.0))  # nonlinear: the spread shows in the numbers
+    z = model.h(np.repeat(prior.mean[:, None], 6, axis=1)) + 0.01
+    scans = Scans(z[:, :, None, :], np.ones((2, 6, 1), dtype=bool), np.arange(6.0))
+    for make, key, value, factory in ((patched.make_ukf, "alpha", 0.5, make_ukf),
+                                      (patched.make_cdkf, "h", 2.0, make_cdkf)):
+        assert make().params[key] == value and inspect.signature(make).parameters[key].default == value
+        ours = run_filter(make(), prior, motion, model, scans, None).mean
+        np.testing.assert_array_equal(ours, run_filter(factory(**{key: value}), prior, motion, model, scans, None).mean)
+        assert not np.allclose(ours, run_filter(factory(), prior, motion, model, scans, None).mean, rtol=0, atol=1e-9)
+
+
+def test_unknown_sigma_point_parameters_are_refused_by_name():
+    from workbench.params import defaults
+    from workbench_filters.sigma_point import CDKF_PARAMETERS, UKF_PARAMETERS
+
+    assert make_ukf().params == defaults(UKF_PARAMETERS) and make_cdkf().params == defaults(CDKF_PARAMETERS)
+    assert make_ukf(0.5, 2.0, 1.0, True).params == {"alpha": 0.5, "beta": 2.0, "kappa": 1.0, "square_root": True}
+    with pytest.raises(InputError, match=r"ukf: unknown parameter 'gamma' \(parameters: alpha, beta, kappa, "):
+        make_ukf(gamma=2.0)
+    with pytest.raises(InputError, match="cdkf: unknown parameter 'alpha'"):
+        make_cdkf(alpha=1.0)
+    with pytest.raises(InputError, match="unknown parameter 'step'"):
+        HOST.filter("sr-cdkf").configure(step=2.0)
