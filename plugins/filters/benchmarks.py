@@ -1,5 +1,6 @@
 """Benchmark group ``core``: the bootstrap particle filter against Stone Soup and its floor, and the batched UKF
-against FilterPy.
+against FilterPy; and group ``motion`` (:func:`bench_motion`, at the end): the same filters with the nonlinear
+coordinated turn (rate in the state) against FilterPy's UKF and Stone Soup's ``ConstantTurn`` particle filter.
 
 :func:`bench` measures, in one process and one run (paper 003's problem: a 2-D random-walk-velocity
 target, ``random_walk_velocity(2, 1.0, 0.1)``, one range-bearing measurement per step from the origin,
@@ -38,6 +39,7 @@ particle filters did the same job.  The figures are described in ``docs/benchmar
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -56,7 +58,9 @@ from workbench.types import Gaussian, Scans
 __all__ = ["PF_SIZES", "PEER_SIZES", "UKF_BATCHES", "SPEEDUP_TARGET", "FLOOR_TARGET", "TARGET_N", "NOT_INSTALLED",
            "bench", "problem", "sir_every_step", "filter_runner", "pf_runner", "stonesoup_runner", "paired_times",
            "time_pf", "time_stonesoup", "time_ukf", "floor_runner", "floor_time", "stonesoup_version",
-           "filterpy_ukf_time", "curves"]
+           "filterpy_ukf_time", "curves", "MOTION_SIZES", "KERNEL_STATES", "UKF_CT_TARGET", "PF_CT_TARGET",
+           "ct_problem", "filterpy_ct_ukf", "filterpy_ct_runner", "ct_stonesoup_runner", "kernel_figures",
+           "bench_motion"]
 
 #: Particle counts of our filter (full, quick), the counts Stone Soup is run at, and the UKF batches.
 PF_SIZES = {"full": (1_000, 10_000, 100_000, 1_000_000), "quick": (1_000, 100_000)}
@@ -473,7 +477,269 @@ def bench(quick: bool = False) -> dict:
     return out
 
 
+# -- group motion: the nonlinear coordinated turn (rate in the state) ---------------------------------------------
+
+#: The coordinated-turn problem of group ``motion``: the truth starts 1.5 km out at 20 m/s turning at 3 deg/s, the
+#: ct-rate model with sigma_a = 0.5 m/s^2 and sigma_omega = 0.01 rad/s/sqrt(s), range-bearing from the origin
+#: (5 m, 0.005 rad), the prior offset from the start and spread as CT_P0.
+CT_X0 = (1500.0, 300.0, 0.0, 20.0, math.radians(3.0))
+CT_PRIOR_OFFSET = (10.0, -10.0, 1.0, -1.0, 0.01)
+CT_P0 = (10.0**2, 10.0**2, 2.0**2, 2.0**2, 0.02**2)
+CT_SIGMA_A, CT_SIGMA_OMEGA, CT_SIGMA_R, CT_SIGMA_THETA = 0.5, 0.01, 5.0, 0.005
+#: Sizes of group ``motion`` (full, quick): the UKF's batch and steps, FilterPy's runs, the PF's particles and steps.
+MOTION_SIZES = {"full": {"batch": 3000, "ukf_steps": 20, "filterpy_runs": 10, "particles": 100_000, "pf_steps": 5},
+                "quick": {"batch": 300, "ukf_steps": 4, "filterpy_runs": 2, "particles": 10_000, "pf_steps": 3}}
+#: The state counts at which the compiled ct-rate f and Jacobian are timed against their NumPy twins: a UKF step
+#: at B = 3,000 (11 sigma points each) and a PF step at N = 10^5 (both modes).
+KERNEL_STATES = (3000 * 11, 100_000)
+#: The targets of issue 23: the batched UKF >= 100 x FilterPy's per run-step, the bootstrap PF >= 10 x Stone Soup's.
+UKF_CT_TARGET, PF_CT_TARGET = 100.0, 10.0
+#: Stone Soup orders the state [x, vx, y, vy, omega]; ours is [x, y, vx, vy, omega].
+STONESOUP_ORDER = (0, 2, 1, 3, 4)
+
+
+def ct_problem(batch: int, steps: int, seed: int = 0):
+    """Truth (sampled from the ct-rate model itself), scans, prior and models of group ``motion`` for ``batch``
+    runs: ``(truth, scans, prior, motion, model)``."""
+    from workbench.models import coordinated_turn_rate
+
+    rng = generator(seed, "bench", "motion", batch, steps)
+    motion = coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)
+    model = range_bearing(CT_SIGMA_R, CT_SIGMA_THETA)
+    truth = sample_motion(np.tile(CT_X0, (batch, 1)), motion, steps, rng)
+    z = model.h(truth.states) + rng.standard_normal((batch, steps, 2)) @ np.linalg.cholesky(model.R).T
+    z[..., 1] = wrap_angle(z[..., 1])
+    scans = Scans(z[:, :, None, :], np.ones((batch, steps, 1), dtype=bool), truth.times)
+    prior = Gaussian.broadcast(np.add(CT_X0, CT_PRIOR_OFFSET), np.diag(CT_P0), batch)
+    return truth, scans, prior, motion, model
+
+
+def _problem_runner(spec, prob, seed: int, tag: str):
+    """``spec`` run over a problem ``(truth, scans, prior, motion, model)`` as a timed run (init, then per step:
+    predict from the second step on, update, estimate), and a function returning the position RMSE (m) of its last
+    run; the means of the last run stay in ``run.means`` ``(B, steps, n)`` once it ran."""
+    truth, scans, prior, motion, model = prob
+    steps = scans.steps
+    scan_list = [scans.scan(k).for_filter() for k in range(steps)]
+    start = spec.init(prior, generator(seed, "bench", tag, "init"))
+    means: list = []
+
+    def run():
+        rng = generator(seed, "bench", tag, "run")
+        state = start
+        means.clear()
+        for k in range(steps):
+            if k > 0:
+                state = spec.predict(state, motion, rng)
+            state = spec.update(state, scan_list[k], model, rng)
+            means.append(spec.estimate(state).mean)
+        run.means = np.stack(means, axis=1)
+
+    return run, lambda: _rmse(truth, means)
+
+
+def filterpy_ct_ukf(mean, cov, motion, model, alpha: float, beta: float, kappa: float):
+    """FilterPy's ``UnscentedKalmanFilter`` (``MerweScaledSigmaPoints``) for the nonlinear ``motion``: its ``fx`` is
+    the model's own ``f`` (``fx(x, dt) = motion.f(x, None, dt)``), the rest as
+    :func:`workbench.bench.peers.filterpy_range_bearing_ukf` (``Q``, ``R``, a wrapped bearing residual, an
+    angle-aware measurement mean)."""
+    ukf = filterpy_range_bearing_ukf(mean, cov, motion, model, alpha, beta, kappa)
+    ukf.fx = lambda x, dt: motion.f(x, None, dt)
+    return ukf
+
+
+def filterpy_ct_runner(host, prob, runs: int):
+    """FilterPy's UKF on the first ``runs`` runs of the problem ``prob`` (:func:`ct_problem`), one run at a time, as
+    a timed run (the ``ukf``'s alpha, beta, kappa); ``run.means`` ``(runs, steps, 5)`` holds its posterior means
+    once it ran."""
+    params = host.filter("ukf").params
+    truth, scans, prior, motion, model = prob
+    steps = scans.steps
+    z = scans.z[:runs, :, 0, :]
+
+    def run():
+        out = np.empty((runs, steps, motion.dim))
+        for r in range(runs):
+            ukf = filterpy_ct_ukf(prior.mean[r], prior.cov[r], motion, model, params["alpha"], params["beta"],
+                                  params["kappa"])
+            ukf.update(z[r, 0])
+            out[r, 0] = ukf.x
+            for k in range(1, steps):
+                ukf.predict()
+                ukf.update(z[r, k])
+                out[r, k] = ukf.x
+        run.means = out
+
+    return run
+
+
+class _StoneSoupTurn:
+    """Stone Soup's ``ConstantTurn`` with the process noise of our ct-rate model (its ``covar`` would be the
+    continuous white-noise form; ours is the discrete one): the same function, the same ``Q``, in its state order."""
+
+    @staticmethod
+    def build(motion):
+        from stonesoup.models.transition.nonlinear import ConstantTurn
+        from stonesoup.types.array import CovarianceMatrix
+
+        order = list(STONESOUP_ORDER)
+        Q = CovarianceMatrix(np.asarray(motion.Q)[np.ix_(order, order)])
+
+        class SameNoiseConstantTurn(ConstantTurn):
+            def covar(self, time_interval, **kwargs):
+                return Q
+
+        return SameNoiseConstantTurn(linear_noise_coeffs=np.array([0.0, 0.0]), turn_noise_coeff=0.0)
+
+
+def ct_stonesoup_runner(particles: int, steps: int, seed: int = 0):
+    """Stone Soup's particle filter on :func:`ct_problem` (one run): ``ParticlePredictor`` with its
+    ``ConstantTurn`` (our ``Q``), ``ParticleUpdater`` with ``CartesianToBearingRange`` and ``SystematicResampler``
+    (every step), its mean and covariance each step.  Returns ``(run, rmse)``."""
+    import datetime
+
+    from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
+    from stonesoup.predictor.particle import ParticlePredictor
+    from stonesoup.resampler.particle import SystematicResampler
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.hypothesis import SingleHypothesis
+    from stonesoup.types.state import ParticleState, StateVectors
+    from stonesoup.updater.particle import ParticleUpdater
+
+    truth, scans, prior, motion, model = ct_problem(1, steps, seed)
+    measurement = CartesianToBearingRange(ndim_state=5, mapping=(0, 2),
+                                          noise_covar=np.diag([CT_SIGMA_THETA**2, CT_SIGMA_R**2]))
+    predictor = ParticlePredictor(_StoneSoupTurn.build(motion))
+    updater = ParticleUpdater(measurement, resampler=SystematicResampler())
+    t0 = datetime.datetime(2020, 1, 1)
+    times = [t0 + datetime.timedelta(seconds=float(t)) for t in scans.times]
+    detections = [Detection(np.array([[scans.z[0, k, 0, 1]], [scans.z[0, k, 0, 0]]]), timestamp=times[k],
+                            measurement_model=measurement) for k in range(steps)]
+    rng = generator(seed, "bench", "motion", "stonesoup-init")
+    cloud = prior.mean[0][:, None] + np.linalg.cholesky(prior.cov[0]) @ rng.standard_normal((5, particles))
+    start = ParticleState(StateVectors(cloud[list(STONESOUP_ORDER)]),
+                          log_weight=np.full(particles, -np.log(particles)), timestamp=times[0])
+    means: list = []
+    back = np.argsort(STONESOUP_ORDER)
+
+    def run():
+        np.random.seed(seed)  # Stone Soup draws from NumPy's global generator
+        state = start
+        means.clear()
+        for k in range(steps):
+            if k > 0:
+                state = predictor.predict(state, timestamp=times[k])
+            state = updater.update(SingleHypothesis(state, detections[k]))
+            means.append(np.asarray(state.mean, dtype=float)[back, 0][None, :])
+            state.covar  # noqa: B018 - the estimate's covariance, as ours computes it
+
+    return run, lambda: _rmse(truth, means)
+
+
+def kernel_figures(repeats: int) -> dict:
+    """The ct-rate model's ``f`` and Jacobian on ``(K, 5)`` states (K in :data:`KERNEL_STATES`, turn rates on both
+    sides of 0): the NumPy twins against the policy's path (the compiled loops where it runs Numba), timed
+    alternately, ns per state, and the speed-up (median of the per-pair ratios)."""
+    from workbench.kernels.backend import resolve
+    from workbench.models import coordinated_turn_rate
+
+    model = coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)
+    backend = resolve("auto")
+    out: dict = {"ct_rate_backend": "numba" if backend == "numba" else f"numpy (the policy's {backend})"}
+    rng = generator(0, "bench", "motion", "kernel")
+    for K in KERNEL_STATES:
+        x = np.column_stack([rng.uniform(-3e3, 3e3, (K, 2)), rng.uniform(-30, 30, (K, 2)),
+                             rng.uniform(-0.2, 0.2, K)])
+        for name, twin, routed in (("f", model.f_numpy, model.f), ("jacobian", model.jacobian_numpy, model.jacobian)):
+            t_twin, t_routed, ratio = paired_times(lambda: twin(x), lambda: routed(x), repeats)
+            out[f"ct_rate_{name}_numpy_ns_per_state_K{K}"] = t_twin / K * 1e9
+            out[f"ct_rate_{name}_ns_per_state_K{K}"] = t_routed / K * 1e9
+            out[f"ct_rate_{name}_speedup_over_numpy_K{K}"] = ratio  # NumPy's time / the policy's, per pair
+    return out
+
+
+def bench_motion(quick: bool = False) -> dict:
+    """Group ``motion``: the batched UKF with the ct-rate model against FilterPy's UKF with the same ``fx`` per
+    run-step, and the bootstrap PF ``sir`` with it against Stone Soup's particle filter with its ``ConstantTurn`` per
+    step, each pair warmed up and timed alternately on the same problem (:func:`ct_problem`); the compiled ct-rate
+    ``f`` and Jacobian against their NumPy twins.  Figures and targets in ``docs/benchmarks.md``."""
+    from workbench.kernels.backend import resolve
+
+    size = "quick" if quick else "full"
+    sizes = MOTION_SIZES[size]
+    repeats = _repeats(quick)
+    host = load_host()
+    version = stonesoup_version()
+    loads = [os.getloadavg()[0]] if hasattr(os, "getloadavg") else [float("nan")]
+    B, steps, runs = sizes["batch"], sizes["ukf_steps"], sizes["filterpy_runs"]
+    N, pf_steps = sizes["particles"], sizes["pf_steps"]
+    out: dict = {"cpu_count": os.cpu_count() or 0, "numpy_version": np.__version__,
+                 "stonesoup_version": version or NOT_INSTALLED, "ukf_batch": B, "ukf_steps": steps,
+                 "filterpy_runs": runs, "pf_particles": N, "pf_steps": pf_steps,
+                 "pf_backend": resolve(host.filter("sir").params.get("backend", "auto"))}
+    out.update(kernel_figures(repeats))
+    try:
+        import filterpy  # noqa: F401
+    except ImportError:
+        filterpy_ok = False
+    else:
+        filterpy_ok = True
+    # the UKF: ours batched over B runs, FilterPy's on `runs` of the same runs
+    prob = ct_problem(B, steps)
+    ours, ukf_rmse = _problem_runner(host.filter("ukf"), prob, 0, "motion-ukf")
+    key = "ukf_ct_speedup_vs_filterpy"
+    out[f"target_{key}"] = f">= {UKF_CT_TARGET:g}"
+    if filterpy_ok:
+        theirs = filterpy_ct_runner(host, prob, runs)
+        t_ours, t_theirs, ratio = paired_times(ours, theirs, repeats)
+        speedup = (B / runs) / ratio  # (their time / run-step) / (ours / run-step), per pair
+        out["ukf_ct_ns_per_run_step"] = t_ours / (B * steps) * 1e9
+        out["filterpy_ukf_ct_ns_per_run_step"] = t_theirs / (runs * steps) * 1e9
+        out["ukf_ct_max_abs_difference_vs_filterpy"] = float(np.max(np.abs(ours.means[:runs] - theirs.means)))
+        out[f"measured_{key}"] = speedup
+        out[f"met_{key}"] = bool(speedup >= UKF_CT_TARGET)
+        out[f"note_{key}"] = (f"ukf at B = {B} against FilterPy's UnscentedKalmanFilter (MerweScaledSigmaPoints, fx = "
+                              f"the model's f) on {runs} of the same runs, {steps} steps, timed alternately, median of "
+                              f"{repeats} pairs; estimates agree to "
+                              f"{out['ukf_ct_max_abs_difference_vs_filterpy']:.2g}")
+    else:
+        ours()
+        out["ukf_ct_ns_per_run_step"] = median_time(ours, repeat=repeats, warmup=0) / (B * steps) * 1e9
+        for name in ("filterpy_ukf_ct_ns_per_run_step", "ukf_ct_max_abs_difference_vs_filterpy", f"measured_{key}",
+                     f"met_{key}"):
+            out[name] = NOT_INSTALLED
+    out["ukf_ct_pos_rmse_m"] = ukf_rmse()
+    # the bootstrap PF: ours and Stone Soup's, one run of N particles each
+    pf, pf_rmse = _problem_runner(sir_every_step(host, N), ct_problem(1, pf_steps), 0, "motion-sir")
+    key = "sir_ct_speedup_vs_stonesoup"
+    out[f"target_{key}"] = f">= {PF_CT_TARGET:g}"
+    if version is not None:
+        theirs, ss_rmse = ct_stonesoup_runner(N, pf_steps)
+        t_ours, t_theirs, ratio = paired_times(pf, theirs, repeats)
+        out["sir_ct_ns_per_particle_step"] = t_ours / (N * pf_steps) * 1e9
+        out["stonesoup_ct_ns_per_particle_step"] = t_theirs / (N * pf_steps) * 1e9
+        out["stonesoup_ct_pos_rmse_m"] = ss_rmse()
+        out[f"measured_{key}"] = 1.0 / ratio
+        out[f"met_{key}"] = bool(1.0 / ratio >= PF_CT_TARGET)
+        out[f"note_{key}"] = (f"sir and Stone Soup's ParticlePredictor (ConstantTurn with our Q) + ParticleUpdater "
+                              f"(SystematicResampler), N = {N}, {pf_steps} steps, resampling every step, timed "
+                              f"alternately, median of {repeats} pairs; position RMSE {pf_rmse():.3g} m (ours) and "
+                              f"{out['stonesoup_ct_pos_rmse_m']:.3g} m (Stone Soup)")
+    else:
+        pf()
+        out["sir_ct_ns_per_particle_step"] = median_time(pf, repeat=repeats, warmup=0) / (N * pf_steps) * 1e9
+        for name in ("stonesoup_ct_ns_per_particle_step", "stonesoup_ct_pos_rmse_m", f"measured_{key}",
+                     f"met_{key}"):
+            out[name] = NOT_INSTALLED
+    out["sir_ct_pos_rmse_m"] = pf_rmse()
+    loads.append(os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan"))
+    out["load_avg_1min"] = max(loads)
+    return out
+
+
 @hookimpl
 def workbench_benchmarks():
     return [BenchmarkSpec("core", "the built-in filters: bootstrap PF against Stone Soup, batched UKF per run-step",
-                          bench)]
+                          bench),
+            BenchmarkSpec("motion", "coordinated turn (rate in the state): batched UKF against FilterPy's UKF, "
+                                    "bootstrap PF against Stone Soup's ConstantTurn particle filter", bench_motion)]

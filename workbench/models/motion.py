@@ -557,10 +557,44 @@ def coordinated_turn(dt: float, omega: float, sigma_a: float | Sequence[float]) 
 
 class CoordinatedTurnRate(MotionModel):
     """Coordinated turn with the turn rate in the state ``[x, y, vx, vy, omega]`` (m, m, m/s, m/s, rad/s):
-    nonlinear ``f``, analytic :meth:`jacobian`; see :func:`coordinated_turn_rate`."""
+    nonlinear ``f``, analytic :meth:`jacobian`; see :func:`coordinated_turn_rate`.
+
+    :meth:`f` and :meth:`jacobian` run the compiled loops of :mod:`workbench.kernels.motion_numba` where the
+    backend policy (:func:`workbench.kernels.backend.resolve`) runs Numba, else their NumPy twins
+    :meth:`f_numpy` and :meth:`jacobian_numpy` (held to each other to 1e-12 on both sides of ``omega = 0``;
+    the compiled ones are several times faster on ``(3.3e4, 5)`` and ``(1e5, 5)`` states: group ``motion`` of
+    ``docs/benchmarks.md``)."""
+
+    def _states(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.ndim == 0 or x.shape[-1] != 5:
+            raise InputError(f"{model_label(self)}: states must be (..., 5), [x, y, vx, vy, omega], got shape "
+                             f"{x.shape}")
+        return x
 
     def f(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
+        x = self._states(x)
+        kernels = _ct_rate_kernels()
+        if kernels is None:
+            return self.f_numpy(x, t, dt)
+        flat = x.reshape(-1, 5)
+        out = np.empty_like(flat, order="K")  # the input's memory order: a component-major cloud stays one
+        kernels.ct_rate_f(flat, self._step(t, dt)[1], _TURN_SMALL, _SINC, _COSC, out)
+        return out.reshape(x.shape)
+
+    def jacobian(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
+        x = self._states(x)
+        kernels = _ct_rate_kernels()
+        if kernels is None:
+            return self.jacobian_numpy(x, t, dt)
+        flat = x.reshape(-1, 5)
+        out = np.empty(flat.shape + (5,))
+        kernels.ct_rate_jacobian(flat, self._step(t, dt)[1], _TURN_SMALL, _SINC, _COSC, _DSINC, _DCOSC, out)
+        return out.reshape(x.shape + (5,))
+
+    def f_numpy(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
+        """:meth:`f` in NumPy (the twin of the compiled loop)."""
+        x = self._states(x)
         T = self._step(t, dt)[1]
         px, py, vx, vy, w = (x[..., i] for i in range(5))
         sa, ca, _, _ = _turn_terms(w * T)
@@ -568,8 +602,9 @@ class CoordinatedTurnRate(MotionModel):
         c, s = np.cos(w * T), np.sin(w * T)
         return np.stack([px + a * vx - b * vy, py + b * vx + a * vy, c * vx - s * vy, s * vx + c * vy, w], axis=-1)
 
-    def jacobian(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
+    def jacobian_numpy(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
+        """:meth:`jacobian` in NumPy (the twin of the compiled loop)."""
+        x = self._states(x)
         T = self._step(t, dt)[1]
         vx, vy, w = x[..., 2], x[..., 3], x[..., 4]
         sa, ca, dsa, dca = _turn_terms(w * T)
@@ -583,6 +618,17 @@ class CoordinatedTurnRate(MotionModel):
         J[..., 2, 2], J[..., 2, 3], J[..., 2, 4] = c, -s, -T * s * vx - T * c * vy
         J[..., 3, 2], J[..., 3, 3], J[..., 3, 4] = s, c, T * c * vx - T * s * vy
         return J
+
+
+def _ct_rate_kernels():
+    """The compiled loops of :class:`CoordinatedTurnRate` where the backend policy runs Numba, else ``None``."""
+    from ..kernels.backend import resolve
+
+    if resolve("auto") != "numba":
+        return None
+    from ..kernels import motion_numba
+
+    return motion_numba
 
 
 def coordinated_turn_rate(dt: float, sigma_a: float | Sequence[float], sigma_omega: float) -> CoordinatedTurnRate:

@@ -282,3 +282,153 @@ def test_the_one_track_runners_compute_the_same_track_as_filterpy():
     runs = bench_core.one_track_runners(load_host(), steps=60)
     np.testing.assert_allclose(runs["ekf"]().mean[0], runs["filterpy_ekf"](), rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(runs["ukf"]().mean[0], runs["filterpy_ukf"](), rtol=1e-6, atol=1e-6)
+
+
+# -- group motion ----------------------------------------------------------------------------------------
+
+
+def _motion_fields(stonesoup: bool, filterpy: bool) -> dict:
+    """Every figure of ``motion --quick`` -> ``"number"``, ``"bool"``, ``"string"`` or the one string it may be."""
+    fields = {key: "number" for key in ("cpu_count", "load_avg_1min", "peak_rss_mib", "group_wall_s", "ukf_batch",
+                                        "ukf_steps", "filterpy_runs", "pf_particles", "pf_steps",
+                                        "ukf_ct_ns_per_run_step", "ukf_ct_pos_rmse_m", "sir_ct_ns_per_particle_step",
+                                        "sir_ct_pos_rmse_m")}
+    fields.update({key: "string" for key in ("numpy_version", "stonesoup_version", "kernel_arch", "pf_backend",
+                                             "ct_rate_backend", "target_ukf_ct_speedup_vs_filterpy",
+                                             "target_sir_ct_speedup_vs_stonesoup")})
+    for K in bench_core.KERNEL_STATES:
+        for name in ("f", "jacobian"):
+            for key in ("ct_rate_{}_numpy_ns_per_state", "ct_rate_{}_ns_per_state", "ct_rate_{}_speedup_over_numpy"):
+                fields[f"{key.format(name)}_K{K}"] = "number"
+    for key, kind in (("filterpy_ukf_ct_ns_per_run_step", "number"), ("ukf_ct_max_abs_difference_vs_filterpy", "number"),
+                      ("measured_ukf_ct_speedup_vs_filterpy", "number"), ("met_ukf_ct_speedup_vs_filterpy", "bool")):
+        fields[key] = kind if filterpy else "not installed"
+    if filterpy:
+        fields["note_ukf_ct_speedup_vs_filterpy"] = "string"
+    for key, kind in (("stonesoup_ct_ns_per_particle_step", "number"), ("stonesoup_ct_pos_rmse_m", "number"),
+                      ("measured_sir_ct_speedup_vs_stonesoup", "number"), ("met_sir_ct_speedup_vs_stonesoup", "bool")):
+        fields[key] = kind if stonesoup else "not installed"
+    if stonesoup:
+        fields["note_sir_ct_speedup_vs_stonesoup"] = "string"
+    return fields
+
+
+@pytest.mark.slow
+def test_bench_quick_motion_reports_every_figure_and_its_targets(tmp_path):
+    out = tmp_path / "bench.json"
+    code = "import sys; from workbench.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--only", "motion", "--json", str(out)],
+                          capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(out.read_text())
+    assert report["quick"] is True and list(report["groups"]) == ["motion"]
+    motion = report["groups"]["motion"]
+    assert "error" not in motion, motion.get("error")
+    stonesoup = importlib.util.find_spec("stonesoup") is not None
+    filterpy = importlib.util.find_spec("filterpy") is not None
+    expected = _motion_fields(stonesoup, filterpy)
+    assert set(motion) == set(expected), f"missing {set(expected) - set(motion)}, unexpected {set(motion) - set(expected)}"
+    for key, kind in expected.items():
+        value = motion[key]
+        if kind == "number":
+            assert isinstance(value, (int, float)) and not isinstance(value, bool), (key, value)
+            assert math.isfinite(value) and value >= 0, (key, value)
+        elif kind == "bool":
+            assert isinstance(value, bool), (key, value)
+        elif kind == "string":
+            assert isinstance(value, str) and value, (key, value)
+        else:
+            assert value == kind, (key, value)
+    sizes = bench_core.MOTION_SIZES["quick"]
+    assert (motion["ukf_batch"], motion["pf_particles"]) == (sizes["batch"], sizes["particles"])
+    assert motion["target_ukf_ct_speedup_vs_filterpy"] == ">= 100"
+    assert motion["target_sir_ct_speedup_vs_stonesoup"] == ">= 10"
+    assert motion["ct_rate_backend"] == ("numba" if importlib.util.find_spec("numba") else "numpy (the policy's taichi)")
+    # both filters track the turn (range noise 5 m, cross-range 0.005 rad x 1.5 km = 7.5 m)
+    assert motion["ukf_ct_pos_rmse_m"] < 30.0 and motion["sir_ct_pos_rmse_m"] < 30.0
+    if filterpy:  # FilterPy's UKF with the same fx computed the same estimates
+        assert motion["ukf_ct_max_abs_difference_vs_filterpy"] < 1e-6
+    if stonesoup:  # Stone Soup solved the same problem: its error is of the same size as ours
+        assert motion["stonesoup_ct_pos_rmse_m"] < 3.0 * motion["sir_ct_pos_rmse_m"] + 5.0
+    # the printed table: one line per target, indicative in quick mode
+    table = proc.stdout[proc.stdout.index("targets (quick"):].splitlines()
+    lines = [line.split() for line in table[2:] if line.startswith("motion ")]
+    assert sorted((line[1], line[-1]) for line in lines) == [("sir_ct_speedup_vs_stonesoup", "indicative"),
+                                                             ("ukf_ct_speedup_vs_filterpy", "indicative")]
+
+
+def test_motion_figures_from_hand_made_timings(monkeypatch):
+    # the arithmetic from timings to figures: per pair (ours, theirs, median ratio) in seconds; the UKF batch B and
+    # FilterPy's runs differ, so the speed-up per run-step is (B / runs) / ratio; the kernels' ratio is NumPy / ours
+    sizes = bench_core.MOTION_SIZES["quick"]
+    B, runs, steps = sizes["batch"], sizes["filterpy_runs"], sizes["ukf_steps"]
+    N, pf_steps = sizes["particles"], sizes["pf_steps"]
+
+    pytest.importorskip("filterpy")
+
+    def tagged(tag, **attrs):
+        def run():
+            return None
+        run.tag = tag
+        run.__dict__.update(attrs)
+        return run
+
+    def paired(a, b, repeats):
+        # our UKF and FilterPy's, our PF and Stone Soup's; the kernels' runs (untagged): the twin and the policy's
+        return {"ukf": (0.3, 0.2, 1.5), "sir": (0.1, 1.2, 1 / 12)}.get(getattr(a, "tag", None), (2.0, 0.5, 4.0))
+
+    def problem_runner(spec, prob, seed, tag):
+        means = np.zeros((B, steps, 5)) if tag == "motion-ukf" else None
+        return tagged("ukf" if tag == "motion-ukf" else "sir", means=means), lambda: 4.0
+
+    theirs = np.zeros((runs, steps, 5))
+    theirs[1, 2, 3] = 2e-9
+    monkeypatch.setattr(bench_core, "paired_times", paired)
+    monkeypatch.setattr(bench_core, "ct_problem", lambda batch, steps, seed=0: None)
+    monkeypatch.setattr(bench_core, "_problem_runner", problem_runner)
+    monkeypatch.setattr(bench_core, "filterpy_ct_runner", lambda host, prob, runs: tagged("fp", means=theirs))
+    monkeypatch.setattr(bench_core, "stonesoup_version", lambda: "1.0")
+    monkeypatch.setattr(bench_core, "ct_stonesoup_runner", lambda n, steps: (tagged("ss"), lambda: 5.0))
+    monkeypatch.setattr(bench_core, "KERNEL_STATES", (1000,))
+    out = bench_core.bench_motion(quick=True)
+    assert out["ukf_ct_ns_per_run_step"] == pytest.approx(0.3 / (B * steps) * 1e9)
+    assert out["filterpy_ukf_ct_ns_per_run_step"] == pytest.approx(0.2 / (runs * steps) * 1e9)
+    assert out["measured_ukf_ct_speedup_vs_filterpy"] == pytest.approx((B / runs) / 1.5)
+    assert out["met_ukf_ct_speedup_vs_filterpy"] is ((B / runs) / 1.5 >= 100)
+    assert out["ukf_ct_max_abs_difference_vs_filterpy"] == pytest.approx(2e-9)
+    assert out["sir_ct_ns_per_particle_step"] == pytest.approx(0.1 / (N * pf_steps) * 1e9)
+    assert out["stonesoup_ct_ns_per_particle_step"] == pytest.approx(1.2 / (N * pf_steps) * 1e9)
+    assert out["measured_sir_ct_speedup_vs_stonesoup"] == pytest.approx(12.0)
+    assert out["met_sir_ct_speedup_vs_stonesoup"] is True
+    assert out["sir_ct_pos_rmse_m"] == 4.0 and out["stonesoup_ct_pos_rmse_m"] == 5.0
+    assert out["ct_rate_f_numpy_ns_per_state_K1000"] == pytest.approx(2e6)  # 2 s over 1000 states
+    assert out["ct_rate_f_ns_per_state_K1000"] == pytest.approx(5e5)
+    assert out["ct_rate_jacobian_speedup_over_numpy_K1000"] == 4.0
+
+
+def test_motion_peers_compute_what_ours_compute():
+    # the UKF's peer, FilterPy's UKF with the model's f as fx, gives our batched UKF's estimates on the same runs; the
+    # PF's peer, Stone Soup's ConstantTurn, propagates as our model's f does (noise-free) and carries our Q
+    pytest.importorskip("filterpy")
+    host = load_host()
+    prob = bench_core.ct_problem(4, 8, seed=2)
+    ours, _ = bench_core._problem_runner(host.filter("ukf"), prob, 0, "test")
+    ours()
+    theirs = bench_core.filterpy_ct_runner(host, prob, 2)
+    theirs()
+    np.testing.assert_allclose(theirs.means, ours.means[:2], rtol=1e-9, atol=1e-9)
+    pytest.importorskip("stonesoup")
+    import datetime
+
+    from stonesoup.types.state import State
+
+    motion = prob[3]
+    turn = bench_core._StoneSoupTurn.build(motion)
+    x = np.array([[100.0, -50.0, 12.0, -7.0, 0.3], [10.0, 20.0, -3.0, 4.0, -0.02]])
+    order = list(bench_core.STONESOUP_ORDER)
+    one_second = datetime.timedelta(seconds=1.0)
+    moved = np.stack([np.asarray(turn.function(State(row[order][:, None]), noise=False, time_interval=one_second),
+                                 dtype=float)[:, 0] for row in x])
+    np.testing.assert_allclose(moved[:, np.argsort(order)], motion.f_numpy(x), rtol=1e-12, atol=1e-9)
+    Q = np.asarray(turn.covar(time_interval=datetime.timedelta(seconds=1.0)))
+    np.testing.assert_allclose(Q[np.ix_(np.argsort(order), np.argsort(order))], motion.Q, rtol=0, atol=0)
