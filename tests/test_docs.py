@@ -16,7 +16,7 @@ def _hooks():
 
 
 def test_every_hook_has_a_docstring_and_is_in_the_guide():
-    assert len(_hooks()) == 7
+    assert len(_hooks()) == 9
     for name in _hooks():
         assert getattr(hookspecs, name).__doc__.strip(), name
         assert name in GUIDE, f"{name} is not mentioned in docs/writing-a-plugin.md"

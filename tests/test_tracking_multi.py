@@ -367,3 +367,40 @@ def test_scan_covariances_are_refused_beside_detection_sigma_or_by_a_filter_that
         run_tracker(own, HOST.filter("kf"), MOTION, model, TrackerConfig(detection_sigma=2.0))
     with pytest.raises(InputError, match="detection_covariance"):
         run_tracker(own, HOST.filter("ukf"), MOTION, model)
+
+
+# -- the module split ------------------------------------------------------------------------------------------
+
+
+def test_multi_still_holds_every_name_it_held_before_the_split():
+    import workbench.tracking.multi as multi
+    from workbench.tracking import assign, gate, initiation, mofn, records
+
+    before = ["TENTATIVE", "CONFIRMED", "TrackerConfig", "TrackTable", "TrackerState", "PingTracks", "TrackLog",
+              "measurement_view", "position_covariance", "two_point_prior", "speed_course_prior",
+              "detection_covariance", "measurement_covariance", "PRIORS", "box_pairs", "gate_covariance",
+              "gated_pairs", "greedy_assign", "rectangular_pairs", "mofn_step", "initial_state", "tracker_step",
+              "MofN", "run_tracker"]
+    homes = (records, gate, assign, initiation, mofn)
+    for name in before:
+        assert name in multi.__all__, name
+        obj = getattr(multi, name)
+        assert any(getattr(home, name, None) is obj for home in homes), name  # re-exported, not a copy
+        if callable(obj):
+            assert obj.__module__ in {home.__name__ for home in homes}, name  # defined by its role's module
+
+
+def test_track_log_keeps_covariances_through_arrays_and_selection():
+    rng = generator(13, "log cov")
+    R = 7
+    a = rng.standard_normal((R, 4, 4))
+    cov = a @ np.swapaxes(a, 1, 2)
+    log = TrackLog(np.array([0, 0, 0, 1, 1, 1, 1]), np.array([0, 1, 2, 0, 1, 1, 2]), np.arange(R),
+                   np.full(R, CONFIRMED, np.int8), np.ones(R, bool), rng.standard_normal((R, 4)), 2, 3, cov)
+    back = TrackLog.from_arrays(log.to_arrays("x_"), "x_")
+    assert np.array_equal(back.cov, cov) and np.array_equal(back.mean, log.mean)
+    mask = log.run == 1
+    assert np.array_equal(log.select(mask).cov, cov[3:])
+    bare = TrackLog(log.run, log.ping, log.track_id, log.status, log.hit, log.mean, 2, 3)
+    assert "cov" not in bare.to_arrays() and TrackLog.from_arrays(bare.to_arrays()).cov is None
+    assert bare.select(mask).cov is None

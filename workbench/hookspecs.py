@@ -20,6 +20,8 @@ import pluggy
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from .specs import (BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, MotionModelSpec, RecipeSpec,
                         SensorSpec)
+    from .specs import TrackerSpec
+    from .frames import Frame
 
 PROJECT = "workbench"
 ENTRY_POINT_GROUP = "workbench"
@@ -59,6 +61,30 @@ def workbench_motion_models() -> list["MotionModelSpec"]:
     from its declared parameters (``build(dt, **params)``).  Scenario files and references name a model with its
     parameters (``"ct-rate(sigma_omega=0.01)"``); filters declare the models they serve
     (:attr:`~workbench.specs.FilterSpec.motion_models`).  Names must be unique across plugins.
+    """
+
+
+@hookspec
+def workbench_frames() -> list["Frame"]:
+    """Return the measurement frames this plugin adds (:class:`~workbench.frames.Frame`: components, SI units,
+    which are angles, ``space``, and ``position(z, sensor)`` where a measurement gives a position).
+
+    The built-in frames (:data:`workbench.frames.BUILTIN_FRAMES`) are always known; the host registers a plugin's
+    frames when it loads, and from then on :func:`workbench.frames.frame` finds them by name, so the plugin's
+    sensors, clutter generators and measurement models may declare them.  A frame that redefines a built-in one or
+    another plugin's (a name already taken) makes its plugin broken.
+    """
+
+
+@hookspec
+def workbench_trackers() -> list["TrackerSpec"]:
+    """Return the multi-target trackers this plugin provides.
+
+    A :class:`~workbench.specs.TrackerSpec` declares its parameters and capabilities and a ``run(scans, filt,
+    motion, model, *, seed, key=(), **params)`` that tracks a batch of runs with any installed filter doing the
+    per-track maths and returns a :class:`~workbench.tracking.TrackLog` (identities, states, covariances where
+    kept).  References name a tracker with its parameters (``"gnn(gate_probability=0.95)"``,
+    :meth:`~workbench.plugins.PluginHost.tracker`).  Names must be unique across plugins.
     """
 
 

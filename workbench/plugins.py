@@ -16,10 +16,13 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 import pluggy
 
+from . import frames as _frames
 from . import hookspecs
+from .frames import Frame
 from .params import check_value
 from .specs import (CAPABILITIES, BenchmarkSpec, ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, MotionModelSpec,
                     RecipeSpec, SensorSpec)
+from .specs import TrackerSpec
 from .types import InputError
 
 __all__ = ["PluginInfo", "PluginHost", "load_host", "blocked_from_env", "UnknownComponent", "BUILTIN_DISTRIBUTION"]
@@ -35,6 +38,8 @@ KINDS: dict[str, tuple[str, type, str]] = {
     "workbench_filters": ("filter", FilterSpec, "name"),
     "workbench_sensors": ("sensor", SensorSpec, "name"),
     "workbench_motion_models": ("motion model", MotionModelSpec, "name"),
+    "workbench_trackers": ("tracker", TrackerSpec, "name"),
+    "workbench_frames": ("frame", Frame, "name"),
     "workbench_clutter_generators": ("clutter generator", ClutterGeneratorSpec, "name"),
     "workbench_clutter_removers": ("clutter remover", ClutterRemoverSpec, "name"),
     "workbench_report_recipes": ("recipe", RecipeSpec, "paper"),
@@ -123,6 +128,36 @@ class PluginHost:
         reference ``"name(key=value, ...)"``) over steps of ``dt`` seconds, with ``params`` set (checked, SI)."""
         return self.motion_model_spec(name).model(dt, **params)
 
+    def frame(self, name: str) -> Frame:
+        """The measurement frame ``name``: a built-in one (:data:`workbench.frames.BUILTIN_FRAMES`) or one a loaded
+        plugin adds (``workbench_frames``)."""
+        if name in _frames.BUILTIN_FRAMES:
+            return _frames.BUILTIN_FRAMES[name]
+        if name not in self.components["workbench_frames"]:
+            known = ", ".join([*_frames.BUILTIN_FRAMES, *sorted(self.components["workbench_frames"])])
+            raise UnknownComponent(f"no measurement frame named {name!r} is known (frames: {known})")
+        return self.components["workbench_frames"][name]
+
+    @property
+    def frames(self) -> Mapping[str, Frame]:
+        """Every measurement frame this host knows: the built-ins, then those its plugins add."""
+        return {**_frames.BUILTIN_FRAMES, **self.components["workbench_frames"]}
+
+    def tracker(self, name: str) -> TrackerSpec:
+        """The installed tracker ``name``, or a configured one: ``"gnn(gate_probability=0.95)"`` is ``gnn`` with
+        that value (checked against its declared parameters) and named by that label."""
+        if "(" in name:
+            from .params import parse_reference
+
+            base, values = parse_reference(name, "tracker")
+            spec = self._get("workbench_trackers", base)
+            return spec.configure(name=name, **values) if values else spec
+        return self._get("workbench_trackers", name)
+
+    @property
+    def trackers(self) -> Mapping[str, TrackerSpec]:
+        return self.components["workbench_trackers"]
+
     def clutter_generator(self, name: str) -> ClutterGeneratorSpec:
         return self._get("workbench_clutter_generators", name)
 
@@ -152,6 +187,8 @@ class PluginHost:
             base, _ = parse_reference(name, "component")
             if base in self.components["workbench_motion_models"] and base not in self.filters:
                 return [("motion model", self.motion_model_spec(name))]
+            if base in self.components["workbench_trackers"] and base not in self.filters:
+                return [("tracker", self.tracker(name))]
             return [("filter", self.filter(name))]
         return [(KINDS[h][0], table[name]) for h, table in self.components.items() if name in table]
 
@@ -305,6 +342,13 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
                         problem = f"{kind} {comp!r}: {declared}"
                         break
                     taken = owner.get((caller.name, comp))
+                    if caller.name == "workbench_frames":  # a plugin's sensors rely on its frame: never dropped
+                        clash = (f"frame {comp!r} is already provided by plugin {taken!r} (distribution "
+                                 f"{owner_dist[(caller.name, comp)]}); frames are never shadowed: rename one"
+                                 if taken is not None else _frames.registration_problem(item, who))
+                        if clash:
+                            problem = clash
+                            break
                     if taken is not None:
                         holder = owner_dist[(caller.name, comp)]
                         rule = ("built-in names are reserved" if holder == BUILTIN_DISTRIBUTION
@@ -344,6 +388,11 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
         infos[i] = PluginInfo(info.name, info.module, info.distribution, info.version, "broken",
                               f"plugin {info.name!r} ({info.module}, distribution {info.distribution} {info.version}): "
                               + "; ".join(whys))
+    for comp, item in components["workbench_frames"].items():  # known to frames.frame() from now on
+        owner_name = owner[("workbench_frames", comp)]
+        info = next(p for p in infos if p.name == owner_name)
+        _frames.register_frame(item, f"plugin {info.name!r} ({info.module}, distribution {info.distribution} "
+                                     f"{info.version})")
     pm.check_pending()
     infos.sort(key=lambda p: p.name)
     return PluginHost(tuple(infos), components, owner, pm, unavailable)
@@ -367,7 +416,7 @@ def _unavailable_of(obj) -> list[tuple[tuple[str, str], str]]:
 
 #: The functions each kind of component must provide (checked at load: a spec missing one is broken).
 REQUIRED_FUNCTIONS = {FilterSpec: ("init", "predict", "update", "estimate"), SensorSpec: ("measurement_model", "simulate"),
-                      MotionModelSpec: ("build",),
+                      MotionModelSpec: ("build",), TrackerSpec: ("run",),
                       ClutterGeneratorSpec: ("generate",), ClutterRemoverSpec: ("remove",),
                       RecipeSpec: ("tasks",), BenchmarkSpec: ("run",)}
 
@@ -390,6 +439,10 @@ def _declaration_problem(spec) -> str:
         served = spec.motion_models
         if not isinstance(served, tuple) or not all(isinstance(m, str) and m.strip() == m and m for m in served):
             return f"motion_models must be a tuple of motion-model names, got {served!r}"
+    if isinstance(spec, TrackerSpec):
+        unknown = sorted(set(spec.capabilities) - set(TrackerSpec.CAPABILITIES))
+        if unknown:
+            return f"unknown capabilities {unknown} (known: {', '.join(sorted(TrackerSpec.CAPABILITIES))})"
     parameters = getattr(spec, "parameters", None)
     problem = _parameters_problem(spec, parameters) if parameters else ""
     if problem or not isinstance(spec, MotionModelSpec):

@@ -31,6 +31,7 @@ __all__ = [
     "FilterSpec",
     "SensorSpec",
     "MotionModelSpec",
+    "TrackerSpec",
     "ClutterGeneratorSpec",
     "ClutterRemoverSpec",
     "RecipeSpec",
@@ -613,6 +614,62 @@ class MotionModelSpec(_Configurable):
             raise InputError(f"motion model {self.name!r}: its build function returned a {type(built).__name__}, "
                              f"not a MotionModel")
         return built
+
+
+@dataclass(frozen=True)
+class TrackerSpec(_Configurable):
+    """A multi-target tracker a plugin registers (hook ``workbench_trackers``): it runs any installed filter for the
+    per-track maths over a batch of runs and logs every track with its identity.
+
+    Attributes
+    ----------
+    name : str
+        Unique among the installed trackers, e.g. ``"gnn"``; references name it with parameters:
+        ``"gnn(gate_probability=0.95)"`` (:meth:`~workbench.plugins.PluginHost.tracker`).
+    summary : str
+        One line for ``workbench plugins``.
+    run : callable
+        ``run(scans, filt, motion, model, *, seed, key=(), **params) -> TrackLog``: track every run of ``scans``
+        (``z (B, T, M, m)``, never reading ``origin``) with the filter ``filt`` (a
+        :class:`FilterSpec`), the :class:`~workbench.models.MotionModel` and the
+        :class:`~workbench.models.MeasurementModel`; every random draw from ``generator(seed, *key, ...)``, one
+        stream per run so that a run's tracks do not depend on the others.  Returns a
+        :class:`~workbench.tracking.TrackLog` (run, ping, identity, status, hit and state of every live track, and
+        their covariances where the tracker has the ``covariance`` capability).  Inputs are never mutated.  Bound
+        to ``params`` (:class:`BoundFunction`): ``spec.run(scans, filt, motion, model, seed=1)`` runs with the
+        spec's current (configured) values.
+    params, parameters
+        The current values and the declared parameters (each with its unit dimension and range).
+    capabilities : frozenset of str
+        Keys of :attr:`CAPABILITIES`.
+    """
+
+    name: str
+    summary: str
+    run: Callable[..., Any]
+    params: Mapping[str, Any] = field(default_factory=dict)
+    parameters: tuple[Param, ...] = ()
+    capabilities: frozenset = frozenset()
+
+    kind = "tracker"
+    _BOUND = ("run",)
+
+    #: Capabilities a tracker may declare.
+    CAPABILITIES = {  # not a field: no annotation
+        "cartesian_2d": "detections are Cartesian (x, y) positions, seen by the filter through its measurement "
+                        "model, and the state is [x, y, vx, vy]",
+        "covariance": "the track log carries every track's covariance (TrackLog.cov)",
+        "existence": "the track log carries every track's existence probability",
+    }
+
+    def configure(self, name: str | None = None, **values) -> "TrackerSpec":
+        """This tracker with some parameter values set (checked against :attr:`parameters`, converted to SI), named
+        ``base(key=value, ...)`` for the values that changed unless ``name`` is given."""
+        if not values and name is None:
+            return self
+        checked = self.check(**values)
+        changed = self.changed(checked)
+        return replace(self, params={**self.params, **checked}, name=name or configured_name(self.name, changed))
 
 
 def _frame_of(frame, params: Mapping[str, Any]) -> str:

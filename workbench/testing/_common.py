@@ -17,7 +17,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 import numpy as np
 from scipy import stats
 
-from ..frames import FRAMES
+from ..frames import FRAMES, frame as frame_of
 from ..params import check_value
 from ..rng import generator
 from ..types import InputError, Truth
@@ -175,10 +175,10 @@ def poisson_p(count: int, mean: float) -> float:
 
 # -- the kits' test truth -----------------------------------------------------------------------------------
 
-#: Position dimensions of the kits' test truth for detections in each measurement frame: the state is
-#: ``[p (d), v (d)]``, positions first (``range-rate``: a range and its rate, ``d = 1``).
-SPACE_DIMS = {"cartesian-2d": 2, "range-bearing": 2, "cartesian-3d": 3, "position-doppler-3d": 3,
-              "bistatic-range-rate": 3, "range-rate": 1}
+#: Position dimensions of the kits' test truth for detections in each built-in measurement frame: the state is
+#: ``[p (d), v (d)]``, positions first (``range-rate``: a range and its rate, ``d = 1``).  Each frame declares its
+#: own (:attr:`workbench.frames.Frame.space`); :func:`kit_truth` reads that, so plugin frames have test truths too.
+SPACE_DIMS = {name: f.space for name, f in FRAMES.items()}
 
 #: The start distances of the test paths: log-uniform between these (m).
 DISTANCES = (30.0, 60e3)
@@ -194,12 +194,13 @@ def kit_truth(frame: str, batch: int, steps: int, seed: int, centre=None, dt: fl
     and moves at a speed drawn log-uniformly in :data:`SPEEDS` in a random direction, so a batch covers
     near and far targets, slow and fast ones, at every bearing.  ``dt`` seconds between steps.
 
-    Shapes: ``states (batch, steps, 2 d)`` with ``d = SPACE_DIMS[frame]``, ``times (steps,)``.
+    Shapes: ``states (batch, steps, 2 d)`` with ``d`` the frame's declared ``space`` (its position axes: built in
+    or added by a plugin), ``times (steps,)``.
     """
-    if frame not in SPACE_DIMS:
-        raise InputError(f"the test kits have no test truth for detections in the frame {frame!r} "
-                         f"(frames: {', '.join(SPACE_DIMS)})")
-    d = SPACE_DIMS[frame]
+    try:
+        d = frame_of(frame).space
+    except InputError as exc:
+        raise InputError(f"the test kits have no test truth for detections in the frame {frame!r}: {exc}") from None
     rng = generator(seed, "kit-truth", frame, batch, steps)
     dist = np.exp(rng.uniform(np.log(DISTANCES[0]), np.log(DISTANCES[1]), batch))
     if d == 1:

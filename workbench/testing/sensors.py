@@ -7,10 +7,12 @@ when it passes.  Use them from pytest (:func:`workbench.testing.parametrize_with
 ``lband-radar-check_centred_on_h``) or without it (:func:`run_checks`, ``workbench check-plugin NAME``).
 
 The test truth (:func:`workbench.testing._common.kit_truth`) is a batch of straight constant-velocity paths in
-the state layout the detection frame implies (``[x, y, vx, vy]`` for ``cartesian-2d`` and ``range-bearing``,
-``[x, y, z, vx, vy, vz]`` for ``position-doppler-3d``, ``cartesian-3d`` and ``bistatic-range-rate``), starting
-30 m to 60 km from the model's ``sensor_position`` (the origin when it declares none), so that every sensor sees
-some of them.  What a sensor must declare for the kit:
+the state layout the detection frame declares (``[p, v]`` with ``space`` position axes,
+:attr:`workbench.frames.Frame.space`: ``[x, y, vx, vy]`` for ``cartesian-2d``, ``range-bearing`` and ``bearing``,
+``[x, y, z, vx, vy, vz]`` for ``position-doppler-3d``, ``cartesian-3d`` and ``bistatic-range-rate``; a plugin's
+frame declares its own), starting 30 m to 60 km from the model's ``sensor_position`` (the origin when it declares
+none), so that every sensor sees some of them.  Nothing assumes a frame has two components, a range or a position:
+a one-component angular frame (``bearing``) is checked like any other.  What a sensor must declare for the kit:
 
 - ``frame`` (the detections' frame) and a measurement model with its own ``frame``;
 - ``truth_to_state`` when its model's ``h`` takes a state derived from the truth rather than the truth itself;
@@ -195,9 +197,10 @@ def check_same_seed_same_scans(spec: SensorSpec) -> str:
 
 
 def check_frame_respected(spec: SensorSpec) -> str:
-    """The declared detection frame is one of :data:`workbench.frames.FRAMES`, the detections have its dimension
-    and their angular components lie in (-pi, pi]; the scans have the truth's batch, steps and times; the
-    measurement model declares a frame whose angular components are the ones it wraps."""
+    """The declared detection frame is known (:data:`workbench.frames.FRAMES`: built in or added by a loaded plugin),
+    the detections have its dimension and their angular components lie in (-pi, pi]; the scans have the truth's
+    batch, steps and times; the measurement model declares a frame whose angular components are the ones it
+    wraps."""
     name = "check_frame_respected"
     truth = _truth(spec, name, 20, 10, seed=3)
     scans = _simulate(spec, truth, name, 3, "frame")

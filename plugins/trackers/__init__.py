@@ -1,0 +1,1 @@
+"""Built-in multi-target trackers as plugins."""
