@@ -271,13 +271,52 @@ def _manoeuvring():
 def test_manoeuvring_scenario_imm_beats_cv_in_the_turns_and_cv_nees_is_outside_its_band():
     m = _manoeuvring()
     scenario = m.load(HOST)
-    res = m.evaluate(scenario, 100, 5, steps=110, host=HOST,
-                     only=("CV EKF", "IMM (CV + CT +-3 deg/s, EKF)"))
-    cv, imm = res["CV EKF"], res["IMM (CV + CT +-3 deg/s, EKF)"]
+    res = m.evaluate(scenario, 100, 5, steps=110, host=HOST, only=("CV EKF", m.IMM))
+    cv, imm = res["CV EKF"], res[m.IMM]
     lo, hi = cv["band"]
     assert imm["rmse_turns_m"] < 0.5 * cv["rmse_turns_m"], (imm, cv)
     assert not lo <= cv["mean_nees"] <= hi, cv
     assert imm["mean_nees"] < cv["mean_nees"] / 10.0, (imm, cv)
+
+
+@pytest.mark.slow
+def test_both_manoeuvring_scenario_files_load_agree_and_run(tmp_path):
+    """The clean and the cluttered file differ only in the clutter and the tracker; both run through ``workbench run``
+    and through the study's :func:`evaluate` (a few runs and scans), the cluttered one with the file's uniform
+    range-bearing clutter in the scans."""
+    from workbench.cli import main
+    from workbench.types import CLUTTER
+
+    m = _manoeuvring()
+    clean, cluttered = m.load(HOST), m.load(HOST, clutter=True)
+    assert not clean.clutter and clean.tracker == "direct"
+    assert [c.plugin for c in cluttered.clutter] == ["uniform-clutter"] and cluttered.tracker == "nearest-neighbour"
+    c = cluttered.clutter[0].params
+    assert c["frame"] == "range-bearing" and c["range"] == (1000.0, 4500.0) and c["rate"] == 20.0
+    for field in ("steps", "dt", "legs", "sensor", "filters"):
+        assert getattr(clean, field) == getattr(cluttered, field), field
+    for field in ("initial_state", "prior_mean", "prior_std"):
+        np.testing.assert_array_equal(getattr(clean, field), getattr(cluttered, field))
+    np.testing.assert_array_equal(clean.motion.F, cluttered.motion.F)
+    np.testing.assert_array_equal(clean.motion.Q, cluttered.motion.Q)
+
+    states, scans, prior, turning = m.simulate(cluttered, 3, 1, steps=12, host=HOST)
+    clutter_rows = scans.valid & (scans.origin == CLUTTER)
+    assert clutter_rows.sum() > 3 * 12 * 10  # 20 per scan on average
+    z = scans.z[clutter_rows]
+    assert z[:, 0].min() >= 1000.0 and z[:, 0].max() <= 4500.0 and z[:, 1].min() >= -1.3 and z[:, 1].max() <= 0.5
+    for scenario in (clean, cluttered):
+        res = m.evaluate(scenario, 4, 1, steps=50, host=HOST)
+        assert set(res) == {"CV EKF", "CV UKF", "CT-only EKF (+3 deg/s)", m.IMM}
+        assert all(np.isfinite(f["rmse_m"]) for f in res.values()), res
+        assert res[m.IMM]["rmse_m"] < 50.0, res[m.IMM]  # the IMM keeps the track; single models may lose it
+        assert ("updated" in res[m.IMM]) == bool(scenario.clutter)
+
+    for path in (m.SCENARIO_FILE, m.CLUTTER_FILE):
+        text = path.read_text().replace("runs = 500", "runs = 2").replace("steps = 150", "steps = 10")
+        small = tmp_path / path.name
+        small.write_text(text)
+        assert main(["run", str(small), "--out", str(small.with_suffix(""))]) == 0
 
 
 def test_the_docs_usage_snippet_runs_and_finds_the_turn(capsys):
