@@ -39,6 +39,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import single_measurement
+from workbench.models import require_linear
 from workbench.params import Param
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
@@ -82,14 +83,19 @@ GAUSSIAN = {
 }
 
 UKF_PARAMETERS = (
-    Param("alpha", 0.5, "primary sigma-point spread (Stone Soup's default)", above=0.0),
-    Param("beta", 2.0, "prior-knowledge weight of the centre point (2 is optimal for a Gaussian)", minimum=0.0),
-    Param("kappa", None, "secondary spread; none: Stone Soup's default 3 - n", type="float?"),
+    Param("alpha", 0.5, "primary sigma-point spread (Stone Soup's default)", unit="dimensionless", above=0.0,
+          maximum=10.0),
+    Param("beta", 2.0, "prior-knowledge weight of the centre point (2 is optimal for a Gaussian)",
+          unit="dimensionless", minimum=0.0, maximum=10.0),
+    Param("kappa", None, "secondary spread; none: Stone Soup's default 3 - n", type="float?",
+          unit="dimensionless", minimum=-100.0, maximum=100.0),
 )
 PF_PARAMETERS = (
-    Param("particles", 1000, "number of particles per run", type="int", minimum=10, footprint=40.0),
+    Param("particles", 1000, "number of particles per run", type="int", unit="dimensionless", minimum=10,
+          footprint=40.0),
     Param("ess_threshold", 0.5, "resample when the effective sample size falls below this fraction of the "
-                                "particles (1: after every update)", minimum=0.0, maximum=1.0),
+                                "particles (1: after every update)", unit="dimensionless", minimum=0.0,
+          maximum=1.0),
 )
 
 _BATCH_NOTE = " (adapter: one Stone Soup call per batch item)"
@@ -130,9 +136,13 @@ def _g_init(prior: Gaussian, rng) -> Gaussian:
     return Gaussian(prior.mean.copy(), prior.cov.copy())
 
 
-def _g_predict(state: Gaussian, motion, rng, *, predictor: str, options: dict) -> Gaussian:
+_LINEAR_ONLY = "'ukf', 'sir' or another workbench filter that follows f (the adapter hands Stone Soup F and Q only)"
+
+
+def _g_predict(state: Gaussian, motion, rng, *, predictor: str, options: dict, name: str) -> Gaussian:
     from stonesoup.types.state import GaussianState
 
+    require_linear(motion, name, _LINEAR_ONLY)
     _, _, _, transition_model, _ = _ss()
     P, _ = _classes(predictor, "KalmanUpdater")
     pred = P(transition_model(motion), **options)
@@ -198,7 +208,7 @@ def make_gaussian(name: str = "ss-ukf", **params) -> FilterSpec:
     caps = {"gaussian", "exact_linear", "detection_covariance"} | ({"linear_only"} if name == "ss-kf" else set())
     return FilterSpec(
         name=name, summary=summary + _BATCH_NOTE, init=_g_init,
-        predict=partial(_g_predict, predictor=predictor, options=options),
+        predict=partial(_g_predict, predictor=predictor, options=options, name=name),
         update=partial(_g_update, updater=updater, options=options, name=name), estimate=_g_estimate,
         capabilities=frozenset(caps), params=values, parameters=declared,
         build=lambda **v: make_gaussian(name, **v), expected_failures=KNOWN_FAILURES.get(name, {}))
@@ -249,6 +259,7 @@ def _p_predict(state: Particles, motion, rng) -> Particles:
     from stonesoup.predictor.particle import ParticlePredictor
     from stonesoup.types.state import ParticleState
 
+    require_linear(motion, "ss-pf", _LINEAR_ONLY)
     _, _, _, transition_model, _ = _ss()
     pred = ParticlePredictor(transition_model(motion, rng))
     when = EPOCH + timedelta(seconds=float(motion.dt))
