@@ -9,6 +9,16 @@ if str(TESTS) not in sys.path:
     sys.path.insert(0, str(TESTS))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _reports_save_png_only():
+    """The suite's reports save each figure as PNG only (``WORKBENCH_REPORT_FORMATS=png``, unless the environment
+    already names the formats): drawing every figure a second time for its SVG doubled the reports' cost in the
+    tests, and the SVG output has tests of its own (tests/test_report.py, which ask for it by name)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("WORKBENCH_REPORT_FORMATS", os.environ.get("WORKBENCH_REPORT_FORMATS", "png"))
+        yield
+
+
 @pytest.fixture
 def demo_host():
     """A host with the installed plugins plus the demo fixture plugin (sensor + recipe)."""

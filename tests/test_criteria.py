@@ -23,6 +23,7 @@ from workbench.criteria import (
     reference_converged,
     replication_rate,
     rows_track,
+    vectorised,
 )
 
 
@@ -175,6 +176,104 @@ def test_bootstrap_is_seeded_handles_rows_and_refuses_to_guess_from_one_run():
     assert bootstrap_interval(rows, lambda e: e.mean(), seed=4) == pytest.approx(bootstrap_interval(x, seed=4))
     assert all(math.isnan(v) for v in bootstrap_interval([1.0], seed=0))
     assert all(math.isnan(v) for v in bootstrap_interval(x, lambda v: np.nan, seed=0))
+
+
+def _loop_interval(samples, statistic, *, level=0.95, resamples=2000, seed=0):
+    """The bootstrap as it was before batching, kept as the reference: one call of the statistic per resample."""
+    arrays = tuple(np.asarray(a) for a in samples) if isinstance(samples, tuple) else (np.asarray(samples),)
+    idx = np.random.default_rng(seed).integers(0, arrays[0].shape[0], size=(resamples, arrays[0].shape[0]))
+    stats = np.array([float(statistic(*(a[i] for a in arrays))) for i in idx])
+    if not np.all(np.isfinite(stats)):
+        return (math.nan, math.nan)
+    lo, hi = np.quantile(stats, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
+    return (float(lo), float(hi))
+
+
+def _batched_statistics_cases():
+    rng = np.random.default_rng(11)
+    runs, steps = 57, 40
+    a, c = rng.exponential(3.0, runs), rng.exponential(2.0, runs)
+    err = rng.gamma(2.0, 1.0, (runs, steps))
+    meas = rng.gamma(2.2, 1.0, (runs, steps))
+    meas[rng.random((runs, steps)) < 0.1] = np.nan  # scans without a gated detection
+    levels = tuple(rng.gamma(2.0, s, (runs, 3)) for s in (1.0, 1.5, 2.0))
+
+    def below(e, m):
+        with np.errstate(invalid="ignore"):
+            mm = np.nanmean(m, axis=0)
+        return float(np.mean(e.mean(axis=0) < mm))
+
+    def below_many(e, m):
+        with np.errstate(invalid="ignore"):
+            mm = np.nanmean(m, axis=1)
+        return np.mean(e.mean(axis=1) < mm, axis=1)
+
+    def below_counts(w, e, m):  # w: (resamples, runs) counts; nanmean as weighted sums
+        finite = np.isfinite(m)
+        with np.errstate(invalid="ignore"):
+            mm = (w @ np.where(finite, m, 0.0)) / (w @ finite)
+        return np.mean((w @ e) / e.shape[0] < mm, axis=1)
+
+    def worst_level(*lv):
+        return float(max(max(m[1] / m[0], m[2] / m[1]) for m in (x.mean(axis=0) for x in lv)))
+
+    def worst_level_many(*lv):
+        return np.max(np.stack([np.maximum(m[:, 1] / m[:, 0], m[:, 2] / m[:, 1])
+                                for m in (x.mean(axis=1) for x in lv)], axis=1), axis=1)
+
+    return {
+        "paired ratio of means": ((a, c), vectorised(lambda x, y: float(x.mean() / y.mean()),
+                                                      lambda x, y: x.mean(axis=1) / y.mean(axis=1))),
+        "share of scans below (runs x steps, NaN)": ((err, meas), vectorised(below, below_many)),
+        "max over levels of column ratios": (levels, vectorised(worst_level, worst_level_many)),
+        "ratio of column medians": (levels[0], vectorised(
+            lambda x: float(np.median(x, axis=0)[2] / np.median(x, axis=0)[0]),
+            lambda x: np.median(x, axis=1)[:, 2] / np.median(x, axis=1)[:, 0])),
+        "standard deviation": (a, vectorised(lambda x: float(x.std(ddof=1)), lambda x: x.std(axis=1, ddof=1))),
+        "share of scans below, from resample counts": ((err, meas), vectorised(below, below_counts, given="counts")),
+        "max over levels of column ratios, from the means": (levels, vectorised(
+            worst_level, lambda *m: np.max(np.stack([np.maximum(x[:, 1] / x[:, 0], x[:, 2] / x[:, 1]) for x in m],
+                                                    axis=1), axis=1), given="means")),
+        "paired ratio of means, from the means": ((a, c), vectorised(lambda x, y: float(x.mean() / y.mean()),
+                                                                      lambda x, y: x / y, given="means")),
+    }
+
+
+@pytest.mark.parametrize("case", list(_batched_statistics_cases()))
+@pytest.mark.parametrize("level", [0.95, 0.9])
+def test_a_vectorised_statistic_gives_the_per_resample_loops_interval(case, level):
+    samples, stat = _batched_statistics_cases()[case]
+    fast = bootstrap_interval(samples, stat, level=level, resamples=700, seed=3)
+    slow = _loop_interval(samples, stat.one, level=level, resamples=700, seed=3)
+    assert np.all(np.isfinite(slow)) and slow[0] < slow[1]
+    assert fast == pytest.approx(slow, rel=1e-12, abs=0.0)
+    # criterion_from_runs takes the same path: its ours is the plain statistic's
+    c = criterion_from_runs("x", "x", samples, stat, 0.0, ">", min_n=2, level=level, resamples=700, seed=3)
+    assert c.interval == pytest.approx(slow, rel=1e-12, abs=0.0)
+    assert c.ours == stat.one(*(samples if isinstance(samples, tuple) else (samples,)))
+
+
+def test_a_batched_form_that_disagrees_or_gives_the_wrong_shape_is_refused_by_name():
+    x = np.random.default_rng(2).normal(size=30)
+
+    def spread(v):
+        return float(v.max() - v.min())
+
+    with pytest.raises(ValueError, match="batched form of the statistic .*spread disagrees"):
+        bootstrap_interval(x, vectorised(spread, lambda v: v.std(axis=1)), resamples=50)
+    with pytest.raises(ValueError, match="spread gave shape \\(50, 30\\) for 50 resamples"):
+        bootstrap_interval(x, vectorised(spread, lambda v: v - v.min()), resamples=50)
+    with pytest.raises(ValueError, match="given one of"):
+        vectorised(spread, np.mean, given="runs")
+    # means from counts take a non-finite run only where a resample draws it, as the per-resample loop does (a
+    # weighted sum would make 0 x inf a NaN for every resample): the same intervals, a number or not
+    y = x.copy()
+    y[4] = np.inf
+    ratio = vectorised(lambda u, v: float(u.mean() / v.mean()), lambda u, v: u / v, given="means")
+    fast, slow = (bootstrap_interval((x, y), ratio, resamples=200), _loop_interval((x, y), ratio.one, resamples=200))
+    assert np.all(np.isfinite(slow)) and fast == pytest.approx(slow, rel=1e-12)  # x / inf = 0 where drawn
+    fast, slow = (bootstrap_interval((y, x), ratio, resamples=200), _loop_interval((y, x), ratio.one, resamples=200))
+    assert all(math.isnan(v) for v in fast + slow)
 
 
 # -- criteria from hand-made run data ---------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """Tasks on a Dask cluster: bit-identical to in-process, retried once, failures named, others kept."""
 
 import os
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,7 +13,7 @@ distributed = pytest.importorskip("distributed")
 from fixtures import demo_plugin  # noqa: E402
 
 from workbench.report.cache import load_arrays  # noqa: E402
-from workbench.report.engine import InProcess, dask_executor, run_recipe, run_report  # noqa: E402
+from workbench.report.engine import DaskClusterLost, InProcess, dask_executor, run_recipe, run_report  # noqa: E402
 from workbench.specs import Task  # noqa: E402
 
 TESTS = Path(__file__).parent
@@ -84,3 +85,29 @@ def test_a_task_failing_once_is_retried_and_one_failing_always_is_reported(tmp_p
     assert [e for e in outcome.errors if "doomed" in e]
     cached = sorted(p.name.split("-")[0] for p in (tmp_path / "out" / "cache" / "paperdemo").glob("*.npz"))
     assert cached == ["flaky", "mse"]
+
+
+def test_a_cluster_whose_workers_are_gone_fails_in_one_line_instead_of_waiting_for_ever(tmp_path, demo_host,
+                                                                                        worker_path, capsys):
+    from workbench.cli import _os_message
+
+    executor = dask_executor(demo_host, workers=1)
+    address = executor.client.scheduler.address
+    try:
+        executor.cluster.scale(0)  # the workers are stopped; the scheduler stays up and would wait for ever
+        deadline = time.monotonic() + 30
+        while executor.client.nthreads() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not executor.client.nthreads()
+        executor.no_worker_grace, executor.poll = 1.0, 0.2
+        start = time.monotonic()
+        with pytest.raises(DaskClusterLost) as caught:
+            run_recipe(demo_plugin.RECIPE, demo_host, tmp_path / "out", progress=False, executor=executor)
+        assert time.monotonic() - start < 20
+    finally:
+        executor.close()
+    message = str(caught.value)
+    assert "\n" not in message and message.startswith(f"the Dask cluster {address}: ")
+    assert "no worker for 1 s while" in message and "tasks wait" in message
+    # the command line prints it as one line: "workbench: error: cannot use the Dask cluster tcp://...: no worker ..."
+    assert _os_message(caught.value) == f"cannot use {message}"

@@ -18,7 +18,8 @@ from workbench.types import InputError
 
 
 
-def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host):
+def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host, monkeypatch):
+    monkeypatch.delenv("WORKBENCH_REPORT_FORMATS", raising=False)  # the default formats: PNG and SVG
     report = run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False, command="workbench report")
     paper = report.papers[0]
     assert not paper.errors
@@ -36,6 +37,39 @@ def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host):
     np.testing.assert_allclose(data["mse"][0], data["mse"][1], rtol=1e-9)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["papers"][0]["tables"][0]["columns"][2].startswith("published")
+    assert "paperdemo/fig1.svg" in index  # linked beside the embedded PNG
+
+
+def test_figure_formats_are_honoured_or_refused_by_name(tmp_path, demo_host, monkeypatch, capsys):
+    from workbench.cli import main
+
+    # PNG only (the test suite's setting): no SVG written, none linked, a stale one from an earlier report removed
+    monkeypatch.delenv("WORKBENCH_REPORT_FORMATS", raising=False)
+    run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False, formats=("png", "svg"))
+    assert (tmp_path / "paperdemo" / "fig1.svg").is_file()
+    monkeypatch.setenv("WORKBENCH_REPORT_FORMATS", "png")
+    report = run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
+    assert [f["svg"] for f in report.papers[0].figures] == [None] * len(report.papers[0].figures)
+    assert (tmp_path / "paperdemo" / "fig1.png").stat().st_size > 0
+    assert not (tmp_path / "paperdemo" / "fig1.svg").exists()
+    index = (tmp_path / "index.html").read_text()
+    assert "data:image/png;base64," in index and "fig1.svg" not in index
+    # an explicit argument wins over the environment
+    run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False, formats="png,svg")
+    assert (tmp_path / "paperdemo" / "fig1.svg").is_file()
+    # refused by name, before any paper runs: through the API and in one line from the CLI
+    with pytest.raises(InputError, match="png is needed"):
+        run_report(demo_host, tmp_path / "x", papers=["demo"], progress=False, formats=("svg",))
+    with pytest.raises(InputError, match="figure formats are png and svg .*got 'pdf'"):
+        run_report(demo_host, tmp_path / "x", papers=["demo"], progress=False, formats="png,pdf")
+    with pytest.raises(InputError, match="named twice"):
+        run_report(demo_host, tmp_path / "x", papers=["demo"], progress=False, formats=["png", "png"])
+    monkeypatch.setenv("WORKBENCH_REPORT_FORMATS", "jpeg")
+    assert main(["report", "--paper", "000", "--out", str(tmp_path / "y"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["workbench: error: WORKBENCH_REPORT_FORMATS='jpeg': figure formats are png and svg "
+                   "(comma-separated), got 'jpeg'"]
+    assert not (tmp_path / "y" / "paper000").exists()
 
 
 def _criteria_by_id(summary, paper="demo"):

@@ -22,6 +22,8 @@ A quick report never says *met*: the report engine marks every quick-mode verdic
 The functions below build criteria honestly from per-run data:
 
 - :func:`bootstrap_interval`: a percentile bootstrap interval over runs (paired samples resampled together);
+  :func:`vectorised` declares a statistic's form over a batch of resamples, so that the bootstrap evaluates them
+  all at once;
 - :func:`binomial_interval`: the exact (Clopper-Pearson) interval of a proportion;
 - :func:`judge`: the three-way verdict of an interval against a threshold;
 - :func:`criterion_from_runs` and :func:`criterion_from_counts`: a :class:`Criterion` with ours, n, the
@@ -53,7 +55,7 @@ __all__ = ["VERDICTS", "NOT_JUDGEABLE", "DIRECTIONS", "Criterion", "Precondition
            "binomial_interval", "judge", "criterion_from_runs", "criterion_from_counts", "replication_rate",
            "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL", "equivalence_band",
            "judge_equivalent", "criterion_equivalent", "EQUIVALENCE_DETAIL", "DeclaredUnknown", "UnknownVerdict",
-           "judge_across", "where_it_holds"]
+           "judge_across", "where_it_holds", "Vectorised", "vectorised"]
 
 #: The verdict of a criterion whose precondition fails.
 NOT_JUDGEABLE = "not judgeable"
@@ -325,6 +327,113 @@ def _rng(rng: np.random.Generator | None, seed: int | None) -> np.random.Generat
 # Statistics that can be applied to all resamples at once along an axis (a 1-D sample only).
 _AXIS_STATISTICS = {np.mean, np.median, np.sum, np.std, np.var, np.min, np.max, np.nanmean, np.nanmedian}
 
+#: The most values one batch of resamples holds (bounds the memory of the resampled copies).
+_BATCH_VALUES = 4_000_000
+#: What the batched form of a :class:`Vectorised` statistic is given.
+_GIVEN = ("resamples", "means", "counts")
+
+
+class Vectorised:
+    """A statistic together with its form over many resamples at once (see :func:`vectorised`).
+
+    Called like the statistic itself (``one``); :func:`bootstrap_interval` and :func:`criterion_from_runs` use
+    ``many`` to evaluate a whole batch of resamples in one go.
+    """
+
+    __slots__ = ("one", "many", "given")
+
+    def __init__(self, one: Callable[..., float], many: Callable[..., Any], given: str = "resamples"):
+        if not callable(one) or not callable(many):
+            raise ValueError("a vectorised statistic needs a callable statistic and a callable batched form")
+        if given not in _GIVEN:
+            raise ValueError(f"a batched form is given one of {_GIVEN}, got {given!r}")
+        self.one, self.many, self.given = one, many, given
+
+    def __call__(self, *arrays: Any) -> float:
+        return self.one(*arrays)
+
+    @property
+    def name(self) -> str:
+        return getattr(self.one, "__qualname__", None) or repr(self.one)
+
+    def __repr__(self) -> str:
+        return f"vectorised({self.name})"
+
+
+def vectorised(one: Callable[..., float], many: Callable[..., Any], *, given: str = "resamples") -> Vectorised:
+    """Declare a statistic's batched form, so that a bootstrap evaluates all its resamples at once.
+
+    Parameters
+    ----------
+    one : callable
+        The statistic on one sample: ``one(*arrays) -> float``, each array with the runs on axis 0 (as
+        :func:`bootstrap_interval` takes it).
+    many : callable
+        The same statistic on a batch of ``B`` resamples, returning ``(B,)``; what it is given is ``given``'s.  It
+        must give, resample by resample, what ``one`` gives (to rounding): :func:`bootstrap_interval` checks it on
+        the first resample and refuses, naming the statistic, where it does not.
+    given : {"resamples", "means", "counts"}
+        ``"resamples"``: ``many(*resampled)``, each array with a leading resample axis,
+        ``resampled[i][b] = arrays[i][idx[b]]`` (runs on axis 1): any statistic (medians, spreads...).
+        ``"means"``: ``many(*means)``, ``means[i][b]`` the mean over the runs of resample ``b`` of ``arrays[i]``
+        (shape ``(B,) + arrays[i].shape[1:]``), from resample counts without copying the runs: for a statistic of
+        means over runs.
+        ``"counts"``: ``many(W, *arrays)``, the arrays as they are and ``W`` of shape ``(B, runs)``, ``W[b, j]``
+        the times run ``j`` is drawn in resample ``b`` (a mean over the resampled runs is ``W @ a / runs``): for
+        sums of other kinds (a mean over the finite entries, a count).
+
+    Returns
+    -------
+    Vectorised
+        Called like ``one``.
+
+    Examples
+    --------
+    >>> ratio = vectorised(lambda a, b: float(a.mean() / b.mean()), lambda a, b: a.mean(axis=1) / b.mean(axis=1))
+    >>> ratio(np.array([2.0, 4.0]), np.array([1.0, 2.0]))
+    2.0
+    """
+    return Vectorised(one, many, given)
+
+
+def _agree(a: float, b: float) -> bool:
+    if math.isnan(a) or math.isnan(b):
+        return math.isnan(a) and math.isnan(b)
+    return a == b or math.isclose(a, b, rel_tol=1e-9, abs_tol=0.0)
+
+
+def _batched_statistics(arrays: tuple[np.ndarray, ...], statistic: Vectorised, idx: np.ndarray) -> np.ndarray:
+    """``statistic`` on every resample ``idx[b]`` of ``arrays``, a batch at a time through its batched form."""
+    resamples, n = idx.shape
+    width = sum(int(np.prod(a.shape[1:], dtype=np.int64)) for a in arrays)
+    # copies hold (chunk, n, width) values; counts (chunk, n) and the weighted sums (chunk, width)
+    chunk = max(1, _BATCH_VALUES // max(1, n * width if statistic.given == "resamples" else n + width))
+    finite = [bool(np.all(np.isfinite(a))) for a in arrays] if statistic.given == "means" else []
+    stats = np.empty(resamples)
+    for start in range(0, resamples, chunk):
+        sel = idx[start:start + chunk]
+        if statistic.given == "resamples":
+            out = statistic.many(*(a[sel] for a in arrays))
+        else:
+            rows = sel.shape[0]
+            flat = (np.arange(rows)[:, None] * n + sel).ravel()
+            counts = np.bincount(flat, minlength=rows * n).reshape(rows, n).astype(float)
+            if statistic.given == "counts":
+                out = statistic.many(counts, *arrays)
+            else:  # a non-finite value counts only where drawn: such an array is resampled by copies
+                out = statistic.many(*((counts @ a.reshape(n, -1) / n).reshape((rows,) + a.shape[1:]) if ok
+                                       else a[sel].mean(axis=1) for a, ok in zip(arrays, finite)))
+        out = np.asarray(out, dtype=float)
+        if out.shape != (sel.shape[0],):
+            raise ValueError(f"the batched form of the statistic {statistic.name} gave shape {out.shape} for "
+                             f"{sel.shape[0]} resamples: it must give one value per resample")
+        stats[start:start + sel.shape[0]] = out
+    first = float(statistic.one(*(a[idx[0]] for a in arrays)))
+    if not _agree(first, float(stats[0])):
+        raise ValueError(f"the batched form of the statistic {statistic.name} disagrees with the statistic on the "
+                         f"first resample ({stats[0]!r} against {first!r})")
+    return stats
+
 
 def bootstrap_interval(samples: Any, statistic: Callable[..., float] = np.mean, *, level: float = 0.95,
                        resamples: int = 2000, seed: int | None = 0,
@@ -341,7 +450,10 @@ def bootstrap_interval(samples: Any, statistic: Callable[..., float] = np.mean, 
         each resample takes the same run indices from every array, and ``statistic`` receives the arrays
         as separate arguments, e.g. ``lambda a, c: a.mean() / c.mean()``.
     statistic : callable, default ``np.mean``
-        Maps the (resampled) sample(s) to one number.
+        Maps the (resampled) sample(s) to one number.  A statistic declared with its batched form
+        (:func:`vectorised`) is evaluated a batch of resamples at a time; any other is called once per resample
+        (``np.mean``, ``np.median`` and the like on a 1-D sample are batched as they are).  The resamples are the
+        same either way.
     level : float, default 0.95
         Confidence level, in (0, 1).
     resamples : int, default 2000
@@ -375,7 +487,9 @@ def bootstrap_interval(samples: Any, statistic: Callable[..., float] = np.mean, 
     gen = _rng(rng, seed)
     idx = gen.integers(0, n, size=(resamples, n))
     q = [(1.0 - level) / 2.0, (1.0 + level) / 2.0]
-    if not paired and arrays[0].ndim == 1 and statistic in _AXIS_STATISTICS:
+    if isinstance(statistic, Vectorised):
+        stats = _batched_statistics(arrays, statistic, idx)
+    elif not paired and arrays[0].ndim == 1 and statistic in _AXIS_STATISTICS:
         stats = np.empty(resamples)
         chunk = max(1, 4_000_000 // n)  # bound the memory of the (chunk, n) block of resampled values
         for start in range(0, resamples, chunk):
@@ -811,8 +925,11 @@ def rows_track(lost: Mapping[str, Any], max_share: float, *, name: str = "judged
     return Precondition(name, not above, detail, {"max_share": float(max_share), "rows": rows, "above": above})
 
 
-def _mean_ratio(a: np.ndarray, b: np.ndarray) -> float:
+def _mean_ratio_one(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(a) / np.mean(b))
+
+
+_mean_ratio = vectorised(_mean_ratio_one, lambda a, b: a / b, given="means")
 
 
 def reference_converged(at_n: Any, at_4n: Any, *, particles: int, tolerance: float, min_n: int | None = None,

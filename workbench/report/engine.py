@@ -4,7 +4,8 @@ Output folder layout::
 
     OUT/index.html                 figures embedded, tables (ours beside published), provenance
     OUT/summary.json               machine-readable: criteria, tables, task timings, errors
-    OUT/paperNNN/FIG.png|.svg      each figure
+    OUT/paperNNN/FIG.png|.svg      each figure (the formats: :data:`FIGURE_FORMATS`, or ``formats``, or the
+                                   environment variable ``WORKBENCH_REPORT_FORMATS``, e.g. ``png``)
     OUT/paperNNN/FIG.npz, FIG.csv  the data behind it
     OUT/paperNNN/TABLE.csv         each table
     OUT/paperNNN/outcome.json      the paper's rendered outcome (tables, figure paths, criteria, tasks, notes,
@@ -56,7 +57,7 @@ from .cache import (CacheEntryUnreadable, TaskCache, code_version, components_di
 __all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
            "dask_executor", "component_failure", "component_errors", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
-           "report_lock", "recording_host"]
+           "report_lock", "recording_host", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats"]
 
 #: The file, inside ``OUT/paperNNN``, that keeps a paper's rendered outcome.
 OUTCOME_FILE = "outcome.json"
@@ -67,6 +68,38 @@ FIRM_SIZE = "full"
 COMPONENT_ERROR_PREFIX = "error/"
 #: The lock file, inside the report folder, held while a report writes into it.
 LOCK_FILE = ".workbench-report.lock"
+#: The formats every figure is saved in by default: PNG (embedded in ``index.html``) and SVG (linked from it).
+FIGURE_FORMATS = ("png", "svg")
+#: The environment variable that chooses the formats where the caller does not (``png`` or ``png,svg``): the test
+#: suite saves PNG only, drawing each figure once instead of twice.
+FORMATS_VARIABLE = "WORKBENCH_REPORT_FORMATS"
+
+
+def figure_formats(formats: Sequence[str] | str | None = None) -> tuple[str, ...]:
+    """The figure formats of a report: ``formats`` (a sequence or ``"png,svg"``), else
+    ``$WORKBENCH_REPORT_FORMATS``, else :data:`FIGURE_FORMATS`.
+
+    PNG is always among them (the page embeds it); an unknown or repeated format, or one without PNG, is refused
+    with an :class:`~workbench.types.InputError` naming where it came from.
+    """
+    where = "formats"
+    if formats is None:
+        text = os.environ.get(FORMATS_VARIABLE)
+        if text is None:
+            return FIGURE_FORMATS
+        formats, where = text, f"{FORMATS_VARIABLE}={text!r}"
+    if isinstance(formats, str):
+        formats = [f for f in formats.split(",")]
+    chosen = tuple(str(f).strip().lower() for f in formats)
+    unknown = [f for f in chosen if f not in FIGURE_FORMATS]
+    if unknown or not chosen:
+        raise InputError(f"{where}: figure formats are {' and '.join(FIGURE_FORMATS)} (comma-separated), got "
+                         f"{', '.join(repr(f) for f in unknown) or 'none'}")
+    if len(set(chosen)) != len(chosen):
+        raise InputError(f"{where}: a figure format is named twice ({', '.join(chosen)})")
+    if "png" not in chosen:
+        raise InputError(f"{where}: png is needed (the report page embeds each figure's PNG)")
+    return tuple(f for f in FIGURE_FORMATS if f in chosen)
 
 
 def component_failure(what: str, exc: BaseException) -> dict[str, np.ndarray]:
@@ -343,11 +376,12 @@ def _write_table(table: Table, path: Path) -> None:
 def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "quick", seed: int = 0,
                filters: str | None = None, arch: str = "cpu", progress: bool = True,
                on_task: Callable[[str], None] | None = None, executor: "Executor | None" = None,
-               command: str = "") -> PaperOutcome:
+               command: str = "", formats: Sequence[str] | str | None = None) -> PaperOutcome:
     """Run one recipe into ``out/paperNNN`` using the cache in ``out/cache``.
 
     The criteria of any size but ``"full"`` are marked indicative (never *met*), and the outcome is saved
-    to ``out/paperNNN/outcome.json``.
+    to ``out/paperNNN/outcome.json``.  Figures are saved in ``formats`` (:func:`figure_formats`: by default PNG
+    and SVG).
     """
     import matplotlib
 
@@ -355,6 +389,7 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     from matplotlib.figure import Figure
 
     start = time.perf_counter()
+    formats = figure_formats(formats)
     if size not in recipe.sizes:
         raise InputError(f"recipe {recipe.paper} has no size {size!r} (sizes: {', '.join(recipe.sizes)})")
     chosen = resolve_filters(recipe.default_filters, filters, host) if recipe.default_filters else ()
@@ -429,9 +464,13 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
             fig = Figure(figsize=spec.size, layout="constrained")
             spec.draw(data, fig)
             fig.savefig(paper_dir / f"{spec.id}.png", dpi=110)
-            fig.savefig(paper_dir / f"{spec.id}.svg")
+            svg = paper_dir / f"{spec.id}.svg"
+            if "svg" in formats:
+                fig.savefig(svg)
+            else:
+                svg.unlink(missing_ok=True)  # never link an SVG of an earlier report beside this PNG
             outcome.figures.append({"id": spec.id, "caption": spec.caption, "png": paper_dir / f"{spec.id}.png",
-                                    "svg": paper_dir / f"{spec.id}.svg", "data": paper_dir / f"{spec.id}.npz"})
+                                    "svg": svg if "svg" in formats else None, "data": paper_dir / f"{spec.id}.npz"})
         except Exception as exc:  # noqa: BLE001
             outcome.errors.append(f"figure {spec.id} not produced: {type(exc).__name__}: {exc}")
     for spec in recipe.tables:
@@ -558,20 +597,40 @@ class DaskExecutor:
 
     Every task's random streams come from the seed and the task's own identity, never from the worker
     or the order, so results are bit-identical to an in-process run.  Dask retries a failing task
-    ``retries`` times; one that fails for good is reported and the other tasks' results are kept.
+    ``retries`` times; one that fails for good is reported and the other tasks' results are kept.  A cluster left
+    without any worker for ``no_worker_grace`` seconds while tasks wait ends the report with
+    :class:`DaskClusterLost` (one line naming the cluster), instead of waiting for ever.
     """
 
-    def __init__(self, client, block: Sequence[str] = (), retries: int = 1, cluster=None):
+    def __init__(self, client, block: Sequence[str] = (), retries: int = 1, cluster=None,
+                 no_worker_grace: float | None = None, poll: float = 1.0):
         self.client, self.block, self.retries, self.cluster = client, tuple(block), retries, cluster
         self.used: dict[str, set] = {}  # task key -> the (hook, name) of the components it used
+        #: How long the cluster may have no worker at all while tasks wait, before the report gives up
+        #: (:class:`DaskClusterLost`); default :data:`NO_WORKER_GRACE`.
+        self.no_worker_grace = NO_WORKER_GRACE if no_worker_grace is None else float(no_worker_grace)
+        self.poll = float(poll)
 
     def close(self) -> None:
         self.client.close()
         if self.cluster is not None:
             self.cluster.close()
 
+    def _where(self) -> str:
+        try:
+            return f"the Dask cluster {self.client.scheduler.address}"
+        except Exception:  # noqa: BLE001 - only for the message
+            return "the Dask cluster"
+
+    def _workers(self) -> int:
+        """The workers the scheduler has now (0 where the scheduler cannot be asked)."""
+        try:
+            return len(self.client.nthreads())
+        except Exception:  # noqa: BLE001 - a scheduler that cannot answer has no worker for us
+            return 0
+
     def execute(self, tasks, seed, arch, on_task=None):
-        from distributed import as_completed
+        from distributed import wait
 
         futures = {}
         for i, task in enumerate(tasks):
@@ -581,16 +640,54 @@ class DaskExecutor:
                                      pure=False, retries=self.retries, key=f"{task.key}-{time.time_ns()}",
                                      priority=len(tasks) - i)
             futures[fut] = task
-        for fut in as_completed(list(futures)):
-            task = futures[fut]
+        pending = dict(futures)
+        workerless_since = None
+        while pending:
             try:
-                arrays, seconds, used = fut.result()
-                self.used[task.key] = {tuple(u) for u in used}
-                yield task, arrays, seconds, None
-            except (KeyboardInterrupt, SystemExit):
-                raise
-            except Exception as exc:  # noqa: BLE001
-                yield task, None, 0.0, (f"{type(exc).__name__}: {exc}", traceback.format_exc())
+                done = set(wait(list(pending), timeout=self.poll, return_when="FIRST_COMPLETED").done)
+            except TimeoutError:
+                done = set()
+            if not done:
+                # nothing finished: a cluster whose workers are all gone would leave us waiting for ever
+                if self._workers():
+                    workerless_since = None
+                elif workerless_since is None:
+                    workerless_since = time.monotonic()
+                elif time.monotonic() - workerless_since >= self.no_worker_grace:
+                    for fut in pending:
+                        fut.cancel()
+                    raise DaskClusterLost(self._where(), len(pending), len(futures), self.no_worker_grace)
+                continue
+            workerless_since = None
+            for fut in [f for f in pending if f in done]:  # in the caller's order within a batch
+                task = pending.pop(fut)
+                try:
+                    arrays, seconds, used = fut.result()
+                    self.used[task.key] = {tuple(u) for u in used}
+                    yield task, arrays, seconds, None
+                except (KeyboardInterrupt, SystemExit):
+                    raise
+                except Exception as exc:  # noqa: BLE001
+                    yield task, None, 0.0, (f"{type(exc).__name__}: {exc}", traceback.format_exc())
+
+
+#: Seconds a Dask cluster may have no worker at all while a report's tasks wait, before the report gives up
+#: (:class:`DaskClusterLost`): long enough for a worker's restart, short of hanging for ever.
+NO_WORKER_GRACE = 30.0
+
+
+class DaskClusterLost(ConnectionError):
+    """The Dask cluster a report runs on has had no worker for :data:`NO_WORKER_GRACE` seconds while its tasks
+    wait (the workers died or were stopped, or the scheduler cannot be asked): one line naming it, the finished
+    tasks already cached."""
+
+    def __init__(self, where: str, waiting: int, total: int, grace: float):
+        super().__init__(errno.ENOTCONN, f"no worker for {grace:g} s while {waiting} of {total} tasks wait (its "
+                                         "workers died or were stopped); the finished tasks are cached for the next "
+                                         "report", where)
+
+    def __str__(self) -> str:
+        return f"{self.filename}: {self.strerror}"
 
 
 Executor = InProcess | DaskExecutor
@@ -773,17 +870,20 @@ def report_lock(out: Path, command: str = "", wait: float = 0.0, poll: float = 0
 
 def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = None, size: str = "quick",
                seed: int = 0, filters: str | None = None, arch: str = "cpu", progress: bool = True,
-               command: str = "", executor: "Executor | None" = None, wait: float = 0.0) -> ReportOutcome:
+               command: str = "", executor: "Executor | None" = None, wait: float = 0.0,
+               formats: Sequence[str] | str | None = None) -> ReportOutcome:
     """Run the chosen recipes (default: every registered one) and write ``index.html`` and ``summary.json``.
 
     The page and the summary show every paper of ``out``: the ones run now, and the others from their
     saved ``outcome.json`` (an unreadable one is skipped with a warning on stderr).  The folder is locked
     while the report runs (:func:`report_lock`): a second report into it waits up to ``wait`` seconds, then
-    is refused with a message naming the report that holds it.
+    is refused with a message naming the report that holds it.  Figures are saved in ``formats``
+    (:func:`figure_formats`: by default PNG and SVG).
     """
     from .html import write_index, write_summary
 
     out = Path(out)
+    formats = figure_formats(formats)  # refused before any paper runs
     wanted = sorted(host.recipes) if not papers else list(papers)
     recipes = []
     for paper in wanted:
@@ -796,7 +896,7 @@ def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = No
         outcomes = []
         for recipe in recipes:
             outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
-                                       progress=progress, executor=executor, command=command))
+                                       progress=progress, executor=executor, command=command, formats=formats))
         saved, warnings = saved_outcomes(out, skip=[o.paper for o in outcomes])
         warnings = [*notes, *(w for o in outcomes for w in o.warnings), *warnings]
         for line in warnings:

@@ -23,7 +23,7 @@ from typing import Mapping
 
 import numpy as np
 
-from workbench.criteria import criterion_from_runs, replication_rate, rows_track
+from workbench.criteria import criterion_from_runs, replication_rate, rows_track, vectorised
 from workbench.report.engine import component_failure
 from workbench.sensing.radar import RadarParameters, aspect_rcs_db, clutter_pass_fraction, db, from_db, radar_snr
 from workbench.specs import Criterion, FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
@@ -771,17 +771,46 @@ def _detail(prefix: str) -> str:
     return prefix.replace("{", "{{").replace("}", "}}") + "; " + RUNS_DETAIL
 
 
-def _ordering(ea, eb, ec, wa, wb, wc) -> float:
+# Each statistic below is declared with its form over a batch of resamples (workbench.criteria.vectorised): the
+# same numbers, from the means over each resample's runs (given="means"), the resample counts ("counts") or the
+# resampled runs on axis 1 ("resamples"), so that the bootstrap evaluates its 2,000 resamples at once.
+
+def _first_min(*values):
+    """Python's ``min`` of the arguments, element-wise over resamples (the first smallest; NaN as ``min`` reads it)."""
+    out = values[0]
+    for v in values[1:]:
+        out = np.where(v < out, v, out)
+    return out
+
+
+def _ordering_one(ea, eb, ec, wa, wb, wc) -> float:
     # min(B/C, A/B) over both averages: > 1 iff C < B < A for both
     return float(min(eb.mean() / ec.mean(), ea.mean() / eb.mean(), wb.mean() / wc.mean(), wa.mean() / wb.mean()))
 
 
-def _a_over_c(wa, wc) -> float:
+def _ordering_many(ea, eb, ec, wa, wb, wc):  # the means over each resample's runs
+    return _first_min(eb / ec, ea / eb, wb / wc, wa / wb)
+
+
+_ordering = vectorised(_ordering_one, _ordering_many, given="means")
+
+
+def _a_over_c_one(wa, wc) -> float:
     return float(wa.mean() / wc.mean())
 
 
-def _early_over_whole(ea, eb, ec, wa, wb, wc) -> float:
+_a_over_c = vectorised(_a_over_c_one, lambda wa, wc: wa / wc, given="means")
+
+
+def _early_over_whole_one(ea, eb, ec, wa, wb, wc) -> float:
     return float(min(ea.mean() / wa.mean(), eb.mean() / wb.mean(), ec.mean() / wc.mean()))
+
+
+def _early_over_whole_many(ea, eb, ec, wa, wb, wc):  # the means over each resample's runs
+    return _first_min(ea / wa, eb / wb, ec / wc)
+
+
+_early_over_whole = vectorised(_early_over_whole_one, _early_over_whole_many, given="means")
 
 
 #: N_conv of a sweep that is not non-increasing within noise (outside every passing range)
@@ -797,14 +826,30 @@ def _n_conv(ns: np.ndarray):
             return float(NOT_MONOTONE)
         within = np.abs(mean - mean[-1]) <= 0.05 * mean[-1]
         return float(next(int(ns[j]) for j in range(len(per_n)) if within[j:].all()))
-    return statistic
+
+    def many(*per_n):
+        mean = np.stack([x.mean(axis=1) for x in per_n], axis=1)  # (resamples, N values)
+        runs = per_n[0].shape[1]
+        se = np.stack([x.std(axis=1, ddof=1) / np.sqrt(runs) if runs > 1 else np.zeros(x.shape[0])
+                       for x in per_n], axis=1)
+        monotone = np.all(mean[:, 1:] <= mean[:, :-1] + 2.0 * np.maximum(se[:, :-1], se[:, 1:]), axis=1)
+        last = mean[:, -1:]
+        within = np.abs(mean - last) <= 0.05 * last
+        tail = np.flip(np.logical_and.accumulate(np.flip(within, axis=1), axis=1), axis=1)  # within[j:].all()
+        first = np.argmax(tail, axis=1)
+        n_conv = np.where(tail.any(axis=1), np.asarray(ns, dtype=float)[first].astype(int), np.nan)
+        return np.where(monotone, n_conv, float(NOT_MONOTONE))
+    return vectorised(statistic, many)
 
 
-def _radius_difference(w25, w1) -> float:
+def _radius_difference_one(w25, w1) -> float:
     return float(abs(w25.mean() - w1.mean()) / w1.mean())
 
 
-def _below_measurement(e25, m25, e1, m1) -> float:
+_radius_difference = vectorised(_radius_difference_one, lambda w25, w1: np.abs(w25 - w1) / w1, given="means")
+
+
+def _below_measurement_one(e25, m25, e1, m1) -> float:
     fracs = []
     for e, m in ((e25, m25), (e1, m1)):
         with np.errstate(invalid="ignore"):
@@ -812,6 +857,30 @@ def _below_measurement(e25, m25, e1, m1) -> float:
         ok = np.isfinite(m_mean)
         fracs.append(float(np.mean(e.mean(axis=0)[ok] < m_mean[ok])) if ok.any() else float("nan"))
     return float(min(fracs))
+
+
+def _below_measurement_many(counts, e25, m25, e1, m1):
+    # counts (resamples, runs): the means over the resampled runs as weighted sums, without copying the
+    # (runs, scans) rows once per resample
+    runs = counts.shape[1]
+    fracs = []
+    for e, m in ((e25, m25), (e1, m1)):
+        finite = np.isfinite(m)
+        count = counts @ finite.astype(float)  # mean_over_runs over the resampled runs
+        with np.errstate(invalid="ignore"):
+            m_mean = np.where(count > 0, (counts @ np.where(finite, m, 0.0)) / np.maximum(count, 1), np.nan)
+        ok = np.isfinite(m_mean)
+        e_finite = np.isfinite(e)  # a non-finite error counts only where its run is drawn (then no scan is below)
+        with np.errstate(invalid="ignore"):
+            e_mean = np.where(counts @ (~e_finite).astype(float) > 0, np.nan,
+                              (counts @ np.where(e_finite, e, 0.0)) / runs)
+            below = (e_mean < m_mean) & ok
+        scans = ok.sum(axis=1)
+        fracs.append(np.where(scans > 0, below.sum(axis=1) / np.maximum(scans, 1), np.nan))
+    return _first_min(*fracs)
+
+
+_below_measurement = vectorised(_below_measurement_one, _below_measurement_many, given="counts")
 
 
 def _pooled(results, key: str, particles: int, radius: float, rcs: float):
@@ -844,9 +913,12 @@ def _with_ours(results, rcs: float, statistic, pairs: str) -> str:
             f"{medians:.2f} from the medians")
 
 
-def _cpu_ratio(wide, table) -> float:
+def _cpu_ratio_one(wide, table) -> float:
     # CPU time at R = 2.5 km / at R = 1 km
     return float(np.mean(wide) / np.mean(table))
+
+
+_cpu_ratio = vectorised(_cpu_ratio_one, lambda wide, table: wide / table, given="means")
 
 
 def _with_timing(crit: Criterion, results) -> Criterion:

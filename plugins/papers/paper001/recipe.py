@@ -37,7 +37,7 @@ from typing import Mapping
 import numpy as np
 
 from workbench.criteria import RUNS_DETAIL, COUNTS_DETAIL, Precondition, binomial_interval, bootstrap_interval, \
-    criterion_from_counts, criterion_from_runs, replication_rate
+    criterion_from_counts, criterion_from_runs, replication_rate, vectorised
 from workbench.metrics import track_gospa
 
 from workbench.metrics import (TrackCounts, continuity, false_track_sums, pooled_rmse, removal_rate_pooled_per_ping,
@@ -594,9 +594,38 @@ def _masked_sq(b: TrackCounts, a: TrackCounts) -> tuple[np.ndarray, np.ndarray]:
     return np.where(both, b.sq_error, np.nan), np.where(both, a.sq_error, np.nan)
 
 
-def _rmse_diff(sq_b: np.ndarray, sq_a: np.ndarray) -> float:
+def _rmse_diff_one(sq_b: np.ndarray, sq_a: np.ndarray) -> float:
     """Pooled RMSE after minus before (pairs held in both); NaN when no pair."""
     return pooled_rmse(sq_a) - pooled_rmse(sq_b)
+
+
+def _rmse_diff_many(counts: np.ndarray, sq_b: np.ndarray, sq_a: np.ndarray) -> np.ndarray:
+    """:func:`_rmse_diff_one` of every resample, from each run's sum and count of finite squared errors weighted by
+    the resample counts ``(resamples, runs)`` (no copy of the runs x pings arrays per resample)."""
+    rmse = []
+    for sq in (sq_a, sq_b):
+        sq = sq.reshape(sq.shape[0], -1)
+        finite = np.isfinite(sq)
+        total = counts @ np.where(finite, sq, 0.0).sum(axis=1)
+        held = counts @ finite.sum(axis=1).astype(float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rmse.append(np.where(held > 0, np.sqrt(total / np.maximum(held, 1.0)), np.nan))
+    return rmse[0] - rmse[1]
+
+
+#: The statistic of criterion 3 and the rows table, declared with its batched form for the bootstrap.
+_rmse_diff = vectorised(_rmse_diff_one, _rmse_diff_many, given="counts")
+
+
+def _removal_ratio_many(counts: np.ndarray, sum_before: np.ndarray, sum_after: np.ndarray) -> np.ndarray:
+    """:func:`removal_ratio` of every resample: the resampled sums as counts-weighted sums (exact for counts)."""
+    den = counts @ np.asarray(sum_before, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, 1.0 - (counts @ np.asarray(sum_after, dtype=float)) / den, np.nan)
+
+
+#: :func:`removal_ratio` declared with its batched form for the bootstrap.
+_removal_ratio = vectorised(removal_ratio, _removal_ratio_many, given="counts")
 
 
 def summary(before: TrackCounts, after: TrackCounts, post: np.ndarray) -> dict:
@@ -628,7 +657,7 @@ def _rate_text(sums: tuple[np.ndarray, np.ndarray]) -> str:
     value = removal_ratio(*sums)
     if not np.isfinite(value):
         return "n/a (no false track before removal)"
-    lo, hi = bootstrap_interval(sums, removal_ratio)
+    lo, hi = bootstrap_interval(sums, _removal_ratio)
     if not np.isfinite(lo):
         return f"{100 * value:.1f} %"
     return f"{100 * value:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]"
@@ -1197,7 +1226,7 @@ def c1_criterion(before_false: np.ndarray, after_false: np.ndarray, post: np.nda
     population_holds = Precondition(name, held, f"{total} summed over {per_run.size} runs x {pings}; needs >= "
                                     f"{min_false}", {"needs": min_false, "has": total})
     crit = criterion_from_runs(
-        "1", "mean false-track removal rate in simulation is in 60-95 % (paper 78 %)", sums, removal_ratio,
+        "1", "mean false-track removal rate in simulation is in 60-95 % (paper 78 %)", sums, _removal_ratio,
         (0.60, 0.95), "within", min_n=MIN_RUNS["1"], published="78 %", detail_fmt=_detail(text, RUNS_DETAIL),
         threshold_text="removal rate (ratio of sums) within [0.60, 0.95]",
         replication=_replication(sums, _c1_holds), preconditions=(population_holds,))

@@ -47,7 +47,7 @@ from typing import Mapping
 import numpy as np
 
 from workbench.criteria import Criterion, Precondition, bootstrap_interval, criterion_from_runs, \
-    equivalence_band, judge, judge_across, judge_equivalent, reference_converged
+    equivalence_band, judge, judge_across, judge_equivalent, reference_converged, vectorised
 
 from .scenario import DELTA, LEVELS, NOMINAL, READINGS, case_name
 
@@ -106,13 +106,35 @@ def _with_detail(c: Criterion, text: str) -> Criterion:
     return replace(c, detail=f"{text} {c.detail}")
 
 
-def _monotone_levels(*levels) -> float:
+# The statistics are declared with their form over a batch of resamples (workbench.criteria.vectorised): the same
+# numbers, from the means over each resample's runs (given="means") or the resampled runs on axis 1, so that a
+# bootstrap evaluates its resamples at once.  _first_max is Python's max element-wise over resamples (the first
+# largest).
+
+def _first_max(*values):
+    out = values[0]
+    for v in values[1:]:
+        out = np.where(v > out, v, out)
+    return out
+
+
+def _monotone_levels_one(*levels) -> float:
     # max over levels of max(m_b / m_a, m_c / m_b) for the mean MSE of a (runs, 3) array per level
     worst = -np.inf
     for a in levels:
         m = a.mean(axis=0)
         worst = max(worst, m[1] / m[0], m[2] / m[1])
     return float(worst)
+
+
+def _monotone_levels_many(*means):
+    worst = np.full(means[0].shape[0], -np.inf)
+    for m in means:
+        worst = _first_max(worst, m[:, 1] / m[:, 0], m[:, 2] / m[:, 1])
+    return worst
+
+
+_monotone_levels = vectorised(_monotone_levels_one, _monotone_levels_many, given="means")
 
 
 def _c1(results, reading: str) -> Criterion:
@@ -123,8 +145,9 @@ def _c1(results, reading: str) -> Criterion:
     levels = _runs(results, reading, names)
     means = [lv.mean(axis=0) for lv in levels]
     worst = [max(means[0][i] / means[1][i], means[1][i] / means[2][i]) for i in range(len(names))]
-    c = criterion_from_runs(cid, text, tuple(levels), lambda a, b, d: max(np.max(a.mean(0) / b.mean(0)),
-                                                                          np.max(b.mean(0) / d.mean(0))),
+    stat = vectorised(lambda a, b, d: max(np.max(a.mean(0) / b.mean(0)), np.max(b.mean(0) / d.mean(0))),
+                      lambda a, b, d: _first_max(np.max(a / b, axis=1), np.max(b / d, axis=1)), given="means")
+    c = criterion_from_runs(cid, text, tuple(levels), stat,
                             1.0, "<", min_n=_MIN["runs"], resamples=RESAMPLES,
                             threshold_text="max over filters of max(MSE_L1 / MSE_L2, MSE_L2 / MSE_L3) < 1")
     i = int(np.argmax(worst))
@@ -151,7 +174,10 @@ def _pair_ratio(num, den):
     def ratio(a):
         m = a.mean(axis=0)
         return float(m[list(num)].min() / m[list(den)].min())
-    return ratio
+
+    def many(m):
+        return m[:, list(num)].min(axis=1) / m[:, list(den)].min(axis=1)
+    return vectorised(ratio, many, given="means")
 
 
 def _order_class(interval: tuple[float, float]) -> str:
@@ -223,10 +249,16 @@ def _c2(results, reading: str) -> Criterion:
     summary = (f"ordered at {count['ordered']} of {total} levels (tie {count['tie']}, reversed {count['reversed']}, "
                f"undecided {count['undecided']})")
 
-    def second_worst(*arrays):
+    def second_worst_one(*arrays):
         # per level the larger of the two pair ratios; the 2nd smallest over levels (the claim needs 2 levels)
         worst = [max(_pair_ratio(num, den)(a) for _, num, den in ORDER_PAIRS) for a in arrays]
         return float(sorted(worst)[1])
+
+    def second_worst_many(*arrays):
+        worst = [_first_max(*(_pair_ratio(num, den).many(a) for _, num, den in ORDER_PAIRS)) for a in arrays]
+        return np.sort(np.stack(worst, axis=1), axis=1)[:, 1]
+
+    second_worst = vectorised(second_worst_one, second_worst_many, given="means")
 
     ours = second_worst(*levels)
     interval = bootstrap_interval(tuple(levels), second_worst, level=level, resamples=RESAMPLES, seed=0) \
@@ -298,9 +330,8 @@ def _c4_level(results, reading: str, level: str) -> Criterion:
     crpf = _runs(results, reading, ("crpf-100",), level)[:, 0]
     kf = _runs(results, reading, KALMAN_TYPE, level)
 
-    def ratio(c, k):
-        # MSE_X / min_k MSE_k
-        return float(c.mean() / k.mean(axis=0).min())
+    ratio = vectorised(lambda c, k: float(c.mean() / k.mean(axis=0).min()),  # MSE_X / min_k MSE_k
+                       lambda c, k: c / k.min(axis=1), given="means")
 
     best = KALMAN_TYPE[int(np.argmin(kf.mean(axis=0)))]
     c = criterion_from_runs(cid, text, (crpf, kf), ratio, 1.0, "<=", min_n=_MIN["runs"], resamples=RESAMPLES,
@@ -411,6 +442,15 @@ def _signed_r2(y: np.ndarray) -> float:
     return float(r2 if slope > 0 else -r2)
 
 
+def _signed_r2_many(y: np.ndarray) -> np.ndarray:
+    """:func:`_signed_r2` of every row of ``y`` (resamples, 3)."""
+    slope, icpt = np.polyfit(CRPF_PARTICLES, y.T, 1)
+    fit = slope[:, None] * CRPF_PARTICLES + icpt[:, None]
+    spread = np.maximum(np.sum((y - y.mean(axis=1, keepdims=True)) ** 2, axis=1), 1e-300)
+    r2 = 1.0 - np.sum((y - fit) ** 2, axis=1) / spread
+    return np.where(slope > 0, r2, -r2)
+
+
 def _timing_criteria(results) -> list[Criterion]:
     names = CRPF_FILTERS + KALMAN_TYPE
     texts = {"linear": "CRPF time about linear in N (straight-line fit of the median time per run against N, "
@@ -433,15 +473,19 @@ def _timing_criteria(results) -> list[Criterion]:
             unit = "ms" if key == "per_run_s" else "us"
             scale = 1e3 if key == "per_run_s" else 1e6
             if kind == "linear":
-                c = criterion_from_runs(cid, text, (crpf, kf), lambda a, b: _signed_r2(np.median(a, axis=0)), 0.9,
+                stat = vectorised(lambda a, b: _signed_r2(np.median(a, axis=0)),
+                                  lambda a, b: _signed_r2_many(np.median(a, axis=1)))
+                c = criterion_from_runs(cid, text, (crpf, kf), stat, 0.9,
                                         ">=", min_n=min_n, resamples=RESAMPLES, threshold_text="signed R^2 >= 0.9")
                 slope, icpt = np.polyfit(CRPF_PARTICLES, med_c, 1)
                 extra = (f"median {unit}/run CRPF-100/300/500 = " + " / ".join(f"{scale * v:.4g}" for v in med_c)
                          + f"; fit slope {scale * slope * 100:.3g} {unit} per 100 particles, intercept "
                            f"{scale * icpt:.3g} {unit} (per-call overhead, {100 * icpt / med_c[0]:.0f} % of CRPF-100).")
             else:
-                c = criterion_from_runs(cid, text, (crpf, kf),
-                                        lambda a, b: float(np.median(a, axis=0)[1:].min() / np.median(b, axis=0).max()),
+                stat = vectorised(
+                    lambda a, b: float(np.median(a, axis=0)[1:].min() / np.median(b, axis=0).max()),
+                    lambda a, b: np.median(a, axis=1)[:, 1:].min(axis=1) / np.median(b, axis=1).max(axis=1))
+                c = criterion_from_runs(cid, text, (crpf, kf), stat,
                                         1.0, ">", min_n=min_n, resamples=RESAMPLES,
                                         threshold_text="min(CRPF-300, CRPF-500) / slowest Kalman-type > 1")
                 extra = (f"median {unit}/run CRPF-300/500 = {scale * med_c[1]:.4g} / {scale * med_c[2]:.4g}; slowest "
@@ -458,9 +502,15 @@ def _timing_criteria(results) -> list[Criterion]:
     else:
         arr = np.stack([results[f"timing/{n}"]["per_run_s"] for n in pair_names], axis=1)
 
-        def worst(a):
+        def worst_one(a):
             m = np.median(a, axis=0)  # ukf, sr-ukf, cdkf, sr-cdkf
             return float(max(m[1] / m[0], m[3] / m[2]))
+
+        def worst_many(a):
+            m = np.median(a, axis=1)
+            return _first_max(m[:, 1] / m[:, 0], m[:, 3] / m[:, 2])
+
+        worst = vectorised(worst_one, worst_many)
 
         m = np.median(arr, axis=0)
         c = criterion_from_runs(cid, text, arr, worst, 1.0, "<", min_n=_MIN["timed"], resamples=RESAMPLES,

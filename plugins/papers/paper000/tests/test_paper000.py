@@ -453,6 +453,77 @@ def test_criterion_5_judges_its_timing_on_repetitions():
     assert untimed.verdict == "inconclusive" and "timing not measured" in untimed.detail
 
 
+def _loop_statistics(arrays, statistic, idx):
+    """The bootstrap's statistics as they were computed before batching (the reference): one call per resample."""
+    return np.array([float(statistic.one(*(a[i] for a in arrays))) for i in idx])
+
+
+def _same_numbers(fast, slow, where="criterion"):
+    """Every number of two ``to_dict()`` records agrees to 1e-12 relative; everything else is equal."""
+    if isinstance(fast, dict):
+        assert fast.keys() == slow.keys(), where
+        for key in fast:
+            _same_numbers(fast[key], slow[key], f"{where}.{key}")
+    elif isinstance(fast, list):
+        assert len(fast) == len(slow), where
+        for i, (a, b) in enumerate(zip(fast, slow)):
+            _same_numbers(a, b, f"{where}[{i}]")
+    elif isinstance(fast, float) and not isinstance(slow, bool):
+        assert fast == pytest.approx(slow, rel=1e-12, abs=0.0, nan_ok=True), where
+    else:
+        assert fast == slow, where
+
+
+def test_batched_criteria_give_the_per_resample_loops_numbers(monkeypatch):
+    """Every criterion's interval, verdict and detail from the batched statistics equal the per-resample loop's
+    (hand-made runs of every row criteria 1-6 judge, with the timing repetitions; 300 resamples)."""
+    from functools import partial
+
+    import workbench.criteria as wc
+
+    rng = np.random.default_rng(5)
+    k = np.arange(300)
+    e = 100.0 * np.where(k <= 100, 2.0, 1.0) * (1 + 0.3 * rng.standard_normal((40, 1))) \
+        + 5.0 * rng.standard_normal((40, 300))
+    res = _fake_results({"A": 1.3 * e + 10 * rng.standard_normal((40, 300)), "B": 1.1 * e, "C": e}, 40)
+    for task, part in (("table@-20dBsm", slice(0, 20)), ("replicate@-20dBsm", slice(20, 40))):
+        wide = e[part] * (1 + 0.1 * rng.standard_normal((part.stop - part.start, 1)))
+        res[task]["C__N600__R2500__error"] = wide
+        res[task]["C__N600__R2500__lost"] = lost_track(wide)
+        res[task]["C__N600__R2500__seconds"] = np.array(1.0)
+        for r in (1000, 2500):
+            m = e[part] * rng.uniform(0.8, 1.6, e[part].shape)
+            m[rng.random(m.shape) < 0.1] = np.nan  # scans without a gated detection
+            res[task][f"C__N600__R{r}__m_error"] = m
+            res[task][f"C__N600__R{r}__gated"] = np.ones_like(m)
+    res["timing@-20dBsm"] = {"runs": np.array(20), "repeats": np.array(7), "rcs": np.array(-20.0),
+                             "cpu_wide": 1.1 + 0.1 * rng.standard_normal(7), "cpu_table": 1.0 + 0.1 * rng.random(7)}
+    res["sweep@-20dBsm"] = {"rcs": np.array(-20.0), "stream": np.array(""), "runs": np.array(20)}
+    monkeypatch.setattr(recipe, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
+    fast = recipe.criteria(res)
+    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    slow = recipe.criteria(res)
+    assert [c.id for c in fast] == [c.id for c in slow] and {"1", "2", "3", "5", "6"} <= {c.id for c in fast}
+    finite = [c.id for c in fast if c.interval is not None and np.all(np.isfinite(c.interval))]
+    assert {"1", "2", "3", "5", "6"} <= set(finite)
+    for a, b in zip(fast, slow):
+        _same_numbers(a.to_dict(), b.to_dict(), a.id)
+    # criterion 6's statistic where one run's error is not a number at a scan: it counts only where that run is
+    # drawn, as in the loop
+    e25, e1 = np.vstack([res[t]["C__N600__R2500__error"] for t in ("table@-20dBsm", "replicate@-20dBsm")]), \
+        np.vstack([res[t]["C__N600__R1000__error"] for t in ("table@-20dBsm", "replicate@-20dBsm")])
+    m25, m1 = (np.vstack([res[t][f"C__N600__R{r}__m_error"] for t in ("table@-20dBsm", "replicate@-20dBsm")])
+               for r in (2500, 1000))
+    e25 = e25.copy()
+    e25[7, 40:60] = np.nan
+    monkeypatch.undo()
+    args = ((e25, m25, e1, m1), recipe._below_measurement)
+    fast = wc.bootstrap_interval(*args, resamples=300)
+    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    slow = wc.bootstrap_interval(*args, resamples=300)
+    assert np.all(np.isfinite(slow)) and fast == pytest.approx(slow, rel=1e-12, abs=0.0)
+
+
 def test_tuning_rule_scores_lost_runs_first():
     assert tuning.score(np.array([True, False, False]), np.array([9e3, 100.0, 200.0])) == (1, 150.0)
     assert tuning.score(np.array([True]), np.array([5e3]))[1] == np.inf

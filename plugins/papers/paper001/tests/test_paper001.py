@@ -302,6 +302,58 @@ def test_c1_is_the_ratio_of_sums_and_its_interval_resamples_runs():
     assert varied.interval[0] < varied.ours < varied.interval[1]
 
 
+def _loop_statistics(arrays, statistic, idx):
+    """The bootstrap's statistics as they were computed before batching (the reference): one call per resample."""
+    return np.array([float(statistic.one(*(a[i] for a in arrays))) for i in idx])
+
+
+def test_batched_statistics_give_the_per_resample_loops_tables_and_criteria(report, monkeypatch):
+    """The removal rates' and the RMSE differences' intervals in every table and criterion, from the batched
+    statistics, equal the per-resample loop's to 1e-12 (the tables' text, which prints them, is the same; 300
+    resamples)."""
+    from functools import partial
+
+    import workbench.criteria as wc
+
+    recipe, results = report
+    intervals = []
+
+    def recorded(*args, **kwargs):  # every interval the tables compute, in order
+        intervals.append(wc.bootstrap_interval(*args, **{"resamples": 300, **kwargs}))
+        return intervals[-1]
+
+    monkeypatch.setattr(paper001, "bootstrap_interval", recorded)
+    monkeypatch.setattr(paper001, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
+
+    def everything():
+        intervals.clear()
+        return [t.make(results) for t in recipe.tables], recipe.criteria(results), list(intervals)
+
+    fast_tables, fast, fast_intervals = everything()
+    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    slow_tables, slow, slow_intervals = everything()
+    assert fast_tables == slow_tables
+    assert [c.id for c in fast] == [c.id for c in slow]
+    for a, b in zip(fast, slow):
+        assert a.verdict == b.verdict and a.detail == b.detail, a.id
+        assert a.interval == pytest.approx(b.interval, rel=1e-12, abs=0.0, nan_ok=True), a.id
+    assert len(fast_intervals) == len(slow_intervals) > 20
+    assert sum(np.all(np.isfinite(iv)) and iv[0] < iv[1] for iv in fast_intervals) > 10
+    for a, b in zip(fast_intervals, slow_intervals):
+        assert a == pytest.approx(b, rel=1e-12, abs=0.0, nan_ok=True)
+    # on hand-made squared errors with unheld pairs (NaN), the RMSE difference's interval directly
+    rng = np.random.default_rng(4)
+    sq_b, sq_a = rng.gamma(2.0, 10.0, (40, 30)), rng.gamma(2.0, 9.0, (40, 30))
+    sq_a[rng.random(sq_a.shape) < 0.2] = np.nan
+    sq_b[np.isnan(sq_a)] = np.nan
+    sq_a[3], sq_b[3] = np.nan, np.nan  # a run with no pair held
+    monkeypatch.undo()
+    fast = wc.bootstrap_interval((sq_b, sq_a), paper001._rmse_diff, resamples=400)
+    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    slow = wc.bootstrap_interval((sq_b, sq_a), paper001._rmse_diff, resamples=400)
+    assert np.all(np.isfinite(slow)) and fast == pytest.approx(slow, rel=1e-12, abs=0.0)
+
+
 def test_c1_counts_false_tracks_after_removal_on_pings_without_one_before():
     before, after, post = _identical_runs()
     after = after.copy()
