@@ -14,6 +14,7 @@ from workbench.plugins import load_host
 from workbench.sensing.radar import (db, detection_probability, exponential_power_log_density, from_db, position_sigma,
                                      radar_snr)
 from workbench.specs import RecipeOptions, TaskContext
+from workbench.testing.bootstrap import loop_statistics, same_numbers
 from workbench.types import Gaussian, Scan
 from workbench_papers.paper000 import methods, recipe, scenario, tuning
 from workbench_papers.paper000.pipeline import (estimation_error, lost_track, measurement_error, moment_matched_scale,
@@ -453,27 +454,6 @@ def test_criterion_5_judges_its_timing_on_repetitions():
     assert untimed.verdict == "inconclusive" and "timing not measured" in untimed.detail
 
 
-def _loop_statistics(arrays, statistic, idx):
-    """The bootstrap's statistics as they were computed before batching (the reference): one call per resample."""
-    return np.array([float(statistic.one(*(a[i] for a in arrays))) for i in idx])
-
-
-def _same_numbers(fast, slow, where="criterion"):
-    """Every number of two ``to_dict()`` records agrees to 1e-12 relative; everything else is equal."""
-    if isinstance(fast, dict):
-        assert fast.keys() == slow.keys(), where
-        for key in fast:
-            _same_numbers(fast[key], slow[key], f"{where}.{key}")
-    elif isinstance(fast, list):
-        assert len(fast) == len(slow), where
-        for i, (a, b) in enumerate(zip(fast, slow)):
-            _same_numbers(a, b, f"{where}[{i}]")
-    elif isinstance(fast, float) and not isinstance(slow, bool):
-        assert fast == pytest.approx(slow, rel=1e-12, abs=0.0, nan_ok=True), where
-    else:
-        assert fast == slow, where
-
-
 def test_batched_criteria_give_the_per_resample_loops_numbers(monkeypatch):
     """Every criterion's interval, verdict and detail from the batched statistics equal the per-resample loop's
     (hand-made runs of every row criteria 1-6 judge, with the timing repetitions; 300 resamples)."""
@@ -501,13 +481,13 @@ def test_batched_criteria_give_the_per_resample_loops_numbers(monkeypatch):
     res["sweep@-20dBsm"] = {"rcs": np.array(-20.0), "stream": np.array(""), "runs": np.array(20)}
     monkeypatch.setattr(recipe, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
     fast = recipe.criteria(res)
-    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
     slow = recipe.criteria(res)
     assert [c.id for c in fast] == [c.id for c in slow] and {"1", "2", "3", "5", "6"} <= {c.id for c in fast}
     finite = [c.id for c in fast if c.interval is not None and np.all(np.isfinite(c.interval))]
     assert {"1", "2", "3", "5", "6"} <= set(finite)
     for a, b in zip(fast, slow):
-        _same_numbers(a.to_dict(), b.to_dict(), a.id)
+        same_numbers(a.to_dict(), b.to_dict(), a.id)
     # criterion 6's statistic where one run's error is not a number at a scan: it counts only where that run is
     # drawn, as in the loop
     e25, e1 = np.vstack([res[t]["C__N600__R2500__error"] for t in ("table@-20dBsm", "replicate@-20dBsm")]), \
@@ -519,7 +499,7 @@ def test_batched_criteria_give_the_per_resample_loops_numbers(monkeypatch):
     monkeypatch.undo()
     args = ((e25, m25, e1, m1), recipe._below_measurement)
     fast = wc.bootstrap_interval(*args, resamples=300)
-    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
     slow = wc.bootstrap_interval(*args, resamples=300)
     assert np.all(np.isfinite(slow)) and fast == pytest.approx(slow, rel=1e-12, abs=0.0)
 

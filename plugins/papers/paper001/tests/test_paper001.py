@@ -11,6 +11,7 @@ from workbench.metrics import TrackCounts, continuity, pooled_rmse
 from workbench.plugins import load_host
 from workbench.recorded.sonar import load_sonar_csv
 from workbench.specs import RecipeOptions, TaskContext
+from workbench.testing.bootstrap import loop_statistics
 from workbench_papers.paper001 import recipe as paper001
 
 HOST = load_host()
@@ -302,11 +303,6 @@ def test_c1_is_the_ratio_of_sums_and_its_interval_resamples_runs():
     assert varied.interval[0] < varied.ours < varied.interval[1]
 
 
-def _loop_statistics(arrays, statistic, idx):
-    """The bootstrap's statistics as they were computed before batching (the reference): one call per resample."""
-    return np.array([float(statistic.one(*(a[i] for a in arrays))) for i in idx])
-
-
 def test_batched_statistics_give_the_per_resample_loops_tables_and_criteria(report, monkeypatch):
     """The removal rates' and the RMSE differences' intervals in every table and criterion, from the batched
     statistics, equal the per-resample loop's to 1e-12 (the tables' text, which prints them, is the same; 300
@@ -330,7 +326,7 @@ def test_batched_statistics_give_the_per_resample_loops_tables_and_criteria(repo
         return [t.make(results) for t in recipe.tables], recipe.criteria(results), list(intervals)
 
     fast_tables, fast, fast_intervals = everything()
-    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
     slow_tables, slow, slow_intervals = everything()
     assert fast_tables == slow_tables
     assert [c.id for c in fast] == [c.id for c in slow]
@@ -349,7 +345,7 @@ def test_batched_statistics_give_the_per_resample_loops_tables_and_criteria(repo
     sq_a[3], sq_b[3] = np.nan, np.nan  # a run with no pair held
     monkeypatch.undo()
     fast = wc.bootstrap_interval((sq_b, sq_a), paper001._rmse_diff, resamples=400)
-    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
     slow = wc.bootstrap_interval((sq_b, sq_a), paper001._rmse_diff, resamples=400)
     assert np.all(np.isfinite(slow)) and fast == pytest.approx(slow, rel=1e-12, abs=0.0)
 

@@ -12,6 +12,7 @@ from workbench.models import random_walk_velocity
 from workbench.plugins import load_host
 from workbench.rng import generator
 from workbench.specs import RecipeOptions, TaskContext
+from workbench.testing.bootstrap import loop_statistics, same_numbers
 from workbench.trajectory import sample_motion
 from workbench.types import InputError
 from workbench_papers.paper003 import judging
@@ -399,27 +400,6 @@ def test_criteria_carry_n_interval_and_verdict(tiny):
     assert c4.ours == pytest.approx(crpf / best)
 
 
-def _loop_statistics(arrays, statistic, idx):
-    """The bootstrap's statistics as they were computed before batching (the reference): one call per resample."""
-    return np.array([float(statistic.one(*(a[i] for a in arrays))) for i in idx])
-
-
-def _same_numbers(fast, slow, where="criterion"):
-    """Every number of two ``to_dict()`` records agrees to 1e-12 relative; everything else is equal."""
-    if isinstance(fast, dict):
-        assert fast.keys() == slow.keys(), where
-        for key in fast:
-            _same_numbers(fast[key], slow[key], f"{where}.{key}")
-    elif isinstance(fast, list):
-        assert len(fast) == len(slow), where
-        for i, (a, b) in enumerate(zip(fast, slow)):
-            _same_numbers(a, b, f"{where}[{i}]")
-    elif isinstance(fast, float) and not isinstance(slow, bool):
-        assert fast == pytest.approx(slow, rel=1e-12, abs=0.0, nan_ok=True), where
-    else:
-        assert fast == slow, where
-
-
 def test_batched_criteria_give_the_per_resample_loops_numbers(tiny, monkeypatch):
     """Every criterion's interval, verdict and detail (across delta and the reference included) from the batched
     statistics equal the per-resample loop's, on the tiny runs with every criterion decided (120 resamples)."""
@@ -429,14 +409,14 @@ def test_batched_criteria_give_the_per_resample_loops_numbers(tiny, monkeypatch)
     monkeypatch.setattr(judging, "_MIN", {"runs": 2, "ref": 2, "timed": 2, "repeats": 2})
     monkeypatch.setattr(judging, "RESAMPLES", 120)
     fast = judging.criteria(results)
-    monkeypatch.setattr(wc, "_batched_statistics", _loop_statistics)
+    monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
     slow = judging.criteria(results)
     assert [c.id for c in fast] == [c.id for c in slow]
     finite = [c.id for c in fast if c.interval is not None and np.all(np.isfinite(c.interval))]
     assert {"C1", "C2", "C4-L2", "C4-L3", "C4-N", "C5-linear", "C5-slower", "C6"} <= set(finite)
     assert any(c.across for c in fast)
     for a, b in zip(fast, slow):
-        _same_numbers(a.to_dict(), b.to_dict(), a.id)
+        same_numbers(a.to_dict(), b.to_dict(), a.id)
 
 
 def test_third_party_filter_joins_the_figures():
