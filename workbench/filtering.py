@@ -10,7 +10,7 @@ from .models import MeasurementModel, MotionModel
 from .specs import FilterSpec
 from .types import Gaussian, InputError, Scan, Scans
 
-__all__ = ["run_filter", "single_measurement", "keep_where"]
+__all__ = ["run_filter", "single_measurement", "require_finite", "keep_where"]
 
 
 def single_measurement(scan: Scan, who: str = "this filter") -> tuple[np.ndarray, np.ndarray]:
@@ -31,6 +31,13 @@ def single_measurement(scan: Scan, who: str = "this filter") -> tuple[np.ndarray
         return np.zeros((scan.batch, scan.z.shape[2])), present
     first = np.argmax(scan.valid, axis=1)
     return scan.z[np.arange(scan.batch), first], present
+
+
+def require_finite(z: np.ndarray, present: np.ndarray, who: str) -> None:
+    """Refuse, naming ``who`` and the first batch item, a present measurement ``z (B, m)`` holding NaN or inf."""
+    if not np.all(np.isfinite(z[present])):
+        item = int(np.flatnonzero(present & ~np.all(np.isfinite(z), axis=1))[0])
+        raise InputError(f"{who}: the measurement of batch item {item} is not finite (NaN or inf)")
 
 
 def keep_where(present: np.ndarray, updated: np.ndarray, previous: np.ndarray) -> np.ndarray:

@@ -49,7 +49,7 @@ from functools import partial
 import numpy as np
 
 from workbench import hookimpl
-from workbench.filtering import keep_where, single_measurement
+from workbench.filtering import keep_where, require_finite, single_measurement
 from workbench.kernels.counter_normals import draw_key
 from workbench.kernels.crpf_step import crpf_step, pmf_offset, propagation_normals
 from workbench.models import MeasurementModel, MotionModel, require_linear
@@ -285,9 +285,7 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
     z, present = single_measurement(scan, "crpf")
     if not present.any():
         return state
-    if not np.all(np.isfinite(z[present])):
-        item = int(np.flatnonzero(present & ~np.all(np.isfinite(z), axis=1))[0])
-        raise InputError(f"crpf: the measurement of batch item {item} is not finite (NaN or inf)")
+    require_finite(z, present, "crpf")
     x, c, s2 = state.particles, state.costs, state.variances
     B, N, n = x.shape
     lam = params.lam

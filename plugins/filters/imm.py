@@ -54,7 +54,7 @@ from typing import Any, Callable, ClassVar, Sequence
 import numpy as np
 
 from workbench import hookimpl
-from workbench.filtering import single_measurement
+from workbench.filtering import require_finite, single_measurement
 from workbench.kalman_core import ekf_update, extended_predict, kf_update, linear_predict, measurement_covariance
 from workbench.linalg import symmetrise
 from workbench.models import MeasurementModel, MotionModel, constant_velocity, coordinated_turn
@@ -376,9 +376,7 @@ def make_imm(modes: Sequence[MotionModel | str], transition, mode_filter: Any = 
         z, present = single_measurement(scan, name)
         if not present.any():
             return state
-        if not np.all(np.isfinite(z[present])):
-            item = int(np.flatnonzero(present & ~np.all(np.isfinite(z), axis=1))[0])
-            raise InputError(f"{name}: the measurement of batch item {item} is not finite (NaN or inf)")
+        require_finite(z, present, name)
         mu, x, P = state.probabilities, state.means, state.covs
         B = mu.shape[0]
         R = measurement_covariance(scan, model, present)

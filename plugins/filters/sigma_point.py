@@ -39,7 +39,7 @@ from functools import partial
 import numpy as np
 
 from workbench import hookimpl
-from workbench.filtering import keep_where, single_measurement
+from workbench.filtering import keep_where, require_finite, single_measurement
 from workbench.kernels.backend import BackendRecord, runs_numba
 from workbench.linalg import cholupdate, safe_cholesky, symmetrise, tria
 from workbench.models import MeasurementModel, MotionModel
@@ -148,12 +148,6 @@ def _solve_upper(U: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
-def _check_finite(z: np.ndarray, present: np.ndarray, who: str) -> None:
-    if not np.all(np.isfinite(z[present])):
-        item = int(np.flatnonzero(present & ~np.all(np.isfinite(z), axis=1))[0])
-        raise InputError(f"{who}: the measurement of batch item {item} is not finite (NaN or inf)")
-
-
 # -- full-covariance filters (UKF, CDKF) ------------------------------------------------------------
 
 
@@ -256,7 +250,7 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
     z, present = single_measurement(scan, who)
     if not present.any():
         return state
-    _check_finite(z, present, who)
+    require_finite(z, present, who)
     x, P = state.mean, state.cov
     n = x.shape[1]
     fast = _compiled(weights)
@@ -351,7 +345,7 @@ def _update_sqrt(state: SquareRootState, scan: Scan, model: MeasurementModel, rn
     z, present = single_measurement(scan, who)
     if not present.any():
         return state
-    _check_finite(z, present, who)
+    require_finite(z, present, who)
     x, S = state.mean, state.chol
     B, n = x.shape
     m = model.dim
