@@ -38,7 +38,9 @@ def _close(a, b, rtol: float) -> tuple[bool, float]:
         same_nan = np.isnan(a) == np.isnan(b)
         ok = np.isclose(a, b, rtol=rtol, atol=1e-12, equal_nan=True)
         with np.errstate(invalid="ignore", divide="ignore"):
-            rel = np.where(np.isfinite(a) & np.isfinite(b), np.abs(a - b) / np.maximum(np.abs(a), 1e-300), 0.0)
+            # relative to the larger of the two (0 against 2.5 is a difference of 1, not of 2.5e300)
+            scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)
+            rel = np.where(np.isfinite(a) & np.isfinite(b), np.abs(a - b) / scale, 0.0)
         return bool(np.all(ok & same_nan)), float(np.max(rel, initial=0.0))
     return bool(np.array_equal(a.astype(str), b.astype(str))), 0.0
 
