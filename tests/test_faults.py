@@ -111,6 +111,20 @@ def test_an_unreachable_scheduler(tmp_path, capsys, monkeypatch):
     _one_error_line(capsys, "cannot reach the Dask scheduler tcp://127.0.0.1:9")
 
 
+def test_a_cluster_that_loses_its_workers_mid_report_is_a_network_failure(tmp_path, capsys, monkeypatch):
+    """The engine's DaskClusterLost (workers gone while tasks wait) leaves the command line with the network's exit
+    code and its one line, as an unreachable scheduler does."""
+    from workbench.report import engine
+
+    def lost(*args, **kwargs):
+        raise engine.DaskClusterLost("tcp://10.0.0.1:8786", 3, 7, 30.0)
+
+    monkeypatch.setattr(engine, "run_report", lost)
+    code = main(["report", "--paper", "003", "--out", str(tmp_path), "--no-progress"])
+    assert code == EXIT["network"]
+    _one_error_line(capsys, "tcp://10.0.0.1:8786", "no worker for 30 s while 3 of 7 tasks wait")
+
+
 def test_a_list_where_a_sensor_number_belongs(tmp_path, capsys):
     path = _scenario(tmp_path, GOOD.replace('sigma_r = "1 m"', "sigma_r = [1, 2]"))
     assert main(["run", str(path)]) == EXIT["input"]

@@ -12,7 +12,7 @@ exit  meaning
 2     bad input: a scenario, data file, option, parameter or component name
 3     an operating-system error: a file or folder that cannot be read or written, a full disk
 4     a plugin failed to load or raised where it should not have
-5     the network: a Dask scheduler that cannot be reached
+5     the network: a Dask scheduler that cannot be reached, or a cluster that lost its workers
 70    an internal error (a bug: please report it with the ``--debug`` traceback)
 130   interrupted (Ctrl-C)
 ====  =================================================================================================
@@ -271,10 +271,14 @@ def cmd_report(args) -> int:
         except (OSError, TimeoutError) as exc:
             raise NetworkError(f"cannot reach the Dask scheduler {args.scheduler or '(local cluster)'}: "
                                f"{exc}") from None
+    from .report.engine import DaskClusterLost
+
     try:
         report = run_report(host, Path(args.out), papers=args.paper or None, size=args.size, seed=args.seed,
                             filters=args.filters, arch=args.arch, progress=not args.no_progress, command=command,
                             executor=executor, wait=args.wait)
+    except DaskClusterLost as exc:  # the cluster went away mid-run: the network's exit code, as an unreachable one
+        raise NetworkError(str(exc)) from None
     finally:
         if executor is not None:
             executor.close()
