@@ -7,7 +7,6 @@ report recipes, the CLI and the test kit.  See ``docs/writing-a-plugin.md``.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import functools
 import inspect
@@ -18,7 +17,7 @@ import numpy as np
 
 from .criteria import Criterion
 from .params import Param, check_values, format_value, infer_params
-from .types import InputError
+from .types import InputError, _replaced
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from matplotlib.figure import Figure
@@ -176,15 +175,6 @@ class _Configurable:
 # -- the filter-state contract: how a state's batch items are taken and joined ------------------------------
 
 
-def _replaced(obj: Any, changes: Mapping[str, Any]) -> Any:
-    """``obj`` with some fields replaced, without re-running ``__post_init__``: the values are sub-batches or joins
-    of arrays the filter's own state already validated."""
-    out = copy.copy(obj)
-    for name, value in changes.items():
-        object.__setattr__(out, name, value)
-    return out
-
-
 def _declared_fields(state: Any) -> tuple[str, ...] | None:
     """The batch-first fields the state's class declares (its ``batch_fields`` class attribute), or ``None``."""
     declared = getattr(type(state), "batch_fields", None)
@@ -259,7 +249,7 @@ def _take(state: Any, index: np.ndarray) -> Any:
         value = getattr(state, name)
         changes[name] = None if value is None else value[index] if isinstance(value, np.ndarray) else _take(value,
                                                                                                              index)
-    return _replaced(state, changes)
+    return _replaced(state, **changes)  # sub-batches of arrays the state already validated
 
 
 def join_batch(states: Sequence[Any]) -> Any:
@@ -296,7 +286,7 @@ def _join(states: list) -> Any:
             changes[name] = np.concatenate(values, axis=0)
         else:
             changes[name] = _join(values)
-    return _replaced(first, changes)
+    return _replaced(first, **changes)  # joins of arrays the states already validated
 
 
 @dataclass(frozen=True)

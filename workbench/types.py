@@ -366,6 +366,12 @@ def _validated(cls, **values):
     return out
 
 
+def _replaced(obj, **changes):
+    """``obj`` (a frozen dataclass) with some fields changed, without re-running its ``__init__`` and checks: the
+    new values are already valid (a sub-batch of checked arrays, a model bound to a step's time)."""
+    return _validated(type(obj), **{**vars(obj), **changes})
+
+
 @dataclass(frozen=True)
 class Scan:
     """The detections of one scan for a batch, padded to a common count ``M``.

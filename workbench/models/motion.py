@@ -20,6 +20,7 @@ nonstationary growth model, time-varying); ``docs/motion-models.md`` tabulates t
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -27,7 +28,7 @@ from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-from ..types import InputError
+from ..types import InputError, _replaced
 
 __all__ = [
     "MotionModel",
@@ -136,7 +137,7 @@ class MotionModel:
             raise InputError(f"motion model {self.name!r} is built for steps of {self.dt} s and cannot be rebuilt "
                              f"for a step of {dt} s")
         out = self.rebuild(float(dt))
-        return out if out.t == self.t else out._with_time(self.t)
+        return out if out.t == self.t else _replaced(out, t=self.t)
 
     def at(self, t: float, dt: float | None = None) -> "MotionModel":
         """The model for the step from the absolute time ``t`` to ``t + dt`` (s): :meth:`for_interval` (``dt``;
@@ -145,15 +146,9 @@ class MotionModel:
         t = float(t)
         if not math.isfinite(t):
             raise InputError(f"motion model {self.name!r}: the start time of a step must be finite, got {t}")
-        return model if model.t == t else model._with_time(t)
-
-    def _with_time(self, t: float) -> "MotionModel":
-        # dataclasses.replace(self, t=t) without re-running __init__ (13 us against 1 us: the loop calls it every
-        # step); the class has no __post_init__ to skip, so a shallow copy of the fields with t set is the same object
-        out = object.__new__(type(self))
-        out.__dict__.update(self.__dict__)
-        object.__setattr__(out, "t", t)
-        return out
+        # dataclasses.replace(model, t=t) without re-running __init__ (13 us against a few: the loop calls it every
+        # step); the class has no checks to skip, so the result is the same object
+        return model if model.t == t else _replaced(model, t=t)
 
     def _step(self, t, dt) -> tuple[float, float]:
         """``(t, dt)`` with ``None`` replaced by the bound ``self.t`` and ``self.dt``."""
@@ -322,7 +317,6 @@ _SINGER_SMALL = 1.0
 _SINGER_TERMS = 32
 # Singer (1970) per axis, in u = alpha T: F13 = T^2 e2(u), Q = q diag(T^{5/2}, T^{3/2}, T^{1/2}) H(u) diag(...),
 # each entry of H written as a sum of c u^m e^{-k u} over 2 u^p (p = 5, 4, 3, 3, 2, 1)
-_SINGER_F13 = _exp_poly_series([(_F1, 1, 0), (-_F1, 0, 0), (_F1, 0, 1)], 2, _SINGER_TERMS)
 _SINGER_H = {
     (0, 0): ([(_F1, 0, 0), (-_F1, 0, 2), (2 * _F1, 1, 0), (Fraction(2, 3), 3, 0), (-2 * _F1, 2, 0),
               (-4 * _F1, 1, 1)], 5),
@@ -332,8 +326,15 @@ _SINGER_H = {
     (1, 2): ([(_F1, 0, 2), (_F1, 0, 0), (-2 * _F1, 0, 1)], 2),
     (2, 2): ([(_F1, 0, 0), (-_F1, 0, 2)], 1),
 }
-_SINGER_H_SERIES = {ij: _exp_poly_series([(c / 2, m, k) for c, m, k in terms], p, _SINGER_TERMS)
-                    for ij, (terms, p) in _SINGER_H.items()}
+
+
+@functools.cache
+def _singer_series() -> tuple[np.ndarray, dict]:
+    """The Taylor coefficients of Singer's ``e2(u)`` (``F13 = T^2 e2``) and of each entry of ``H(u)``: exact
+    rational arithmetic, about 10 ms, so computed on the first Singer model rather than at import."""
+    f13 = _exp_poly_series([(_F1, 1, 0), (-_F1, 0, 0), (_F1, 0, 1)], 2, _SINGER_TERMS)
+    return f13, {ij: _exp_poly_series([(c / 2, m, k) for c, m, k in terms], p, _SINGER_TERMS)
+                 for ij, (terms, p) in _SINGER_H.items()}
 
 
 def _closed(terms, p):
@@ -456,11 +457,12 @@ def singer(dims: int, dt: float, sigma_m: float | Sequence[float], tau: float) -
     u = np.array(alpha * T)
     eu = float(np.exp(-u))
     e1 = float(-np.expm1(-u) / u) if u > 0 else 1.0  # (1 - e^-u) / u
-    e2 = float(_blend(u, _SINGER_SMALL, _SINGER_F13, lambda v: (v - 1.0 + np.exp(-v)) / (v * v)))
+    f13_series, h_series = _singer_series()
+    e2 = float(_blend(u, _SINGER_SMALL, f13_series, lambda v: (v - 1.0 + np.exp(-v)) / (v * v)))
     F3 = np.array([[1.0, T, T * T * e2], [0.0, 1.0, T * e1], [0.0, 0.0, eu]])
     H = np.zeros((3, 3))
     for (i, j), (terms, p) in _SINGER_H.items():
-        H[i, j] = H[j, i] = float(_blend(u, _SINGER_SMALL, _SINGER_H_SERIES[(i, j)], _closed(terms, p)))
+        H[i, j] = H[j, i] = float(_blend(u, _SINGER_SMALL, h_series[(i, j)], _closed(terms, p)))
     q_unit = 2.0 * alpha  # q = 2 alpha sigma_m^2: the per-axis sigma_m^2 enters through _third_order's scale
     D = np.diag([T**2.5, T**1.5, T**0.5])
     Q3 = q_unit * (D @ H @ D)
