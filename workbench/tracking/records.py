@@ -141,6 +141,8 @@ class TrackLog:
     run, ping, track_id, status, hit : (R,)
     mean : (R, n)
     cov : (R, n, n), the covariance of each ``mean``; ``None`` where the tracker does not keep covariances
+    existence : (R,), each track's probability of existence (JIPDA) or its Gaussian component's weight (PHD);
+        ``None`` where the tracker has no such number
     """
 
     run: np.ndarray
@@ -152,6 +154,7 @@ class TrackLog:
     runs: int
     pings: int
     cov: np.ndarray | None = None
+    existence: np.ndarray | None = None
 
     def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
         """The log as named arrays (for a task result / NPZ); ``cov`` only where the log keeps it."""
@@ -160,6 +163,8 @@ class TrackLog:
                f"{prefix}shape": np.array([self.runs, self.pings])}
         if self.cov is not None:
             out[f"{prefix}cov"] = self.cov
+        if self.existence is not None:
+            out[f"{prefix}existence"] = self.existence
         return out
 
     @classmethod
@@ -168,11 +173,13 @@ class TrackLog:
         return cls(np.asarray(arrays[f"{prefix}run"]), np.asarray(arrays[f"{prefix}ping"]),
                    np.asarray(arrays[f"{prefix}track_id"]), np.asarray(arrays[f"{prefix}status"]),
                    np.asarray(arrays[f"{prefix}hit"], dtype=bool), np.asarray(arrays[f"{prefix}mean"]), runs, pings,
-                   np.asarray(arrays[f"{prefix}cov"]) if f"{prefix}cov" in arrays else None)
+                   np.asarray(arrays[f"{prefix}cov"]) if f"{prefix}cov" in arrays else None,
+                   np.asarray(arrays[f"{prefix}existence"], dtype=float) if f"{prefix}existence" in arrays else None)
 
     def select(self, mask: np.ndarray) -> "TrackLog":
         return TrackLog(self.run[mask], self.ping[mask], self.track_id[mask], self.status[mask], self.hit[mask],
-                        self.mean[mask], self.runs, self.pings, None if self.cov is None else self.cov[mask])
+                        self.mean[mask], self.runs, self.pings, None if self.cov is None else self.cov[mask],
+                        None if self.existence is None else self.existence[mask])
 
     def confirmed_counts(self) -> np.ndarray:
         """Number of confirmed tracks per run and ping, ``(runs, pings)``."""
