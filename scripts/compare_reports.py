@@ -8,6 +8,9 @@ strings exactly.  Columns and arrays that hold measured times (their name mentio
 is the report's; the numbers behind it come from the same tables and figures), and text cells that quote measured
 times.
 
+Only the papers in both folders are compared: a paper that only one report has is listed as such, which is a
+difference of coverage, not of numbers (``--same-papers`` makes it one).
+
 Exit status 0 when everything compared agrees, 1 otherwise; one line per table and figure either way.
 
     python scripts/compare_reports.py before/ after/ [--rtol 1e-9]
@@ -118,25 +121,40 @@ def main(argv=None) -> int:
     parser.add_argument("first", type=Path)
     parser.add_argument("second", type=Path)
     parser.add_argument("--rtol", type=float, default=1e-9)
+    parser.add_argument("--same-papers", action="store_true",
+                        help="a paper that only one of the two reports has is a difference (default: listed only)")
     args = parser.parse_args(argv)
     sa = json.loads((args.first / "summary.json").read_text())
     sb = json.loads((args.second / "summary.json").read_text())
     papers_b = {p["paper"]: p for p in sb["papers"]}
-    good = True
+    only_first = [p["paper"] for p in sa["papers"] if p["paper"] not in papers_b]
+    only_second = sorted(set(papers_b) - {p["paper"] for p in sa["papers"]})
+    good, compared = True, 0
     for pa in sa["papers"]:
         pb = papers_b.get(pa["paper"])
-        print(f"paper {pa['paper']}:")
         if pb is None:
-            print("  missing in the second report")
-            good = False
             continue
+        compared += 1
+        print(f"paper {pa['paper']}:")
         out: list[str] = []
         ok = compare_tables(pa, pb, args.rtol, out)
         ok &= compare_figures(args.first / f"paper{pa['paper']}", args.second / f"paper{pa['paper']}", args.rtol, out)
         print("\n".join(out))
         good &= ok
-    print("all numbers agree" if good else "SOME NUMBERS DIFFER")
-    return 0 if good else 1
+    for where, papers in (("first", only_first), ("second", only_second)):
+        if papers:
+            print(f"only in the {where} report (not compared): paper " + ", ".join(map(str, papers)))
+    covered = not (only_first or only_second)
+    if compared == 0:
+        print("no paper is in both reports: nothing compared")
+        return 1
+    if not good:
+        print(f"SOME NUMBERS DIFFER (in the {compared} paper(s) both reports have)")
+    elif covered:
+        print("all numbers agree")
+    else:
+        print(f"all numbers agree in the {compared} paper(s) both reports have; the reports cover different papers")
+    return 0 if good and (covered or not args.same_papers) else 1
 
 
 if __name__ == "__main__":
