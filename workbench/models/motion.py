@@ -220,9 +220,9 @@ def _dwna_axis(dt: float) -> np.ndarray:
 def constant_velocity(dims: int, dt: float, sigma_a: float | Sequence[float]) -> MotionModel:
     """Constant velocity in ``dims`` dimensions with discrete white-noise acceleration.
 
-    Per axis ``A = [[1, T], [0, 1]]`` and ``W = sigma_a^2 [[T^4/4, T^3/2], [T^3/2, T^2]]``; the axes are
-    interleaved into the layout ``[p_1..p_d, v_1..v_d]``.  ``sigma_a`` may be one value or one per
-    axis (m/s^2).
+    Per axis ``A = [[1, T], [0, 1]]`` and ``W = sigma_a^2 [[T^4/4, T^3/2], [T^3/2, T^2]]``; the state is
+    blocked, all positions then all velocities: ``[p_1..p_d, v_1..v_d]`` (``[x, y, vx, vy]`` in 2-D; Stone
+    Soup's order ``[x, vx, y, vy]`` is interleaved).  ``sigma_a`` may be one value or one per axis (m/s^2).
     """
     if dims < 1:
         raise InputError(f"constant_velocity needs dims >= 1, got {dims}")
