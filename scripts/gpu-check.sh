@@ -73,8 +73,8 @@ if [ "$ARCH" = cpu ]; then OTHER=cpu-again; else OTHER=cpu; fi
 WB="$PY -m workbench.cli"
 TESTS="tests/test_kernels.py tests/test_crpf_kernel.py"
 
-bench_cmd() {  # the kernel group (method C) on an arch, then paper 003's CRPF step per particle on it
-    echo "$WB bench $BENCH_SIZE --only paper000 --arch $1 --json $WORK/bench-$1.json" \
+bench_cmd() {  # the method-C weight-kernel group (tbd-pf's) on an arch, then the CRPF step per particle on it
+    echo "$WB bench $BENCH_SIZE --only tbd-weights --arch $1 --json $WORK/bench-$1.json" \
          "&& $PY scripts/gpu_check_compare.py crpf-step --arch $1 --json $WORK/crpf-$1.json"
 }
 report_cmd() {  # $1 arch, $2 folder name

@@ -60,9 +60,10 @@ def compare(first: Path, second: Path, rtol: float) -> dict:
 
 
 def crpf_step(arch: str, repeat: int) -> dict:
-    """paper 003's CRPF step cost (ns per particle) with the kernels on ``arch``, and which backend ran."""
+    """The CRPF step cost (ns per particle; the ``crpf`` filter's ``crpf-step`` group) with the kernels on ``arch``,
+    and which backend ran."""
     from workbench.kernels.backend import using
-    from workbench_papers.paper003.bench import crpf_step_cost
+    from workbench_filters.crpf.bench import crpf_step_cost
 
     with using(arch):
         out = crpf_step_cost(repeat=repeat)  # its "step_backend" is the backend that ran on this arch

@@ -33,8 +33,8 @@ IMPORTERS = {POLICY, Path("workbench/kernels/runtime.py"), Path("workbench/kerne
 #: installed (never which code a filter runs): the only modules allowed to, each with what it does.
 BENCHMARKS = {
     Path("plugins/filters/benchmarks.py"): "the compiled-draws floor is timed where Numba is installed",
-    Path("plugins/papers/paper000/bench.py"): "peak FLOP/s of a Numba FMA loop; the method-C kernel per backend",
-    Path("plugins/papers/paper003/bench.py"): "times the CRPF step on one Numba thread (numba.set_num_threads)",
+    Path("plugins/filters/tbd/bench.py"): "the peak rate of a Numba FMA loop (the limit); the weight kernel per backend",
+    Path("plugins/filters/crpf/bench.py"): "times the CRPF step on one Numba thread (numba.set_num_threads)",
 }
 
 
@@ -118,10 +118,10 @@ def test_the_source_tree_keeps_to_the_one_policy():
     ("from taichi import lang\n", "imports taichi"),
 ])
 def test_the_scan_catches_a_deliberately_added_breach(added, rule):
-    rel = Path("workbench/kernels/sigma_numba.py") if "taichi" in rule or "numba" in rule else None
-    clean = (ROOT / "plugins/filters/sigma_point.py").read_text(encoding="utf-8")
-    assert violations(Path("plugins/filters/sigma_point.py"), clean) == []
-    got = violations(Path("plugins/filters/sigma_point.py"), clean + added)
+    rel = Path("plugins/filters/sigma_point/sigma_numba.py") if "taichi" in rule or "numba" in rule else None
+    clean = (ROOT / "plugins/filters/sigma_point/__init__.py").read_text(encoding="utf-8")
+    assert violations(Path("plugins/filters/sigma_point/__init__.py"), clean) == []
+    got = violations(Path("plugins/filters/sigma_point/__init__.py"), clean + added)
     assert len(got) == 1 and rule in got[0], got
     if rel is not None and rule.startswith("imports"):  # a compiled twin may import its compiler
         assert violations(rel, added) == []

@@ -1,11 +1,11 @@
-"""The fused CRPF step kernel (workbench.kernels.crpf_step) against its NumPy twin and the plugin's array code."""
+"""The fused CRPF step kernel (workbench_filters.crpf.crpf_step) against its NumPy twin and the plugin's array code."""
 
 
 import numpy as np
 import pytest
 
 from workbench.filtering import run_filter
-from workbench.kernels.crpf_step import (atan2_poly, crpf_step, crpf_step_numpy, numba_available, pmf_offset,
+from workbench_filters.crpf.crpf_step import (atan2_poly, crpf_step, crpf_step_numpy, numba_available, pmf_offset,
                                         propagation_normals)
 from workbench.models import random_walk_velocity, range_bearing
 from workbench.plugins import load_host
@@ -67,7 +67,7 @@ def test_numba_serial_and_parallel_paths_agree():
     # below PARALLEL_FROM runs the kernel runs on one thread; the runs are independent, so a batch split in two
     # gives the same numbers as the whole batch (run b's normals depend on the key and b only: pass the rows of
     # the second half with their own row index by running the whole batch on each path)
-    from workbench.kernels import crpf_numba
+    from workbench_filters.crpf import crpf_numba
 
     x, c, s2, t, z, key, u0, shape = _inputs(B=40, N=30, seed=4)
     args = (x, c, s2, t, F, z, key, u0, shape, 0.95, 2.0, 0.3, 2.0, True, (0.0, 0.0), True, True)

@@ -47,7 +47,7 @@ def test_dry_run_on_cuda_names_each_arch_and_the_out_folder(tmp_path):
     assert "WORKBENCH_TEST_ARCH=cuda " in steps["tests"][0] and "taichi-cuda" in steps["tests"][0]
     for arch in ("cuda", "cpu"):
         bench = steps[f"bench-{arch}"][0]
-        assert f"bench --quick --only paper000 --arch {arch} " in bench and f"crpf-step --arch {arch} " in bench
+        assert f"bench --quick --only tbd-weights --arch {arch} " in bench and f"crpf-step --arch {arch} " in bench
         report = steps[f"report-{arch}"][0]
         assert f"report --paper 000 --quick --arch {arch} --out {tmp_path}/w/report-{arch} " in report
     compare = shlex.split(steps["compare"][0])
@@ -150,7 +150,7 @@ def test_summary_gathers_the_steps_and_fails_on_a_failed_step(tmp_path):
     make_report(work / "report-cpu")
     make_report(work / "report-cpu-again")
     compare(work / "report-cpu", work / "report-cpu-again", work)
-    (work / "bench-cpu.json").write_text(json.dumps({"groups": {"paper000": {"kernel_arch": "cpu"}}}))
+    (work / "bench-cpu.json").write_text(json.dumps({"groups": {"tbd-weights": {"kernel_arch": "cpu"}}}))
     (out / "tests.log").write_text("....\n18 passed, 36 deselected, 1 warning in 30.52s\n")
     rows = [("tests", "ok", 0, 30.5), ("bench-cpu", "ok", 0, 120.0), ("report-cpu", "ok", 0, 40.0),
             ("report-cpu-again", "ok", 0, 41.0), ("compare", "ok", 0, 1.0)]
@@ -167,7 +167,7 @@ def test_summary_gathers_the_steps_and_fails_on_a_failed_step(tmp_path):
     assert got["steps"][0]["result"] == "18 passed, 36 deselected, 1 warning in 30.52s"
     assert got["steps"][1] == {"name": "bench-cpu", "status": "ok", "exit": 0, "seconds": 120.0,
                                "log": "bench-cpu.log", "command": "cmd bench-cpu"}
-    assert got["compare"]["verdict"] == "agree" and got["bench"]["cpu"]["groups"]["paper000"]["kernel_arch"] == "cpu"
+    assert got["compare"]["verdict"] == "agree" and got["bench"]["cpu"]["groups"]["tbd-weights"]["kernel_arch"] == "cpu"
     rows[2] = ("report-cpu", "timed out", 124, 240.0)
     code, got = summary(rows)
     assert code == 1 and not got["ok"] and got["failed_steps"] == ["report-cpu"]

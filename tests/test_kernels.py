@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from workbench.kernels.reference import kernel_inputs, naive_log_weight_sums
-from workbench.kernels.reference import tbd_log_weight_sums_reference
+from workbench_filters.tbd.reference import kernel_inputs, naive_log_weight_sums
+from workbench_filters.tbd.reference import tbd_log_weight_sums_reference
 from workbench.kernels.runtime import TaichiUnavailable, ensure_taichi, taichi_available_arches
-from workbench.kernels.tbd_weights import (EXP_FLOOR, FLOAT32_WEIGHT_RTOL, numba_available, pack_measurements,
+from workbench_filters.tbd.tbd_weights import (EXP_FLOOR, FLOAT32_WEIGHT_RTOL, numba_available, pack_measurements,
                                            pack_points, poly_exp, poly_exp2, resolve_backend, tbd_log_weight_sums)
-from workbench.kernels.tbd_weights_numpy import tbd_log_weight_sums_float32
+from workbench_filters.tbd.tbd_weights_numpy import tbd_log_weight_sums_float32
 
 BACKENDS = [("taichi", arch) for arch in taichi_available_arches()] + \
     ([("numba", "cpu")] if numba_available() else [])
@@ -64,7 +64,7 @@ def test_reference_equals_direct_logsumexp():
 @pytest.mark.parametrize("serial_pairs", [0, 10**12], ids=["threaded", "serial"])
 @pytest.mark.parametrize(("backend", "arch"), BACKENDS, ids=IDS)
 def test_kernel_matches_reference_on_random_inputs(backend, arch, serial_pairs, monkeypatch):
-    import workbench.kernels.tbd_weights as kernels
+    import workbench_filters.tbd.tbd_weights as kernels
 
     monkeypatch.setattr(kernels, "SERIAL_PAIRS", serial_pairs)  # the Numba backend has both variants
     rng = np.random.default_rng(11)
@@ -95,7 +95,7 @@ def _weight_error(log32: np.ndarray, log64: np.ndarray) -> float:
 @pytest.mark.parametrize("serial_pairs", [0, 10**12], ids=["threaded", "serial"])
 @pytest.mark.parametrize(("backend", "arch"), BACKENDS + [("numpy", "cpu")], ids=IDS + ["numpy"])
 def test_float32_kernels_match_the_reference_within_the_stated_tolerance(backend, arch, serial_pairs, monkeypatch):
-    import workbench.kernels.tbd_weights as kernels
+    import workbench_filters.tbd.tbd_weights as kernels
 
     monkeypatch.setattr(kernels, "SERIAL_PAIRS", serial_pairs)
     rng = np.random.default_rng(12)
@@ -264,7 +264,7 @@ def test_backends_resolve_and_reject_unknown_names():
 
 
 def test_taichi_runtime_is_lazy_and_checks_its_arch():
-    code = ("import sys, workbench.kernels.tbd_weights, workbench.sensing.radar; "
+    code = ("import sys, workbench_filters.tbd.tbd_weights, workbench.sensing.radar; "
             "import workbench_filters.tbd; print('taichi' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]

@@ -1,4 +1,4 @@
-"""The UKF's compiled loops (workbench.kernels.sigma_numba) against the filter's NumPy code.  sigma_point falls back
+"""The UKF's compiled loops (workbench_filters.sigma_point.sigma_numba) against the filter's NumPy code.  sigma_point falls back
 to NumPy silently, so each comparison asserts which code ran (sigma_point.backend_counts): two runs of the same
 NumPy code would agree trivially."""
 
@@ -37,7 +37,7 @@ def _scenario(model, B=40, steps=30, seed=0):
                          ids=["range-bearing", "linear"])
 @pytest.mark.parametrize("B", [40, 64], ids=["serial", "threaded"])  # below and at sigma_numba.PARALLEL_MIN
 def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model, B):
-    from workbench.kernels import sigma_numba
+    from workbench_filters.sigma_point import sigma_numba
     from workbench.plugins import load_host
 
     assert (B >= sigma_numba.PARALLEL_MIN) == (B == 64)
@@ -78,7 +78,7 @@ def _kalman_filter(prior, motion, model, scans):
 
 
 def test_compiled_update_declines_a_covariance_that_is_not_positive_definite():
-    from workbench.kernels import sigma_numba
+    from workbench_filters.sigma_point import sigma_numba
 
     x = np.zeros((2, 4))
     P = np.tile(np.eye(4), (2, 1, 1))

@@ -35,7 +35,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from .crpf_step_numpy import ATAN_P, ATAN_Q, TAN_PI_8
+from .atan_poly import ATAN_P, ATAN_Q, TAN_PI_8
 from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
 from .vector_width import wide_vectors
 

@@ -309,7 +309,9 @@ def _module_with(path, old, new, monkeypatch):
 
     text = path.read_text(encoding="utf-8")
     assert text.count(old) == 1, old
-    name = f"workbench_filters._patched_{path.stem}"
+    # a module of the plugin's package (its relative imports of the package's kernels resolve there)
+    name = f"workbench_filters.{path.parent.name}._patched" if path.name == "__init__.py" else \
+        f"workbench_filters._patched_{path.stem}"
     module = importlib.util.module_from_spec(importlib.util.spec_from_loader(name, loader=None))
     monkeypatch.setitem(sys.modules, name, module)
     exec(compile(text.replace(old, new), str(path), "exec"), module.__dict__)

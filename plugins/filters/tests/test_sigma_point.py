@@ -250,7 +250,7 @@ def test_a_changed_declared_default_changes_the_built_filter(monkeypatch):
     for old, new in changes:
         assert text.count(old) == 1
         text = text.replace(old, new)
-    name = "workbench_filters._patched_sigma_point"
+    name = "workbench_filters.sigma_point._patched"  # in the package: its relative import of the kernels resolves
     patched = importlib.util.module_from_spec(importlib.util.spec_from_loader(name, loader=None))
     monkeypatch.setitem(sys.modules, name, patched)
     exec(compile(text, sp.__file__, "exec"), patched.__dict__)

@@ -6,9 +6,8 @@
     (8 filters, the ablation row and the 5,000-particle reference PF on its ``reference_runs`` runs), at the full
     size (3,000 runs, 100 steps) or the quick size, in this process, after a warm-up (the ``dask`` group runs the
     same tasks on a local Dask cluster), with the machine's load average beside it;
-(a') the CRPF step kernel per particle: the previous configuration (fixed variance, plain norm, absolute delta)
-    against the paper configuration (Table 6's adaptive variance, arc-length cost, relative delta), at the
-    Monte Carlo's batch sizes, medians of repeated warm calls;
+(a') (the CRPF step kernel per particle, previous against paper configuration, is the ``crpf`` filter's own
+    benchmark group ``crpf-step``, :mod:`workbench_filters.crpf.bench`);
 (b) the cost per run-step (one predict + update) of our UKF batched over ``batch`` runs, against FilterPy's
     ``UnscentedKalmanFilter`` (an optional ``bench`` extra; skipped when it is not installed) on the same
     range-bearing problem with the same (alpha, beta, kappa), angle-aware residual and mean; the ratio is
@@ -28,16 +27,15 @@ import numpy as np
 
 from workbench.bench import median_time
 from workbench.bench.peers import filterpy_range_bearing_ukf
+from workbench.kernels.backend import resolve as resolve_backend
 from workbench.plugins import load_host
 from workbench.report.engine import InProcess
-from workbench.kernels.crpf_step import crpf_step, resolve_backend
-from workbench.models import random_walk_velocity
 from workbench.specs import RecipeOptions, TaskContext
 
 from . import recipe
 from .scenario import filter_models, level_sigmas, make_case, prior, simulate_units, units
 
-__all__ = ["bench", "monte_carlo_wall_time", "crpf_step_cost", "ukf_vs_filterpy", "quick_tasks_time"]
+__all__ = ["bench", "monte_carlo_wall_time", "ukf_vs_filterpy", "quick_tasks_time"]
 
 _HOST = None
 #: The target for the full primary Monte Carlo (with the reference row) in one process on 2 cores (seconds).
@@ -45,8 +43,6 @@ MC_TARGET_S = 60.0
 #: The speed work's stricter goal for the same Monte Carlo (set when it had neither the reference row nor the
 #: adaptive-variance CRPF); printed as a second target so that a miss is seen.
 MC_STRICT_TARGET_S = 30.0
-#: The target for the paper CRPF step's cost per particle against the previous step's.
-STEP_TARGET_RATIO = 1.2
 
 
 def _host():
@@ -131,83 +127,6 @@ def monte_carlo_wall_time(size: str = "full", seed: int = 0, values=None) -> dic
     return out
 
 
-def _step_times(budget: int, repeat: int, seed: int) -> dict:
-    """Median ns per particle of the two configurations at N = 100, 300, 500 (interleaved warm calls)."""
-    F = random_walk_velocity(2, 1.0, 0.1).F
-    rng = np.random.default_rng(seed)
-    out = {}
-    for N in recipe.CRPF_PARTICLES:
-        B = max(1, budget // N)
-        x = np.array([100.0, 50.0, -1.0, 1.0]) + rng.normal(size=(B, N, 4)) * [1.0, 1.0, 0.2, 0.2]
-        c = rng.exponential(2.0, (B, N))
-        z = np.stack([np.full(B, 111.0), np.full(B, 0.46)], axis=1)
-        u0 = rng.random(B)
-        t = np.full(B, 5.0)
-        configs = {
-            "previous": dict(s2=np.full((B, N), 1.0 / N ** 0.5), shape=np.array([0.5, 0.5, 1.0, 1.0]), delta=0.01,
-                             arc=False, adaptive=False, relative=False),
-            "paper": dict(s2=np.full((B, N), 0.09), shape=np.ones(4), delta=0.1, arc=True, adaptive=True,
-                          relative=True),
-        }
-
-        def call(cfg, key):
-            crpf_step(x, c, cfg["s2"], t, F, z, key, u0, cfg["shape"], 0.95, 2.0, cfg["delta"], 2.0, cfg["arc"],
-                      (0.0, 0.0), cfg["adaptive"], cfg["relative"])
-
-        times = {k: [] for k in configs}
-        for cfg in configs.values():
-            call(cfg, 0)  # warm-up: loads the compiled kernel
-        for r in range(repeat):
-            for k, cfg in configs.items():
-                t0 = time.perf_counter()
-                call(cfg, r + 1)
-                times[k].append(time.perf_counter() - t0)
-        out[N] = {k: 1e9 * float(np.median(v)) / (B * N) for k, v in times.items()}
-    return out
-
-
-def crpf_step_cost(repeat: int = 15, seed: int = 0, budget: int = 131072) -> dict:
-    """Nanoseconds per particle of one fused CRPF step (the kernel only), for the previous configuration (fixed
-    variance, plain norm, absolute delta = 0.01) and the paper configuration (adaptive variance, arc-length cost,
-    relative delta), at N = 100, 300, 500 with ``budget / N`` runs per call (the Monte Carlo's batches); each the
-    median of ``repeat`` warm calls, the two configurations interleaved so that both see the same machine load.
-
-    The target is judged on one thread: the step's own work per particle.  With two threads on a shared machine a
-    parallel region waits at its barrier for a thread the scheduler has put aside, which adds the same stall to
-    both configurations and hides the difference; the two-thread figures are printed beside, for information."""
-    load = os.getloadavg()[0]
-    out = {"step_backend": resolve_backend("auto"), "step_load_average_1min": load}
-    threads = None
-    if out["step_backend"] == "numba":
-        import numba
-
-        threads = numba.get_num_threads()
-        numba.set_num_threads(1)
-    try:
-        one = _step_times(budget, repeat, seed)
-    finally:
-        if threads is not None:
-            numba.set_num_threads(threads)
-    many = _step_times(budget, repeat, seed + 1) if threads and threads > 1 else None
-    ratios = []
-    for N in recipe.CRPF_PARTICLES:
-        prev, paper = one[N]["previous"], one[N]["paper"]
-        out[f"step_ns_per_particle[previous, N={N}]"] = prev
-        out[f"step_ns_per_particle[paper, N={N}]"] = paper
-        ratios.append(paper / prev)
-        out[f"step_ratio_paper_over_previous[N={N}]"] = ratios[-1]
-        if many is not None:
-            out[f"step_ns_per_particle_{threads}_threads[previous, N={N}]"] = many[N]["previous"]
-            out[f"step_ns_per_particle_{threads}_threads[paper, N={N}]"] = many[N]["paper"]
-    out.update({"target_crpf_step_ratio": f"<= {STEP_TARGET_RATIO:g}", "measured_crpf_step_ratio": max(ratios),
-                "met_crpf_step_ratio": bool(max(ratios) <= STEP_TARGET_RATIO),
-                "note_crpf_step_ratio": (f"paper step (adaptive variance, arc-length cost, relative delta) over the "
-                                         f"previous step per particle, one thread, the largest over N = 100, 300, "
-                                         f"500; medians of {repeat} interleaved warm calls; 1-min load average "
-                                         f"{load:.2f}")})
-    return out
-
-
 def ukf_vs_filterpy(batch: int = 3000, filterpy_runs: int = 30, steps: int = 100, seed: int = 0,
                     repeat: int = 5) -> dict:
     """Per run-step cost (one predict + update) of our UKF over ``batch`` runs vs FilterPy's UKF, one run
@@ -279,7 +198,6 @@ def bench(quick: bool = False, *, seed: int = 0) -> dict:
     """All four measurements: ``quick`` uses the quick Monte Carlo size, fewer step repeats and FilterPy runs."""
     out = {}
     out.update(monte_carlo_wall_time("quick" if quick else "full", seed=seed))
-    out.update(crpf_step_cost(repeat=5 if quick else 15, seed=seed))
     out.update(ukf_vs_filterpy(batch=3000, filterpy_runs=5 if quick else 30, seed=seed))
     out.update(quick_tasks_time(seed=seed))
     return out

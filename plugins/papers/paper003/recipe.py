@@ -123,7 +123,7 @@ Choices where the paper is silent (brief § 3.2-3.4; details and the Table-6 fra
   by a reported run) by the rule written in docs/paper003.md before the tuning ran: the smallest geometric mean
   over the six cases of CRPF-100's time-averaged MSE. The previous reconstruction (fixed sigma^2 = kappa /
   N^(2/dim) with kappa 1 and the dwna shape, the plain norm, delta = 0.01) is the ablation row; the changes
-  table undoes one change at a time. Every CRPF runs the fused kernel workbench.kernels.crpf_step (Numba on the
+  table undoes one change at a time. Every CRPF runs the fused kernel workbench_filters.crpf.crpf_step (Numba on the
   CPU, else Taichi) for the range-bearing sensor, with counter-based propagation normals.
 - MSE(t) = mean over runs of the squared position error; the scalar is its mean over t. RMSE = sqrt(MSE).
   "Median" = the median over runs of each run's time-averaged squared error; "MSE not lost" = the mean over the

@@ -187,7 +187,7 @@ _RECORD = BackendRecord()  # which code the last full-covariance predict / updat
 
 def last_backend() -> str | None:
     """Which code computed this thread's last full-covariance sigma-point predict or update: ``"numba"`` (the
-    compiled UKF loops of :mod:`workbench.kernels.sigma_numba`) or ``"numpy"`` (the NumPy code below: the backend
+    compiled UKF loops of :mod:`workbench_filters.sigma_point.sigma_numba`) or ``"numpy"`` (the NumPy code below: the backend
     policy did not pick Numba, e.g. ``WORKBENCH_BACKEND=numpy``, no Numba or a GPU arch; the CDKF; a covariance the
     compiled Cholesky declines); ``None`` before the first call.  For tests, which must know
     which path ran."""
@@ -201,11 +201,11 @@ def backend_counts() -> dict:
 
 
 def _compiled(weights: SigmaWeights):
-    """The Numba loops of the UKF (:mod:`workbench.kernels.sigma_numba`) where the backend policy picks Numba
+    """The Numba loops of the UKF (:mod:`workbench_filters.sigma_point.sigma_numba`) where the backend policy picks Numba
     (:func:`workbench.kernels.backend.runs_numba`) and the weights are unscented, else ``None``."""
     if weights.kind != "unscented" or not runs_numba():
         return None
-    from workbench.kernels import sigma_numba
+    from . import sigma_numba
 
     return sigma_numba
 

@@ -39,9 +39,10 @@ Taichi reads the annotations as objects.)
 
 import numpy as np
 
-from .backend import current_arch, numba_available, resolve as resolve_backend
+from workbench.kernels.backend import current_arch, numba_available, resolve as resolve_backend
+from workbench.kernels.runtime import ensure_taichi
+
 from .crpf_step_numpy import _check, atan2_poly, crpf_step_numpy, pmf_offset, propagation_normals
-from .runtime import ensure_taichi
 
 __all__ = ["crpf_step", "crpf_step_numpy", "numba_available", "pmf_offset", "propagation_normals", "resolve_backend",
            "atan2_poly"]

@@ -10,7 +10,7 @@ For run ``b``, particle ``i`` and valid measurement ``m``::
 and the kernels return ``log sum_m w_{m,i}`` (``-inf`` for a run with no valid measurement), computed
 as a streaming max/sum over ``m`` so that memory stays ``O(B N + M)``: no ``(B, N, M)`` array is formed.
 
-Backends (all held to :func:`workbench.kernels.reference.tbd_log_weight_sums_reference`):
+Backends (all held to :func:`workbench_filters.tbd.reference.tbd_log_weight_sums_reference`):
 
 - ``"taichi"``: one particle per parallel iteration, two streaming passes over ``m`` (an integer max,
   which LLVM vectorises, then the sum of exponentials); runs on any Taichi arch.
@@ -37,9 +37,10 @@ import annotations`` here: Taichi reads the kernel annotations as objects.)
 
 import numpy as np
 
-from .backend import BACKENDS, current_arch, numba_available, resolve
+from workbench.kernels.backend import BACKENDS, current_arch, numba_available, resolve
+from workbench.kernels.runtime import ensure_taichi
+
 from .reference import tbd_log_weight_sums_reference
-from .runtime import ensure_taichi
 from .tbd_weights_numpy import (EXP_FLOOR, LOG2E, PRECISIONS, SERIAL_PAIRS, TILE, pack_measurements,  # noqa: F401
                                 pack_points, poly_exp, poly_exp2, tbd_log_weight_sums_float32)
 

@@ -35,7 +35,7 @@ Initial particles are uniform in a box around the prior mean with half-widths ``
 (for the paper-003 prior ``P0 = diag(10^2, 10^2, 2^2, 2^2)``: +-10 m and +-2 m/s, as the brief says).
 
 For a range-bearing model (declared frame and sensor position) a step in which every item moves and has a
-measurement runs the fused kernel :func:`workbench.kernels.crpf_step.crpf_step` (Numba on the CPU, else
+measurement runs the fused kernel :func:`workbench_filters.crpf.crpf_step.crpf_step` (Numba on the CPU, else
 Taichi); the array code below is its reference in the plugin and gives the same particles up to round-off.
 
 Shapes: particles ``(B, N, n)``, costs and variances ``(B, N)``, step counts ``(B,)``.
@@ -51,17 +51,18 @@ import numpy as np
 from workbench import hookimpl
 from workbench.filtering import keep_where, require_finite, single_measurement
 from workbench.kernels.counter_normals import draw_key
-from workbench.kernels.crpf_step import crpf_step, pmf_offset, propagation_normals
 from workbench.models import MeasurementModel, MotionModel, require_linear
 from workbench.params import Param, declared_dataclass, declared_factory, declared_values
 from workbench.resampling import normalise_log_weights, systematic_resample
-from workbench.specs import FilterSpec
+from workbench.specs import BenchmarkSpec, FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
+
+from .crpf_step import crpf_step, pmf_offset, propagation_normals
 
 COSTS = ("norm", "arc-length")
 VARIANCES = ("adaptive", "fixed")
 DELTA_MODES = ("relative", "absolute")
-#: "auto": the fused kernel (:mod:`workbench.kernels.crpf_step`, Numba on the CPU, else Taichi) for a
+#: "auto": the fused kernel (:mod:`workbench_filters.crpf.crpf_step`, Numba on the CPU, else Taichi) for a
 #: range-bearing model; "numpy": always the array code below; "numba"/"taichi": that kernel backend.
 BACKENDS = ("auto", "numpy", "numba", "taichi")
 
@@ -173,7 +174,7 @@ def log_pmf(costs: np.ndarray, beta: float, delta: float, relative: bool = False
     """Unnormalised log PMF ``-beta log(C - min C + delta_C)`` of costs ``(B, N)``.
 
     ``delta_C`` is ``delta`` or, ``relative``, ``delta`` times the mean gap of the row's finite costs above their
-    minimum (:func:`workbench.kernels.crpf_step.pmf_offset`).  Finite costs of any size give finite
+    minimum (:func:`workbench_filters.crpf.crpf_step.pmf_offset`).  Finite costs of any size give finite
     log-weights; an infinite cost gets ``-inf`` (weight zero), and a row whose every cost is infinite (or NaN)
     becomes uniform instead of NaN.
     """
@@ -379,3 +380,15 @@ PAPER_FILTERS = (100, 300, 500)
 @hookimpl
 def workbench_filters():
     return [make_crpf(n) for n in PAPER_FILTERS]
+
+
+def _bench(quick: bool) -> dict:
+    from .bench import bench
+
+    return bench(quick)
+
+
+@hookimpl
+def workbench_benchmarks():
+    return [BenchmarkSpec("crpf-step", "the CRPF's fused step kernel per particle: paper 003's configuration "
+                                       "against the previous one", _bench)]

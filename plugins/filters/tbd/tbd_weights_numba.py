@@ -1,10 +1,10 @@
-"""The Numba backend of :func:`workbench.kernels.tbd_weights.tbd_log_weight_sums` (imported only when used).
+"""The Numba backend of :func:`workbench_filters.tbd.tbd_weights.tbd_log_weight_sums` (imported only when used).
 
 Module-level functions, so that Numba's on-disk cache holds across processes (a kernel made in a
 factory is a closure, whose cache key changes from process to process: every process compiled it
 anew, about 2.7 s).  ``parallel`` and ``serial`` are the same loops compiled threaded and serial;
 ``parallel32`` and ``serial32`` the single-precision kernel.  The packed layouts are those of
-:mod:`.tbd_weights_numpy`.  The loops vectorise with the CPU's full width (:mod:`.vector_width`: eight doubles,
+:mod:`.tbd_weights_numpy`.  The loops vectorise with the CPU's full width (:mod:`workbench.kernels.vector_width`: eight doubles,
 sixteen singles on AVX-512; 1.5x the throughput of LLVM's 256-bit default, bit for bit the same float64 weights).
 """
 
@@ -15,8 +15,9 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
+from workbench.kernels.vector_width import wide_vectors
+
 from .tbd_weights_numpy import EXP2_COEFFS, EXP2_COEFFS_F32, EXP2_FLOOR, EXP2_FLOOR_F32, LN2, TILE
-from .vector_width import wide_vectors
 
 
 @intrinsic

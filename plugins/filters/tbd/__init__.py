@@ -37,7 +37,7 @@ The floor ``eps_i`` is the "target missed, every gated detection is clutter" alt
 - ``"none"``: ``eps = 0`` (the literal eqs 13-15).
 
 Everything is in the log domain; the sum over ``m`` is the compiled kernel
-:func:`workbench.kernels.tbd_weights.tbd_log_weight_sums` (streaming, no (B, N, M) array) and every floor term is
+:func:`workbench_filters.tbd.tbd_weights.tbd_log_weight_sums` (streaming, no (B, N, M) array) and every floor term is
 ``O(B N + M)``.  An item whose weights all underflow keeps its previous weights (counted).  Systematic resampling
 when ``N_eff < threshold * N`` (eq 16), followed by post-regularisation (:func:`regularise`, Musso, Oudjane and
 Le Gland's regularised particle filter): each resampled particle is jittered by ``h D e``, ``D D^T`` the cloud's
@@ -84,7 +84,6 @@ from workbench import hookimpl
 from workbench.filtering import keep_where, single_measurement
 from workbench.kalman_core import ekf_update, linearised, measurement_covariance
 from workbench.kernels.backend import BACKENDS
-from workbench.kernels.tbd_weights import PRECISIONS, tbd_log_weight_sums
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
@@ -92,8 +91,10 @@ from workbench.particle_core import (ParticleState, combine_columns, component_m
                                      log_likelihood_cov, noise_columns, predict, propagate_f)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
-from workbench.specs import FilterSpec, join_batch, take_batch
+from workbench.specs import BenchmarkSpec, FilterSpec, join_batch, take_batch
 from workbench.types import Gaussian, InputError, Particles, Scan
+
+from .tbd_weights import PRECISIONS, tbd_log_weight_sums
 
 #: two-mode process noise [U, chosen on tuning seeds, docs/paper000.md]: P(quiet -> manoeuvre), P(manoeuvre ->
 #: quiet) per scan and the manoeuvre mode's factor on sigma_a
@@ -710,3 +711,15 @@ def make_ekf_nis(manoeuvre_scale: float = MANOEUVRE_SCALE, nis_threshold: float 
 @hookimpl
 def workbench_filters():
     return [make_tbd_pf(), make_sir_jm(), make_ekf_nis()]
+
+
+def _bench(quick: bool) -> dict:
+    from .bench import bench
+
+    return bench(quick)
+
+
+@hookimpl
+def workbench_benchmarks():
+    return [BenchmarkSpec("tbd-weights", "tbd-pf's weight kernel (paper 000's method C): throughput per backend and "
+                                         "precision against NumPy and against its FMA-peak limit", _bench)]

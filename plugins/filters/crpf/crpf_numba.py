@@ -1,8 +1,8 @@
-"""The Numba backend of :func:`workbench.kernels.crpf_step.crpf_step` (imported only when it is used).
+"""The Numba backend of :func:`workbench_filters.crpf.crpf_step.crpf_step` (imported only when it is used).
 
 The functions live at module level, not in a factory, so that Numba's on-disk cache finds them again
 in a new process (a closure's cache key includes its cells, which differ from process to process, and
-every process compiled the kernel anew: 7-12 s).  See :mod:`workbench.kernels.crpf_step` for the step.
+every process compiled the kernel anew: 7-12 s).  See :mod:`workbench_filters.crpf.crpf_step` for the step.
 """
 
 import functools
@@ -11,10 +11,11 @@ import math
 import numba
 import numpy as np
 
-from .counter_normals_numba import row_normals
+from workbench.kernels.counter_normals_numba import row_normals
+from workbench.kernels.particle_numba import atan2  # the select-only atan2 (Cephes' rational approximation) both kernels use
+from workbench.kernels.vector_width import wide_vectors
+
 from .crpf_step_numpy import TWO_PI
-from .particle_numba import atan2  # the select-only atan2 (Cephes' rational approximation) both kernels use
-from .vector_width import wide_vectors
 
 pi, two_pi = math.pi, TWO_PI
 # error_model="numpy": a float division by zero gives inf instead of raising, so the loops below
@@ -53,7 +54,7 @@ def costs_into(out, base, px, py, zr, zt, sx, sy, q, arc):
 def pmf(vals, N, beta, delta, relative, w):
     """w_i ~ (v_i - min v + delta_v)^-beta (scaled so the best is 1); returns the sum.  ``delta_v = delta``, or
     for ``relative`` ``delta`` times the mean gap of the finite values above their minimum (``delta`` where
-    there is no gap): the twin's :func:`~workbench.kernels.crpf_step_numpy.pmf_offset`."""
+    there is no gap): the twin's :func:`~workbench_filters.crpf.crpf_step_numpy.pmf_offset`."""
     m = math.inf
     bad = False
     total = 0.0
