@@ -24,6 +24,17 @@ Update, per item ``b`` with a measurement present::
     x = x- + K (z - H x-)
     P = (I - K H) P- (I - K H)^T + K R_b K^T      Joseph form
 
+Innovations, on request (``update(state, scan, model, rng, innovations=True)`` returns ``(state, Innovations)``;
+the filters that can declare the ``innovations`` capability), per item with a measurement::
+
+    y   = wrap(z - h(x-))              innovation (B, m)
+    S   = H P- H^T + R                 its covariance (B, m, m)
+    NIS = y^T S^-1 y                   (B,), chi-square with m degrees of freedom for a consistent filter
+    log N(z; h(x-), S) = -(NIS + log det S + m log 2 pi) / 2       (B,)
+
+and NaN for an item without one (``Innovations.present`` says which).  These are FilterPy's ``y``, ``S``,
+``mahalanobis ** 2`` and ``log_likelihood`` after ``update``.
+
 Shapes
 ------
 state : :class:`~workbench.types.Gaussian` with ``mean (B, n)``, ``cov (B, n, n)``
@@ -31,6 +42,10 @@ z : (B, m), present : (B,) bool, H : (m, n), R : (B, m, m)
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -41,7 +56,55 @@ from .models import MeasurementModel, MotionModel, require_jacobian, require_lin
 from .types import Gaussian, InputError, Scan
 
 __all__ = ["linear_predict", "extended_predict", "linearised", "linear_update", "kalman_update", "kf_update", "ekf_update",
-           "measurement_covariance", "last_backend", "backend_counts"]
+           "measurement_covariance", "last_backend", "backend_counts", "Innovations", "gaussian_innovations"]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Innovations:
+    """What an update saw, per batch item: the innovation ``y (B, m)``, its covariance ``S (B, m, m)``, the
+    normalised innovation squared ``nis = y^T S^-1 y (B,)``, the log-likelihood of the measurement ``(B,)`` and
+    ``present (B,)``, whether the item had a measurement (where not, the numbers are NaN).  A time loop asked for
+    them (``run(..., innovations=True)``) holds the same fields over the scans, ``(B, T, ...)``.
+
+    For the Kalman family the log-likelihood is the Gaussian ``log N(y; 0, S)``; for an IMM it is the mixture's,
+    ``log sum_j cbar_j N(z; z^_j, S_j)``, while ``y`` and ``S`` are the moments of the modes' predicted
+    measurements (see ``plugins/filters/imm.py``)."""
+
+    y: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+    log_likelihood: np.ndarray
+    present: np.ndarray
+
+    #: Every field is batch-first (the filter-state take / join contract of :mod:`workbench.specs`).
+    batch_fields: ClassVar[tuple[str, ...]] = ("y", "S", "nis", "log_likelihood", "present")
+
+    @staticmethod
+    def absent(batch: int, m: int) -> "Innovations":
+        """The record of a scan without a measurement for any item (NaN everywhere, ``present`` all False)."""
+        return Innovations(np.full((batch, m), np.nan), np.full((batch, m, m), np.nan), np.full(batch, np.nan),
+                           np.full(batch, np.nan), np.zeros(batch, dtype=bool))
+
+
+def gaussian_innovations(y: np.ndarray, S: np.ndarray, present: np.ndarray) -> Innovations:
+    """:class:`Innovations` of innovations ``y (B, m)`` with covariances ``S (B, m, m)`` (symmetric positive
+    definite where ``present``): ``nis = y^T S^-1 y`` and ``log N(y; 0, S)`` through a Cholesky factor; NaN where
+    not ``present``."""
+    y = np.asarray(y, dtype=float)
+    S = np.asarray(S, dtype=float)
+    present = np.asarray(present, dtype=bool)
+    B, m = y.shape
+    S_safe = np.where(present[:, None, None], S, np.eye(m))
+    y_safe = np.where(present[:, None], y, 0.0)
+    L = np.linalg.cholesky(S_safe)
+    w = np.linalg.solve(L, y_safe[..., None])[..., 0]  # L w = y: ||w||^2 = y^T S^-1 y
+    nis = np.sum(w * w, axis=-1)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
+    loglik = -0.5 * (nis + logdet + m * _LOG_2PI)
+    return Innovations(np.where(present[:, None], y, np.nan), np.where(present[:, None, None], S, np.nan),
+                       np.where(present, nis, np.nan), np.where(present, loglik, np.nan), present.copy())
 
 
 #: Batches smaller than this take the compiled item-by-item loops (:mod:`workbench.kernels.kalman_numba`) where
@@ -164,7 +227,8 @@ def measurement_covariance(scan: Scan, model: MeasurementModel, present: np.ndar
     return np.where(present[:, None, None], cov, np.eye(m))
 
 
-def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.ndarray, who: str) -> Gaussian:
+def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.ndarray, who: str,
+                  innovations: bool = False):
     """The Kalman update of a scan with at most one valid row per item, linearised as ``H (B, m, n)``::
 
         S = H P- H^T + R              innovation covariance (R: the detection's own where the scan has one)
@@ -172,12 +236,18 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
         x = x- + K wrap(z - h(x-))    residual wraps angular components
         P = (I - K H) P- (I - K H)^T + K R K^T   Joseph form
 
-    Items without a measurement come back unchanged.
+    Items without a measurement come back unchanged.  With ``innovations``, returns ``(state, innovations)``, the
+    second an :class:`Innovations`: ``y = wrap(z - h(x-))``, ``S``, NIS and ``log N(y; 0, S)`` of the same update.
     """
     z, present = single_measurement(scan, who)
     if not present.any():
-        return state
+        return (state, Innovations.absent(state.batch, model.dim)) if innovations else state
     R = measurement_covariance(scan, model, present)
+    if innovations:
+        nu = model.residual(np.where(present[:, None], z, 0.0), model.h(state.mean))  # wrap(z - h(x-))
+        Ht = np.swapaxes(H, -1, -2)
+        S = symmetrise(H @ state.cov @ Ht + R)
+        return kalman_update(state, scan, model, H, who), gaussian_innovations(nu, S, present)
     if state.batch < SMALL_BATCH and (fast := _compiled()) is not None:
         nu = model.residual(z, model.h(state.mean))  # wrap(z - h(x-))
         mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
@@ -198,17 +268,19 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
     return Gaussian.trusted(keep_where(present, mean, state.mean), keep_where(present, cov, P))
 
 
-def kf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:
-    """The Kalman filter's update (the model's ``H``)."""
+def kf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None, *, innovations: bool = False):
+    """The Kalman filter's update (the model's ``H``); with ``innovations``, ``(state, innovations)`` (an
+    :class:`Innovations`)."""
     if model.H is None:
         raise InputError(f"the Kalman filter needs a linear measurement model; {model.name!r} has no H "
                          "(use the EKF, UKF or CDKF)")
     H = np.broadcast_to(model.H, (state.batch, *model.H.shape))
-    return kalman_update(state, scan, model, H, "kf")
+    return kalman_update(state, scan, model, H, "kf", innovations)
 
 
-def ekf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None) -> Gaussian:
-    """The extended Kalman filter's update (the model's Jacobian at the prediction)."""
+def ekf_update(state: Gaussian, scan: Scan, model: MeasurementModel, rng=None, *, innovations: bool = False):
+    """The extended Kalman filter's update (the model's Jacobian at the prediction); with ``innovations``,
+    ``(state, innovations)`` (an :class:`Innovations`)."""
     if model.jacobian is None:
         raise InputError(f"the EKF needs the Jacobian of {model.name!r}, which the sensor does not publish")
-    return kalman_update(state, scan, model, model.jacobian(state.mean), "ekf")
+    return kalman_update(state, scan, model, model.jacobian(state.mean), "ekf", innovations)

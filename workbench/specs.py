@@ -66,6 +66,8 @@ CAPABILITIES = {
     "manoeuvre_modes": "the filter carries a manoeuvre mode of its own (a jump-Markov or NIS-switched model), so a "
                        "recipe hands it the quiet motion model instead of one with the manoeuvres' noise moment-matched "
                        "in",
+    "innovations": "update(state, scan, model, rng, innovations=True) returns (state, Innovations): the innovation, "
+                   "its covariance, NIS and log-likelihood per item (workbench.kalman_core.Innovations)",
 }
 
 

@@ -14,7 +14,8 @@ gate) is read from the files, so the study and ``workbench run`` never disagree.
   track), each run's prior drawn from ``N(truth_0, P0)``.
 - :func:`filters`: the compared filters, each with the motion model it runs with: the CV EKF and CV UKF (the quiet
   model of the file), a CT-only EKF (the known turn at +turn_rate of the imm, the IMM's turn noise), and the
-  registered ``imm`` as the file configures it (the quiet model and turns at +-turn_rate).
+  registered ``imm`` as the file configures it (the quiet model and its turn modes at
+  ``+-turn_rate * k / turn_modes``).
 - :func:`evaluate`: position RMSE overall and in the turns, the mean NEES, the mean NEES on the straight legs and in
   the turns, and the share of scans whose run-averaged NEES lies in its chi-square 95 % band; the file's tracker
   (direct, or nearest neighbour with the file's gate).
@@ -43,7 +44,7 @@ CLUTTER_FILE = Path(__file__).with_name("manoeuvring_clutter.toml")
 #: A run whose position error at the last scan exceeds this is counted as lost.
 LOST_M = 200.0
 #: The label of the IMM in the results.
-IMM = "IMM (CV + CT +-turn_rate, EKF)"
+IMM = "IMM (CV + CT turn modes, EKF)"
 
 
 def load(host: PluginHost | None = None, clutter: bool = False) -> Scenario:

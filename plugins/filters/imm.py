@@ -34,19 +34,28 @@ loop model of another state dimension is refused by name.  The loop's model supp
 mode given as :data:`LOOP` (the string ``"loop"``), which *is* the loop's model.  A fixed ``M`` is per scan whatever
 the interval; ``M`` given as a function of the interval is rebuilt for every step.
 
-The registered ``imm``: three modes, the loop's own motion model (the scenario's quiet model, its noise honoured),
-and coordinated turns at ``+turn_rate`` and ``-turn_rate`` (:func:`workbench.models.coordinated_turn`: known rate,
-state ``[x, y, vx, vy]``, discrete white-noise acceleration ``turn_sigma_a``).  It leaves each mode at a constant
-rate, to either other mode alike, with probability ``switch_probability`` within 1 s (``2/3 (1 - (1 - 1.5 p)^dt)``
-within ``dt``, so irregular scans are honoured); it starts in the quiet mode with ``quiet_probability``; its mode
-filter is the EKF.  The defaults of ``turn_sigma_a`` (0.4 m/s^2) and ``switch_probability`` (0.05) were chosen by a
-stated rule (of the candidates that pass the filter kit, the run-averaged NEES closest to 4, scan by scan, on the
-manoeuvring scenario's tuning seeds; ``scripts/imm_tuning.py``).  :func:`make_imm` builds any other.  See
-``docs/imm.md``.
+The registered ``imm``: ``1 + 2 turn_modes`` modes, the loop's own motion model (the scenario's quiet model, its
+noise honoured), and coordinated turns at ``+-turn_rate * k / turn_modes``, ``k = turn_modes .. 1``
+(:func:`workbench.models.coordinated_turn`: known rate, state ``[x, y, vx, vy]``, discrete white-noise acceleration
+``turn_sigma_a``).  It leaves each mode at a constant rate, to every other mode alike, with probability
+``switch_probability`` within 1 s (``(r-1)/r (1 - (1 - r/(r-1) p)^dt)`` within ``dt`` for ``r`` modes, so irregular
+scans are honoured); it starts in the quiet mode with ``quiet_probability``; its mode filter is the EKF.  The
+defaults of ``turn_rate`` (4 deg/s), ``turn_modes`` (1), ``turn_sigma_a`` (0.3 m/s^2) and ``switch_probability``
+(0.02) were chosen by a stated rule (of 100 candidates, those whose mean NEES over the manoeuvring scenario's
+tuning seeds lies inside its chi-square band first, by the scan-by-scan NEES score; the first of them that passes
+the filter kit; ``scripts/imm_tuning.py``).  :func:`make_imm` builds any other.  See ``docs/imm.md``.
+
+Innovations (the ``innovations`` capability): ``update(state, scan, model, rng, innovations=True)`` returns
+``(state, Innovations)`` (:class:`workbench.kalman_core.Innovations`) with, per item, the moments of the modes'
+innovations under the predicted mode probabilities, ``y = sum_j cbar_j y_j`` and
+``S = sum_j cbar_j (S_j + (y_j - y)(y_j - y)^T)`` (``y_j = wrap(z - z^_j)``), ``NIS = y^T S^-1 y``, and the
+log-likelihood of the measurement under the IMM's predicted mixture, ``log sum_j cbar_j N(z; z^_j, S_j)`` (the
+normaliser of the mode probabilities' update; with one mode, the Kalman filter's).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar, Sequence
@@ -55,7 +64,8 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import require_finite, single_measurement
-from workbench.kalman_core import ekf_update, extended_predict, kf_update, linear_predict, measurement_covariance
+from workbench.kalman_core import (Innovations, ekf_update, extended_predict, gaussian_innovations, kf_update,
+                                   linear_predict, measurement_covariance)
 from workbench.linalg import symmetrise
 from workbench.models import MeasurementModel, MotionModel, constant_velocity, coordinated_turn
 from workbench.params import Param
@@ -372,10 +382,10 @@ def make_imm(modes: Sequence[MotionModel | str], transition, mode_filter: Any = 
             means[:, j], covs[:, j] = est.mean, est.cov
         return IMMState(cbar, means, covs)
 
-    def update(state: IMMState, scan: Scan, model: MeasurementModel, rng=None) -> IMMState:
+    def update(state: IMMState, scan: Scan, model: MeasurementModel, rng=None, *, innovations: bool = False):
         z, present = single_measurement(scan, name)
         if not present.any():
-            return state
+            return (state, Innovations.absent(state.probabilities.shape[0], model.dim)) if innovations else state
         require_finite(z, present, name)
         mu, x, P = state.probabilities, state.means, state.covs
         B = mu.shape[0]
@@ -383,9 +393,14 @@ def make_imm(modes: Sequence[MotionModel | str], transition, mode_filter: Any = 
         R = R[:, None] if R.ndim == 3 else R
         z_safe = np.where(present[:, None], z, 0.0)
         loglik = np.empty((B, r))
+        if innovations:
+            nus, Ss = np.empty((B, r, model.dim)), np.empty((B, r, model.dim, model.dim))
         for (kind, weights), idx in groups.items():
             z_hat, S = _predicted_measurement(kind, x[:, idx], P[:, idx], model, weights)
-            loglik[:, idx] = _log_likelihoods(z_safe, z_hat, symmetrise(S + R), model)
+            S = symmetrise(S + R)
+            loglik[:, idx] = _log_likelihoods(z_safe, z_hat, S, model)
+            if innovations:
+                nus[:, idx], Ss[:, idx] = model.residual(z_safe[:, None, :], z_hat), S
         # mu_j = cbar_j L_j / sum_k cbar_k L_k, in logs (no underflow when every likelihood is tiny)
         with np.errstate(divide="ignore"):
             logw = np.log(mu) + loglik
@@ -397,13 +412,23 @@ def make_imm(modes: Sequence[MotionModel | str], transition, mode_filter: Any = 
             est = filt.estimate(filt.update(filt.init(Gaussian.trusted(x[:, j], P[:, j]), rng), scan, model, rng))
             means[:, j], covs[:, j] = est.mean, est.cov
         probabilities = np.where(present[:, None], posterior, mu)
-        return IMMState(probabilities, means, covs)
+        out = IMMState(probabilities, means, covs)
+        if not innovations:
+            return out
+        # the moments of the modes' predicted measurements (weights cbar): y = sum_j cbar_j y_j,
+        # S = sum_j cbar_j (S_j + (y_j - y)(y_j - y)^T); the log-likelihood is the mixture's, log sum_j cbar_j L_j
+        y = np.einsum("br,brm->bm", mu, nus)
+        d = nus - y[:, None, :]
+        S = np.einsum("br,brij->bij", mu, Ss + d[..., :, None] * d[..., None, :])
+        record = gaussian_innovations(y, symmetrise(S), present)
+        mixture = (top[:, 0] + np.log(wts.sum(axis=1)))
+        return out, dataclasses.replace(record, log_likelihood=np.where(present, mixture, np.nan))
 
     def diagnostics(state: IMMState) -> dict:
         mean = np.mean(state.probabilities, axis=0)
         return {key: float(v) for key, v in zip(keys, mean)}
 
-    caps = {"gaussian", "manoeuvre_modes"}
+    caps = {"gaussian", "manoeuvre_modes", "innovations"}
     caps |= {c for c in ("needs_jacobian", "linear_only") if any(c in f.capabilities for f in filters)}
     if all("detection_covariance" in f.capabilities for f in filters):
         caps.add("detection_covariance")
@@ -422,33 +447,41 @@ def make_imm(modes: Sequence[MotionModel | str], transition, mode_filter: Any = 
 IMM_PARAMETERS = (
     Param("mode_filter", "ekf", "the Gaussian filter of every mode", "str",
           choices=("kf", "ekf", "ukf", "cdkf", "sr-ukf", "sr-cdkf")),
-    Param("turn_rate", math.radians(3.0), "rate of the two coordinated-turn modes (+ and -)", unit="angular_rate",
+    Param("turn_rate", math.radians(4.0), "rate of the fastest coordinated-turn modes (+ and -)", unit="angular_rate",
           above=0.0, maximum=10.0),
-    Param("turn_sigma_a", 0.4, "white-noise acceleration of the turn modes", unit="acceleration", minimum=0.0,
+    Param("turn_modes", 1, "turn modes on each side: known rates turn_rate * k / turn_modes, k = 1 .. turn_modes",
+          "int", unit="dimensionless", minimum=1, maximum=5),
+    Param("turn_sigma_a", 0.3, "white-noise acceleration of the turn modes", unit="acceleration", minimum=0.0,
           maximum=1e3),
-    Param("switch_probability", 0.05, "probability of leaving a mode within 1 s (switching at a constant rate)",
+    Param("switch_probability", 0.02, "probability of leaving a mode within 1 s (switching at a constant rate)",
           unit="dimensionless", above=0.0, maximum=0.6),
     Param("quiet_probability", 0.9, "initial probability of the quiet mode (the loop's own model)",
           unit="dimensionless", above=0.0, maximum=1.0),
 )
 
 
-def make_default_imm(mode_filter: str = "ekf", turn_rate: float = math.radians(3.0), turn_sigma_a: float = 0.4,
-                     switch_probability: float = 0.05, quiet_probability: float = 0.9, name: str = "imm") -> FilterSpec:
-    """The registered ``imm``: the loop's own model and coordinated turns at ``+-turn_rate`` (see the module
-    docstring), each mode run by ``mode_filter``."""
-    decay = 1.0 - 1.5 * switch_probability  # the chain's decay over 1 s, e^{-3 lambda / 2}
+def make_default_imm(mode_filter: str = "ekf", turn_rate: float = math.radians(4.0), turn_modes: int = 1,
+                     turn_sigma_a: float = 0.3, switch_probability: float = 0.02, quiet_probability: float = 0.9,
+                     name: str = "imm") -> FilterSpec:
+    """The registered ``imm``: the loop's own model and coordinated turns at ``+-turn_rate * k / turn_modes``
+    (``k = turn_modes .. 1``: the modes are the loop's, then ``+turn_rate``, ``-turn_rate``, then the slower rates
+    in pairs; see the module docstring), each mode run by ``mode_filter``."""
+    K = int(turn_modes)
+    r = 1 + 2 * K
+    decay = 1.0 - r / (r - 1.0) * switch_probability  # the chain's decay over 1 s, e^{-r a} (a: rate to one mode)
 
     def M(dt: float) -> np.ndarray:
-        # switching at the rate lambda out of each mode, lambda / 2 to each other: leave(dt) = 2/3 (1 - decay^dt),
+        # switching at the rate (r - 1) a out of each mode, a to each other: leave(dt) = (r-1)/r (1 - decay^dt),
         # which is switch_probability at dt = 1 s
-        leave = 2.0 / 3.0 * (1.0 - decay**dt)
-        return np.full((3, 3), leave / 2.0) + np.eye(3) * (1.0 - 1.5 * leave)
-    q = (1.0 - quiet_probability) / 2.0
-    params = {"mode_filter": mode_filter, "turn_rate": turn_rate, "turn_sigma_a": turn_sigma_a,
+        leave = (r - 1.0) / r * (1.0 - decay**dt)
+        off = leave / (r - 1.0)
+        return np.full((r, r), off) + np.eye(r) * (1.0 - leave - off)
+    q = (1.0 - quiet_probability) / (r - 1)
+    params = {"mode_filter": mode_filter, "turn_rate": turn_rate, "turn_modes": K, "turn_sigma_a": turn_sigma_a,
               "switch_probability": switch_probability, "quiet_probability": quiet_probability}
-    turns = (coordinated_turn(1.0, turn_rate, turn_sigma_a), coordinated_turn(1.0, -turn_rate, turn_sigma_a))
-    return make_imm((LOOP,) + turns, M, mode_filter, (quiet_probability, q, q), name=name,
+    turns = tuple(coordinated_turn(1.0, sign * turn_rate * k / K, turn_sigma_a)
+                  for k in range(K, 0, -1) for sign in (1.0, -1.0))
+    return make_imm((LOOP,) + turns, M, mode_filter, (quiet_probability,) + (q,) * (r - 1), name=name,
                     parameters=IMM_PARAMETERS, params=params, build=make_default_imm)
 
 

@@ -18,7 +18,10 @@ Update::
     P = (I - K H) P- (I - K H)^T + K R K^T   Joseph form: stays symmetric positive definite
 
 The KF uses the model's ``H``; the EKF linearises ``h`` at ``x-`` with the model's Jacobian.  Where a scan
-carries each detection's own covariance (``Scan.cov``) it replaces ``R``.  The steps are
+carries each detection's own covariance (``Scan.cov``) it replaces ``R``.  Both declare ``innovations``:
+``update(state, scan, model, rng, innovations=True)`` returns ``(state, Innovations)`` with the innovation ``y``,
+``S``, NIS and the Gaussian log-likelihood per item (:class:`workbench.kalman_core.Innovations`), and
+``run(..., innovations=True)`` collects them over the scans.  The steps are
 :mod:`workbench.kalman_core`'s, which other filter plugins share.
 """
 
@@ -51,14 +54,14 @@ KF = FilterSpec(
     name="kf",
     summary="Kalman filter (linear models), Joseph-form update",
     init=init, predict=predict, update=kf_update, estimate=estimate,
-    capabilities=frozenset({"gaussian", "exact_linear", "linear_only", "detection_covariance"}),
+    capabilities=frozenset({"gaussian", "exact_linear", "linear_only", "detection_covariance", "innovations"}),
 )
 
 EKF = FilterSpec(
     name="ekf",
     summary="Extended Kalman filter, Jacobian at the prediction, Joseph-form update",
     init=init, predict=ekf_predict, update=ekf_update, estimate=estimate,
-    capabilities=frozenset({"gaussian", "exact_linear", "needs_jacobian", "detection_covariance"}),
+    capabilities=frozenset({"gaussian", "exact_linear", "needs_jacobian", "detection_covariance", "innovations"}),
 )
 
 

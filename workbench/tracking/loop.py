@@ -10,6 +10,9 @@
         carry = association.update(carry, scan, k)
     return association.finish(carry)
 
+(from scan 1 on, ``association.step(carry, motion_k, scan, k)`` in place of the two calls where the filter gives a
+fused ``FilterSpec.step`` and the role takes it: the same numbers bit for bit, the filter kit checks)
+
 An *association* decides what the filter is updated with at each scan, and records what it decided:
 
 - :class:`~workbench.tracking.single.Direct`: the scan as it is (at most one valid row per item, or any number for a
@@ -66,6 +69,10 @@ class Association(Protocol):
 
     def finish(self, carry: Any) -> Any: ...
 
+    # Optional: ``step(carry, motion, scan, k) -> carry``, predict and update at scan ``k`` through the filter's
+    # fused ``FilterSpec.step``, the same records as ``predict`` then ``update``; :func:`run` calls it from scan 1 on
+    # where the filter gives a step and the role has this method (:class:`~workbench.tracking.single.Direct`).
+
 
 @dataclass(frozen=True)
 class Track:
@@ -78,6 +85,9 @@ class Track:
     records : the association's per-step records, each ``(B, T, ...)`` (see each role)
 
     ``seconds`` is the wall time of the loop; ``diagnostics`` the filter's counters after the last scan.
+    ``innovations``: with ``run(..., innovations=True)``, a :class:`~workbench.kalman_core.Innovations` whose
+    fields are ``(B, T, ...)`` (``y (B, T, m)``, ``S (B, T, m, m)``, ``nis``, ``log_likelihood`` and ``present``
+    ``(B, T)``; NaN where an item had no update at a scan); ``None`` otherwise.
     """
 
     filter: str
@@ -87,28 +97,42 @@ class Track:
     diagnostics: Mapping[str, float]
     records: Mapping[str, np.ndarray] = field(default_factory=dict)
     seconds: float = 0.0
+    innovations: Any = None
 
 
 def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementModel, *,
         association: Association | None = None, prior: Gaussian | None = None,
         rng: np.random.Generator | None = None, predict_first: bool = False,
-        progress: Callable[[float], None] | None = None):
+        progress: Callable[[float], None] | None = None, innovations: bool = False):
     """Drive ``filt`` over ``scans`` with ``association`` (default :class:`~workbench.tracking.single.Direct`).
 
     Parameters
     ----------
-    filt : the filter (any :class:`~workbench.specs.FilterSpec`)
-    scans : the detections, ``z (B, T, M, m)``; their ``origin`` labels are stripped before any step sees them
-    motion : the motion model; each predict gets ``motion.at(t_{k-1}, t_k - t_{k-1})`` (rebuilt where the interval
+    filt : FilterSpec
+        The filter (any :class:`~workbench.specs.FilterSpec`).
+    scans : Scans
+        The detections, ``z (B, T, M, m)``; their ``origin`` labels are stripped before any step sees them.
+    motion : MotionModel
+        The motion model; each predict gets ``motion.at(t_{k-1}, t_k - t_{k-1})`` (rebuilt where the interval
         differs from its own ``dt``, the step's absolute start time bound, so a time-varying model sees it;
-        with ``predict_first``, the step before the first scan is ``motion.at(t_0 - dt, dt)``)
-    model : the measurement model the filter is given
-    association : the role that chooses what the filter is updated with (see the module docstring)
-    prior : the belief at the first scan, ``(B, n)`` (a role may build its own, e.g. from the first scan)
-    rng : the generator of the run's random draws (filters that draw, pseudo steps)
-    predict_first : predict before the first update too (as FilterPy and Stone Soup do, when the prior is the
-        belief one step before the first scan); by default the first scan updates the prior directly
-    progress : called with the finished fraction after each scan
+        with ``predict_first``, the step before the first scan is ``motion.at(t_0 - dt, dt)``).
+    model : MeasurementModel
+        The measurement model the filter is given.
+    association : Association or None
+        The role that chooses what the filter is updated with (see the module docstring).
+    prior : Gaussian or None
+        The belief at the first scan, ``(B, n)`` (a role may build its own, e.g. from the first scan).
+    rng : numpy.random.Generator or None
+        The generator of the run's random draws (filters that draw, pseudo steps).
+    predict_first : bool
+        Predict before the first update too (as FilterPy and Stone Soup do, when the prior is the belief one step
+        before the first scan); by default the first scan updates the prior directly.
+    progress : callable or None
+        Called with the finished fraction after each scan.
+    innovations : bool
+        Record each update's innovation, its covariance, NIS and log-likelihood into the returned
+        :class:`Track`'s ``innovations`` (``(B, T, ...)``); the filter must declare the ``innovations`` capability
+        and the association be a single-target one.
     """
     if association is None:
         from .single import Direct
@@ -127,20 +151,71 @@ def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementM
                          f"rng=wb.generator(seed, key), e.g. wb.run(filt, scans, motion, model, prior=prior, "
                          f"rng=wb.generator(1, 'runs'))")
     T = scans.steps
+    recorder = None
+    if innovations:
+        filt, recorder = _recording(filt, association, scans.batch, T, model.dim)
     ctx = Context(filt, model, motion, scans.batch, T, scans.times, rng)
     carry = association.start(ctx, prior, scans.scan(0).for_filter() if T else Scan.empty(scans.batch,
                                                                                            scans.z.shape[-1]))
     times = np.asarray(scans.times, dtype=float)
+    # a filter's fused predict + update + estimate (FilterSpec.step), where the role takes it (Association.step)
+    fused = getattr(association, "step", None) if filt.step is not None and recorder is None else None
     for k in range(T):
         scan = scans.scan(k).for_filter()
+        if k > 0 and fused is not None:
+            carry = fused(carry, motion.at(float(times[k - 1]), float(times[k] - times[k - 1])), scan, k)
+            if progress is not None:
+                progress((k + 1) / T)
+            continue
         if k > 0:
             # the step from t_{k-1} to t_k: its absolute start time and interval bound into the model
             carry = association.predict(carry, motion.at(float(times[k - 1]), float(times[k] - times[k - 1])), k)
         elif predict_first:
             # the prior is the belief one nominal step before the first scan
             carry = association.predict(carry, motion.at(float(times[0]) - motion.dt, motion.dt), k)
+        if recorder is not None:
+            recorder["k"] = k
         carry = association.update(carry, scan, k)
         if progress is not None:
             progress((k + 1) / T)
-    return association.finish(carry)
+    result = association.finish(carry)
+    if recorder is not None:
+        import dataclasses
+
+        result = dataclasses.replace(result, innovations=recorder["record"])
+    return result
+
+
+def _recording(filt: FilterSpec, association: Any, batch: int, steps: int, m: int):
+    """``filt`` with an update that asks for the innovations and writes them at the loop's scan ``k``, and the
+    recorder (``{"k": scan, "record": Innovations (B, T, ...)}``); refused by name where the filter does not declare
+    ``innovations`` or the association is not a single-target role (its batch is not the runs')."""
+    import dataclasses
+
+    from ..kalman_core import Innovations
+    from .single import SingleTarget
+
+    if "innovations" not in filt.capabilities:
+        raise InputError(f"filter {filt.name!r} does not record innovations (it lacks the innovations capability; "
+                         f"the Kalman family and the IMM have it)")
+    if not isinstance(association, SingleTarget):
+        raise InputError(f"innovations=True needs a single-target association (Direct, Gated, NearestNeighbour), "
+                         f"not {type(association).__name__}")
+    record = Innovations(np.full((batch, steps, m), np.nan), np.full((batch, steps, m, m), np.nan),
+                         np.full((batch, steps), np.nan), np.full((batch, steps), np.nan),
+                         np.zeros((batch, steps), dtype=bool))
+    recorder: dict = {"k": 0, "record": record}
+    update = filt.update
+
+    def recording_update(state, scan, model, rng=None):
+        state, got = update(state, scan, model, rng, innovations=True)
+        if got.y.shape != (batch, m):
+            raise InputError(f"filter {filt.name!r} gave innovations of shape {got.y.shape} at scan "
+                             f"{recorder['k']}; the run records {(batch, m)} (the measurement model's dimension)")
+        k = recorder["k"]
+        for name in ("y", "S", "nis", "log_likelihood", "present"):
+            getattr(record, name)[:, k] = getattr(got, name)
+        return state
+
+    return dataclasses.replace(filt, update=recording_update, step=None), recorder
 

@@ -307,7 +307,7 @@ def test_both_manoeuvring_scenario_files_load_agree_and_run(tmp_path):
     assert z[:, 0].min() >= 1000.0 and z[:, 0].max() <= 4500.0 and z[:, 1].min() >= -1.3 and z[:, 1].max() <= 0.5
     for scenario in (clean, cluttered):
         res = m.evaluate(scenario, 4, 1, steps=50, host=HOST)
-        assert set(res) == {"CV EKF", "CV UKF", "CT-only EKF (+3 deg/s)", m.IMM}
+        assert set(res) == {"CV EKF", "CV UKF", "CT-only EKF (+4 deg/s)", m.IMM}  # the imm's turn_rate
         assert all(np.isfinite(f["rmse_m"]) for f in res.values()), res
         assert res[m.IMM]["rmse_m"] < 50.0, res[m.IMM]  # the IMM keeps the track; single models may lose it
         assert ("updated" in res[m.IMM]) == bool(scenario.clutter)
@@ -322,7 +322,7 @@ def test_both_manoeuvring_scenario_files_load_agree_and_run(tmp_path):
 def test_the_docs_usage_snippet_runs_and_finds_the_turn(capsys):
     text = (ROOT / "docs" / "imm.md").read_text()
     blocks = [b.split("```", 1)[0] for b in text.split("```python\n")[1:]]
-    assert len(blocks) == 1
+    assert len(blocks) == 2  # the usage, then the innovations (which continues it)
     namespace: dict = {}
     exec(compile(blocks[0], "docs/imm.md", "exec"), namespace)  # noqa: S102 - the documented code itself
     probabilities = namespace["imm_mode_probabilities"](namespace["state"]).mean(axis=0)
@@ -331,6 +331,19 @@ def test_the_docs_usage_snippet_runs_and_finds_the_turn(capsys):
     assert max(diagnostics, key=diagnostics.get).startswith("mode_probability_ct(0.05"), diagnostics
     np.testing.assert_allclose(sorted(diagnostics.values()), np.sort(probabilities), rtol=1e-9)
     assert "mode_probability" in capsys.readouterr().out
+    exec(compile(blocks[1], "docs/imm.md", "exec"), namespace)  # noqa: S102 - the innovations example
+    nis = np.array(namespace["nis"])  # (T, B) from the FilterPy-style loop
+    T = namespace["scans"].steps
+    assert nis.shape == (T, 20) and np.isfinite(nis).all()
+    # the CV EKF is consistent on the straight leg and lags in the turn: its NIS there far above chi-square(2)'s 2
+    assert 1.0 < nis[:20].mean() < 3.5 and nis[20:].mean() > 10.0, (nis[:20].mean(), nis[20:].mean())
+    record = namespace["record"]
+    assert record.nis.shape == (20, T) and record.present.all()
+    # NIS against y and S recomputed with a plain solve
+    y, S = record.y, record.S
+    np.testing.assert_allclose(record.nis, np.einsum("bti,bti->bt", y, np.linalg.solve(S, y[..., None])[..., 0]),
+                               rtol=1e-9)
+    assert record.nis.mean() < nis.mean() / 3.0  # the IMM follows the turn
 
 
 def test_ukf_modes_weigh_by_the_unscented_transform_with_the_mode_filters_own_weights():
@@ -372,3 +385,29 @@ def test_ukf_modes_weigh_by_the_unscented_transform_with_the_mode_filters_own_we
             nu = np.array([z[0] - y_hat[0], math.remainder(z[1] - y_hat[1], 2 * math.pi)])
             weights.append(predicted.probabilities[b, j] * multivariate_normal(np.zeros(2), S).pdf(nu))
         np.testing.assert_allclose(after.probabilities[b], np.array(weights) / sum(weights), rtol=1e-9)
+
+
+def test_turn_modes_build_the_turn_pairs_and_a_constant_rate_chain():
+    """``turn_modes=2``: five modes (the loop's, +-turn_rate, +-turn_rate / 2), each turn the coordinated turn of
+    its rate; the switching matrix over ``dt`` is the matrix exponential of the chain's generator (leaving each mode
+    at one rate, to every other alike), whose leaving probability over 1 s is ``switch_probability``."""
+    from scipy.linalg import expm
+
+    rate, p = math.radians(4.0), 0.03
+    imm = HOST.filter("imm").configure(turn_modes=2, turn_rate=rate, switch_probability=p, turn_sigma_a=0.3)
+    assert "5 modes" in imm.summary
+    prior = Gaussian.broadcast(np.array([100.0, 50.0, 10.0, -5.0]), np.diag([4.0, 4.0, 1.0, 1.0]), 1)
+    cv = constant_velocity(2, 1.0, 0.1)
+    for dt in (1.0, 2.5):
+        state = imm.predict(imm.init(prior), cv.for_interval(dt))
+        # mode j's mean after mixing equal means is the prior mean moved by that mode's own transition
+        for j, w in enumerate((rate, -rate, rate / 2, -rate / 2), start=1):
+            np.testing.assert_allclose(state.means[0, j], prior.mean[0] @ coordinated_turn(dt, w, 0.3).F.T,
+                                       rtol=1e-12)
+        # cbar = mu0 M(dt) with M(dt) = expm(G dt); the rate a to each other mode solves leave(1 s) = p
+        a = -math.log(1.0 - 5.0 / 4.0 * p) / 5.0
+        G = a * (np.ones((5, 5)) - 5.0 * np.eye(5))
+        mu0 = np.array([0.9] + [0.025] * 4)
+        np.testing.assert_allclose(state.probabilities[0], mu0 @ expm(G * dt), rtol=1e-12)
+        if dt == 1.0:
+            np.testing.assert_allclose(1.0 - expm(G)[0, 0], p, rtol=1e-12)
