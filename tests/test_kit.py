@@ -107,7 +107,7 @@ def test_check_plugin_command_fits_the_kit_to_the_kind(capsys):
     out = capsys.readouterr().out
     assert "PASSED   sonar-poisson-check_count_poisson: " in out and "PASSED   hough-check_causal: " in out
     assert main(["check-plugin", "no-such-thing"]) == 2
-    assert "no filter, sensor, clutter generator, clutter remover or motion model named 'no-such-thing'" in capsys.readouterr().err
+    assert "no filter, sensor, clutter generator, clutter remover, motion model or tracker named 'no-such-thing'" in capsys.readouterr().err
     assert main(["check-plugin", "kf", "--kind", "sensor"]) == 2
 
 

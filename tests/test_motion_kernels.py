@@ -119,3 +119,77 @@ def test_states_of_another_dimension_are_refused_with_one_line(bad, method):
     assert isinstance(model, CoordinatedTurnRate)
     with pytest.raises(InputError, match=r"'ct-rate'.*\(\.\.\., 5\).*got shape"):
         getattr(model, method)(bad)
+
+
+# -- the particle filter's compiled propagation through the model (particle_propagator) ---------------------------
+
+
+def _cloud(rng, B=2, N=700):
+    """A ``(B, N, 5)`` cloud stored component-major (as the particle filter keeps it), every rate of RATES."""
+    from workbench import particle_core as core
+
+    x = core.component_major(B, N, 5)
+    x[...] = _states(rng, (B, N))
+    return x
+
+
+@needs_numba
+@pytest.mark.parametrize("dt", [T, 2.5])
+def test_compiled_propagation_equals_the_numpy_path_bit_for_bit_and_follows_f(dt):
+    from workbench import particle_core as core
+    from workbench.types import Particles
+
+    model = coordinated_turn_rate(T, [0.5, 2.0], 0.01).at(3.0, dt)
+    x = _cloud(np.random.default_rng(5))
+    state = core.ParticleState(Particles.trusted(x, np.full(x.shape[:2], -np.log(x.shape[1]))))
+    before = x.copy()
+    a, b, c = np.random.default_rng(9), np.random.default_rng(9), np.random.default_rng(9)
+    with using("cpu"):
+        ref = core.predict(state, model, a, backend="numpy").cloud.particles
+        got = core.predict(state, model, b, backend="numba").cloud.particles
+    np.testing.assert_array_equal(got, ref)  # the NumPy twin, bit for bit
+    assert a.random() == b.random()  # the generator left where NumPy leaves it
+    np.testing.assert_array_equal(x, before)
+    assert np.moveaxis(got, 2, 0).flags.c_contiguous  # component-major, as the filter keeps it
+    # an independent reference: the model's NumPy f plus Q_sqrt's non-zero columns times NumPy's draws
+    G = core.noise_columns(model)
+    e = c.standard_normal(x.shape[:2] + (G.shape[1],))
+    np.testing.assert_allclose(got, model.f_numpy(before) + e @ G.T, rtol=1e-12, atol=1e-9)
+
+
+@needs_numba
+def test_the_particle_filter_runs_the_declared_loop_only_where_the_policy_runs_numba_and_f_is_the_models(monkeypatch):
+    from workbench import particle_core as core
+    from workbench.kernels import motion_numba
+    from workbench.kernels.backend import preferring
+    from workbench.types import Particles
+
+    calls = []
+    real = motion_numba.ct_rate_propagate
+    monkeypatch.setattr(motion_numba, "ct_rate_propagate", lambda *a: calls.append(1) or real(*a))
+    model = coordinated_turn_rate(T, 0.5, 0.01)
+    x = _cloud(np.random.default_rng(6), 1, 64)
+    state = core.ParticleState(Particles.trusted(x, np.zeros((1, 64))))
+    with using("cpu"):
+        core.predict(state, model, np.random.default_rng(1), backend="auto")
+        assert len(calls) == 1
+        core.predict(state, model, np.random.default_rng(1), backend="numpy")
+        with preferring("numpy"):  # WORKBENCH_BACKEND=numpy: "auto" is the NumPy twin
+            core.predict(state, model, np.random.default_rng(1), backend="auto")
+        assert len(calls) == 1
+    with using("cuda"):  # no Taichi version: the NumPy path off the CPU
+        core.predict(state, model, np.random.default_rng(1), backend="auto")
+    assert len(calls) == 1
+
+    class Drift(CoordinatedTurnRate):  # a user's own f is what the filter follows, never the compiled turn
+        def f(self, x, t=None, dt=None):
+            return np.asarray(x, dtype=float) + 1.0
+
+    drift = Drift(model.name, model.F, model.Q, model.Q_sqrt, model.dt)
+    assert drift.particle_propagator() is None
+    with using("cpu"):
+        moved = core.predict(state, drift, np.random.default_rng(2), backend="numba").cloud.particles
+    G = core.noise_columns(drift)
+    e = np.random.default_rng(2).standard_normal((1, 64, G.shape[1]))
+    np.testing.assert_allclose(moved, x + 1.0 + e @ G.T, rtol=1e-12, atol=1e-12)
+    assert len(calls) == 1

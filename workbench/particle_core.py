@@ -9,8 +9,10 @@ State: :class:`ParticleState` with particles ``(B, N, n)`` and normalised log-we
 
 Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal); for a motion model that overrides ``f``
 (not :attr:`~workbench.models.MotionModel.linear`) ``x_i <- f(x_i) + Q_sqrt e_i``, ``f`` called once on all
-``(B N, n)`` particles (:func:`propagate_f`), the noise drawn as for a linear model (the same numbers), and the
-NumPy code runs whatever the backend (the compiled steps use ``F``).
+``(B N, n)`` particles (:func:`propagate_f`), the noise drawn as for a linear model (the same numbers); the compiled
+backend runs the model's own compiled propagation where it declares one
+(:meth:`~workbench.models.MotionModel.particle_propagator`: ``f`` and the noise in one pass, the NumPy path its
+twin), and the NumPy code otherwise.
 Likelihood: ``log N(z; h(x_i), R)`` up to a constant, with the residual wrapped for angular components.
 
 Speed: the particle arrays made here are stored component-major (``(n, B, N)`` in memory, seen as
@@ -18,6 +20,10 @@ Speed: the particle arrays made here are stored component-major (``(n, B, N)`` i
 matrix products (``F x``, ``Q_sqrt e``, the whitening by ``chol(R)^-1``) are written out one component at a
 time, skipping zero entries, instead of calling BLAS on ``(N, 4) x (4, 4)`` shapes.  Any layout of the input
 particles is accepted.
+
+Fused: :func:`predict_log_weights` is :func:`predict` and :func:`weighted_log_likelihood` in one compiled pass (a
+linear model, the planar range-bearing measurement), the two calls' numbers bit for bit; the bootstrap filter's
+fused step (``FilterSpec.step``) is built on it.
 
 Backends.  :func:`predict`, :func:`weighted_log_likelihood`, :func:`reweight` and :func:`estimate` take a
 ``backend`` that the kernel policy resolves (:func:`workbench.kernels.backend.resolve`): ``"numba"`` runs the
@@ -45,8 +51,8 @@ from .models import MeasurementModel, MotionModel
 from .types import Gaussian, InputError, Particles
 
 __all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "propagate_f", "noise_columns",
-           "log_likelihood", "weighted_log_likelihood", "log_likelihood_cov", "reweight", "estimate", "diagnostics",
-           "compiled"]
+           "log_likelihood", "weighted_log_likelihood", "predict_log_weights", "log_likelihood_cov", "reweight",
+           "estimate", "diagnostics", "compiled"]
 
 
 @dataclass(frozen=True)
@@ -216,12 +222,24 @@ def predict(state: ParticleState, motion: MotionModel, rng: np.random.Generator,
             backend: str = "numpy") -> ParticleState:
     """``x_i <- F x_i + Q_sqrt e_i`` with ``e = rng.standard_normal((B, N, k))`` for the ``k`` non-zero columns of
     ``Q_sqrt``; ``backend`` as in the module docstring (the same particles either way).  A model that overrides
-    ``f``: ``x_i <- f(x_i) + Q_sqrt e_i``, the same draws, in NumPy whatever the backend."""
+    ``f``: ``x_i <- f(x_i) + Q_sqrt e_i``, the same draws: in NumPy (:func:`propagate_f`, then
+    :func:`combine_columns` of ``[I | G]``), or, where the backend runs Numba and the model declares a compiled
+    propagation (:meth:`~workbench.models.MotionModel.particle_propagator`, e.g. the coordinated turn with the rate
+    in the state), by that loop in one pass, which is held to the NumPy path as its twin."""
     need_rng(rng, "particle_core.predict")
     x = state.cloud.particles
     B, N, n = x.shape
     if not motion.linear:
         g = noise_columns(motion)
+        run = motion.particle_propagator() if compiled(backend) else None
+        if run is not None and (g.shape[1] == 0 or type(rng) is np.random.Generator):
+            # the model's declared compiled propagation: f and the noise in one pass, the same draws and sums
+            matrix = np.ascontiguousarray(np.hstack([np.eye(n), g]), dtype=float)
+            out = np.empty((n, B, N))
+            run(out.reshape(n, B * N), _rows(x).reshape(n, B * N), rng, g.shape[1],
+                *_plan_arrays(matrix.tobytes(), *matrix.shape))
+            return ParticleState(Particles.trusted(out.transpose(1, 2, 0), state.cloud.log_weights), state.resamples,
+                                 state.underflows)
         sources = [propagate_f(x, motion, "particle_core.predict")]
         if g.shape[1]:
             sources.append(rng.standard_normal((B, N, g.shape[1])))
@@ -350,6 +368,43 @@ def weighted_log_likelihood(z: np.ndarray, x: np.ndarray, model: MeasurementMode
     return out
 
 
+def predict_log_weights(state: ParticleState, motion: MotionModel, rng: np.random.Generator, z: np.ndarray,
+                        present: np.ndarray, model: MeasurementModel, backend: str = "numpy",
+                        scratch: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`predict` and :func:`weighted_log_likelihood` in one compiled pass, or ``None`` where that pass does not
+    apply (then call the two): it needs the compiled backend, a :attr:`~workbench.models.MotionModel.linear` motion
+    model, the planar range-bearing measurement model (declared by its frame, as :func:`weighted_log_likelihood`
+    requires) and a ``numpy.random.Generator`` (or no noise).  The same draws, particles and log-weights as the two
+    calls bit for bit (:func:`~workbench.kernels.particle_numba.propagate_range_bearing`).
+
+    Returns the moved particles ``(B, N, n)`` (component-major; ``scratch``: in this thread's work array, valid
+    until the next call, for a caller that resamples them into a new array at once), the log-weights ``(B, N)``
+    (:func:`weighted_log_likelihood`'s for the items with ``present``, the previous ones for the others) and their
+    rows' max ``(B,)`` (``np.max(log_w, axis=1)`` where ``present``, ``-inf`` elsewhere).
+
+    Shapes: ``z (B, 2)``, ``present (B,)``.
+    """
+    x = state.cloud.particles
+    B, N, n = x.shape
+    if not compiled(backend) or not motion.linear:
+        return None
+    sensor = _plane_range_bearing(model, n)
+    if sensor is None:
+        return None
+    matrix, k = _propagation(motion)
+    if k and type(rng) is not np.random.Generator:
+        return None
+    out = (_scratch("predicted", n * B * N) if scratch else np.empty(n * B * N)).reshape(n, B, N)
+    log_w = np.empty((B, N))
+    top = np.full(B, -np.inf)
+    _kernels().propagate_range_bearing(out.reshape(n, B * N), _rows(x).reshape(n, B * N), rng, k,
+                                       *_plan_arrays(matrix.tobytes(), *matrix.shape),
+                                       np.ascontiguousarray(present, dtype=bool), np.ascontiguousarray(z, dtype=float),
+                                       sensor, _inverse_cholesky(model.R),
+                                       np.ascontiguousarray(state.cloud.log_weights, dtype=float), log_w, top)
+    return out.transpose(1, 2, 0), log_w, top
+
+
 def log_likelihood_cov(z: np.ndarray, x: np.ndarray, model: MeasurementModel, R: np.ndarray) -> np.ndarray:
     """``log N(z_b; h(x_bi), R_b)`` for a per-item covariance ``R (B, m, m)``, including the normalising
     ``-(m log 2 pi + log |R_b|) / 2``; ``z (B, m)``, ``x (B, N, n)`` -> ``(B, N)``."""
@@ -363,14 +418,17 @@ def log_likelihood_cov(z: np.ndarray, x: np.ndarray, model: MeasurementModel, R:
 
 
 def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, present: np.ndarray, threshold: float,
-             rng: np.random.Generator, backend: str = "numpy") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+             rng: np.random.Generator, backend: str = "numpy", top: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Normalise, and resample where the effective sample size is low: the end of a bootstrap update.
 
     Items with ``present``: ``log_w`` normalised (an item whose every weight underflowed, or that holds a NaN or
     ``+inf``, keeps ``previous`` and is counted as ``dead``); items without: ``previous``.  Then the items with
     ``present`` and ``N_eff < threshold N`` (every such item when ``threshold > 1``) are resampled
     systematically (:func:`workbench.resampling.resample_where`: one offset ``u_0 ~ U[0, 1)`` per resampled item,
-    drawn as ``rng.random((R, 1))``) and get weights ``1/N``.  ``backend`` as in the module docstring.
+    drawn as ``rng.random((R, 1))``) and get weights ``1/N``.  ``backend`` as in the module docstring.  ``top``:
+    ``np.max(log_w, axis=1)`` where the caller has it (:func:`predict_log_weights`), the rows of items without
+    ``present`` ignored.
 
     Shapes: ``particles (B, N, n)``; ``log_w, previous (B, N)``; ``present (B,)`` ->
     ``particles (B, N, n)`` (component-major), ``log_w (B, N)``, ``resampled (B,)``, ``dead (B,)``.
@@ -380,7 +438,8 @@ def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, pre
     need_rng(rng, "particle_core.reweight")
     B, N = np.shape(log_w)
     present = np.asarray(present, dtype=bool)
-    top = np.max(log_w, axis=1)
+    if top is None:
+        top = np.max(log_w, axis=1)
     if not compiled(backend):
         # every weight of an item underflowed (or a NaN/inf crept in): its max is not finite
         dead = present & ~np.isfinite(top)

@@ -317,6 +317,15 @@ class FilterSpec(_Configurable):
         reject a scan with more than one valid row per item (:func:`workbench.filtering.single_measurement`).
     estimate : callable
         ``estimate(state) -> Gaussian``: the point estimate and its covariance, ``(B, n)``, ``(B, n, n)``.
+    step : callable or None
+        Optional: ``step(state, motion, scan, model, rng, predicted=False) -> (state, estimate, predicted)``,
+        ``predict``, ``update`` and ``estimate`` in one call (a filter that can fuse them, e.g. in one pass over its
+        particles); ``predicted`` is ``estimate`` of the predicted state where ``predicted=True`` asks for it, else
+        ``None``.  It must give the three calls' numbers bit for bit (the same draws from ``rng`` in the same
+        order): the filter kit holds it to them.  The time loop uses it where it is given (with the
+        :class:`~workbench.tracking.single.Direct` association, which updates with the scan whatever the
+        prediction).  A spec derived with another ``predict``, ``update`` or ``estimate``
+        (``dataclasses.replace``) must give its own ``step`` or ``step=None``.
     capabilities : frozenset of str
         Keys of :data:`CAPABILITIES`.
     params : mapping
@@ -365,6 +374,7 @@ class FilterSpec(_Configurable):
     motion_models: tuple[str, ...] = ()
     take: Callable[[Any, np.ndarray], Any] | None = None
     join: Callable[[Sequence[Any]], Any] | None = None
+    step: Callable[..., Any] | None = None
 
     kind = "filter"
 

@@ -13,6 +13,10 @@ every update).  An item with every weight underflowed keeps its previous weights
 diagnostics).  The shared pieces (state, proposal, likelihood, reweighting, estimate) are
 :mod:`workbench.particle_core`.
 
+Step: :func:`step`, the filter's ``FilterSpec.step``, is predict, update and estimate in one call (the time loop
+uses it), the three calls' numbers bit for bit; with the compiled backend, a linear motion model and the planar
+range-bearing measurement it propagates and weighs the particles in one pass.
+
 Backend: ``backend="auto"`` (the default) runs the compiled steps of :mod:`workbench.kernels.particle_numba` where
 the kernel policy picks Numba (the CPU with Numba installed), else the NumPy code they are held to; ``"numba"`` or
 ``"numpy"`` ask for one.  The same seed gives the same particles on both (see :mod:`workbench.particle_core`).
@@ -27,10 +31,10 @@ import numpy as np
 from workbench import hookimpl
 from workbench.filtering import single_measurement
 from workbench.kalman_core import measurement_covariance
-from workbench.models import MeasurementModel
+from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
-from workbench.particle_core import (ParticleState, diagnostics, estimate, init, log_likelihood_cov, predict, reweight,
-                                     weighted_log_likelihood)
+from workbench.particle_core import (ParticleState, diagnostics, estimate, init, log_likelihood_cov, predict,
+                                     predict_log_weights, reweight, weighted_log_likelihood)
 from workbench.specs import FilterSpec
 from workbench.types import InputError, Particles, Scan
 
@@ -46,19 +50,25 @@ PARAMETERS = (
 )
 
 
-def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
-           threshold: float, backend: str = "numpy") -> ParticleState:
+def _measurement(scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+    """``(z (B, m), present (B,))`` of a scan with at most one valid row per item; a valid row holding a NaN or an
+    inf is refused by name (it would make every weight of its item NaN, which the update would then replace by the
+    previous weights, hiding it)."""
     z, present = single_measurement(scan, "sir")
-    if not present.any():
-        return state
-    cloud = state.cloud
-    # a NaN or inf measurement would make every weight of its item NaN, which the update would then replace by
-    # the previous weights: refuse it instead of hiding it
     bad = present & ~np.all(np.isfinite(z), axis=1)
     if bad.any():
         item = int(np.argmax(bad))
         raise InputError(f"sir: the valid measurement of batch item {item} holds a non-finite value (NaN or inf): "
                          f"{z[item]}")
+    return z, present
+
+
+def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
+           threshold: float, backend: str = "numpy") -> ParticleState:
+    z, present = _measurement(scan)
+    if not present.any():
+        return state
+    cloud = state.cloud
     if scan.cov is None:
         log_w = weighted_log_likelihood(z, cloud.particles, model, cloud.log_weights, backend)
     else:
@@ -74,6 +84,38 @@ def update(state: ParticleState, scan: Scan, model: MeasurementModel, rng: np.ra
                          state.underflows + int(dead.sum()))
 
 
+def step(state: ParticleState, motion: MotionModel, scan: Scan, model: MeasurementModel, rng: np.random.Generator,
+         threshold: float, backend: str = "numpy", predicted: bool = False):
+    """Predict, update and estimate in one call (``FilterSpec.step``): ``(state, estimate, predicted_estimate)``, the
+    last the estimate of the predicted state where ``predicted`` asks for it (else ``None``).  The numbers of
+    :func:`~workbench.particle_core.predict`, :func:`update` and :func:`~workbench.particle_core.estimate` called one
+    after the other, bit for bit, with the same draws in the same order.
+
+    Where the compiled backend runs, the motion model is linear and the measurement model the planar range-bearing
+    one without a per-detection covariance, the propagation, the likelihood and the rows' max are one pass
+    (:func:`~workbench.particle_core.predict_log_weights`), and with resampling at every update (``threshold > 1``)
+    the predicted particles, which never outlive the step, live in a reused work array; normalising, resampling
+    and the estimate are the three-call path's own code.  Otherwise it is the three calls."""
+    z, present = _measurement(scan)
+    fused = None
+    if present.any() and scan.cov is None:
+        # with threshold > 1 every item with a measurement is resampled (the others copied), so the predicted cloud
+        # is never returned
+        fused = predict_log_weights(state, motion, rng, z, present, model, backend, scratch=threshold > 1.0)
+    if fused is None:
+        moved = predict(state, motion, rng, backend)
+        before = estimate(moved, backend) if predicted else None
+        after = update(moved, scan, model, rng, threshold, backend)
+        return after, estimate(after, backend), before
+    x, log_w, top = fused
+    previous = state.cloud.log_weights
+    before = estimate(ParticleState(Particles.trusted(x, previous)), backend) if predicted else None
+    x, log_w, resampled, dead = reweight(x, log_w, previous, present, threshold, rng, backend, top)
+    after = ParticleState(Particles.trusted(x, log_w), state.resamples + int(resampled.sum()),
+                          state.underflows + int(dead.sum()))
+    return after, estimate(after, backend), before
+
+
 def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = None,
              backend: str = "auto") -> FilterSpec:
     """A bootstrap particle filter with ``particles`` particles, resampling when ``N_eff < threshold N``; its array
@@ -87,6 +129,7 @@ def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = No
         predict=partial(predict, backend=backend),
         update=partial(update, threshold=threshold, backend=backend),
         estimate=partial(estimate, backend=backend),
+        step=partial(step, threshold=threshold, backend=backend),
         capabilities=frozenset({"stochastic", "detection_covariance"}),
         params={"particles": particles, "threshold": threshold, "backend": backend},
         diagnostics=diagnostics,

@@ -15,6 +15,12 @@ Horner's rule in ``u^2`` (each series has powers of one parity), and take ``sin 
 ``cos u = 1 - u ((1 - cos u) / u)`` from the same series (no libm call there).  The two differ by round-off, far
 less than 1e-12.
 
+:func:`ct_rate_propagate` is the particle filter's propagation through the model, ``f`` plus the process noise
+drawn inside the loop, in one pass (the model declares it: :meth:`CoordinatedTurnRate.particle_propagator`); its
+twin is the NumPy path of :func:`workbench.particle_core.predict` (the model's ``f``, NumPy's draws, the noise added
+by :func:`~workbench.particle_core.combine_columns`), which it equals bit for bit where that ``f`` is
+:func:`ct_rate_f` (the same formula, one inline function) and to ``f``'s round-off against ``f_numpy``.
+
 Serial loops (no ``prange``): a UKF step calls ``f`` on ``B (2n + 1)`` sigma points, a particle filter on ``B N``
 particles, each a few microseconds to a millisecond of work here, and the callers' own compiled loops already
 use the cores.  Module-level functions compiled with ``cache=True`` (Numba's on-disk cache holds across
@@ -24,8 +30,9 @@ processes).  The input may be any 2-D float64 view (a particle cloud stored comp
 import math
 
 import numba
+import numpy as np
 
-__all__ = ["ct_rate_f", "ct_rate_jacobian"]
+__all__ = ["ct_rate_f", "ct_rate_jacobian", "ct_rate_propagate"]
 
 
 @numba.njit(inline="always", error_model="numpy")
@@ -64,6 +71,22 @@ def _series(coef, terms, parity, u, u2):
     return out * u if parity == 1 else out
 
 
+@numba.njit(inline="always", error_model="numpy")
+def _turn(px, py, vx, vy, w, T, small, sinc, cosc, n_s, p_s, n_c, p_c):
+    """``f`` of one state ``[px, py, vx, vy, w]`` over ``T``: the five components (the one formula of
+    :func:`ct_rate_f` and :func:`ct_rate_propagate`, so both give the same numbers)."""
+    u = w * T
+    if abs(u) < small:
+        u2 = u * u
+        sa, ca = _series(sinc, n_s, p_s, u, u2), _series(cosc, n_c, p_c, u, u2)
+        s, c = u * sa, 1.0 - u * ca  # sin u and cos u from the same series (within an ulp or two of libm's)
+    else:
+        s, c = math.sin(u), math.cos(u)
+        sa, ca = s / u, (1.0 - c) / u
+    a, b = T * sa, T * ca
+    return px + a * vx - b * vy, py + b * vx + a * vy, c * vx - s * vy, s * vx + c * vy, w
+
+
 @numba.njit(cache=True, error_model="numpy")
 def ct_rate_f(x, T, small, sinc, cosc, out):
     """``out[i] = f(x[i])`` for states ``x (K, 5)`` over the step ``T`` (s); ``sinc``, ``cosc``: the Taylor
@@ -71,21 +94,69 @@ def ct_rate_f(x, T, small, sinc, cosc, out):
     n_s, p_s = _plan(sinc, small)
     n_c, p_c = _plan(cosc, small)
     for i in range(x.shape[0]):
-        px, py, vx, vy, w = x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4]
-        u = w * T
-        if abs(u) < small:
-            u2 = u * u
-            sa, ca = _series(sinc, n_s, p_s, u, u2), _series(cosc, n_c, p_c, u, u2)
-            s, c = u * sa, 1.0 - u * ca  # sin u and cos u from the same series (within an ulp or two of libm's)
-        else:
-            s, c = math.sin(u), math.cos(u)
-            sa, ca = s / u, (1.0 - c) / u
-        a, b = T * sa, T * ca
-        out[i, 0] = px + a * vx - b * vy
-        out[i, 1] = py + b * vx + a * vy
-        out[i, 2] = c * vx - s * vy
-        out[i, 3] = s * vx + c * vy
-        out[i, 4] = w
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4] = _turn(x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4],
+                                                                      T, small, sinc, cosc, n_s, p_s, n_c, p_c)
+
+
+#: Particles per tile of :func:`ct_rate_propagate` (the tile's moved states and normals stay in L1).
+TILE = 512
+
+
+@numba.njit(cache=True, error_model="numpy")
+def ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, small, sinc, cosc):
+    """``out_i = f(x_i) + G e_i`` for the particles ``x (5, L)`` stored component-major, in one pass: the particle
+    filter's propagation through the coordinated turn (:func:`workbench.particle_core.predict`), ``e`` drawn here
+    from the ``numpy.random.Generator`` ``rng`` in the order of ``rng.standard_normal((L, k))`` (the same numbers,
+    the generator left where NumPy leaves it), one tile at a time.
+
+    ``src, coef, ptr``: the plan of ``[I | G]`` (:func:`workbench.particle_core._plan_arrays`): row ``i`` of ``out``
+    is ``sum_t coef[t] s_{src[t]}`` over its terms ``t`` in order, ``s_j`` being component ``j`` of ``f(x)`` for
+    ``j < 5`` and noise column ``j - 5`` beyond.  That is the order of the NumPy twin
+    (:func:`workbench.particle_core.combine_columns` of ``[I | G]`` on ``f(x)`` (:func:`ct_rate_f`) and the
+    draws), products and sums rounded one by one (no fused multiply-adds), so the result is the twin's bit for
+    bit.  ``out`` must not share memory with ``x``.
+
+    Shapes: ``out, x (5, L)``; ``k`` noise columns; ``src, coef (T,)``, ``ptr (6,)``.
+    """
+    n_s, p_s = _plan(sinc, small)
+    n_c, p_c = _plan(cosc, small)
+    L = out.shape[1]
+    e = np.empty((TILE, max(k, 1)))
+    fx = np.empty((5, TILE))
+    for lo in range(0, L, TILE):
+        m = min(lo + TILE, L) - lo
+        for t in range(m):
+            for j in range(k):
+                e[t, j] = rng.standard_normal()
+        for t in range(m):
+            i = lo + t
+            fx[0, t], fx[1, t], fx[2, t], fx[3, t], fx[4, t] = _turn(x[0, i], x[1, i], x[2, i], x[3, i], x[4, i], T,
+                                                                     small, sinc, cosc, n_s, p_s, n_c, p_c)
+        for r in range(5):
+            o = out[r, lo:lo + m]
+            if ptr[r] == ptr[r + 1]:
+                o[:] = 0.0
+                continue
+            for q in range(ptr[r], ptr[r + 1]):
+                j = src[q]
+                c = coef[q]
+                if j < 5:
+                    s = fx[j, :m]
+                    if q == ptr[r]:
+                        for t in range(m):
+                            o[t] = c * s[t]
+                    else:
+                        for t in range(m):
+                            o[t] += c * s[t]
+                else:
+                    s = e[:m, j - 5]
+                    if q == ptr[r]:
+                        for t in range(m):
+                            o[t] = c * s[t]
+                    else:
+                        for t in range(m):
+                            o[t] += c * s[t]
+    return out
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -190,16 +190,79 @@ def range_bearing_log_weights(px, py, z, sensor, linv, prev, out):
         zr, zb = z[b, 0], z[b, 1]
         xb, yb, wb, ob = px[b], py[b], prev[b], out[b]
         for i in range(ob.shape[0]):
-            dx = xb[i] - sx
-            dy = yb[i] - sy
-            nr = zr - math.sqrt(dx * dx + dy * dy)
-            a = zb - atan2(dy, dx)
-            # wrap to (-pi, pi]: a - 2 pi ceil((a - pi) / 2 pi)
-            nb = a - two_pi * math.ceil((a - pi) * inv_two_pi)
-            # white = L^-1 nu;  -1/2 nu^T R^-1 nu = -1/2 |white|^2
-            w0 = l00 * nr
-            w1 = l10 * nr + l11 * nb if cross else l11 * nb
-            ob[i] = -0.5 * (w0 * w0 + w1 * w1) + wb[i]
+            ob[i] = _range_bearing_term(xb[i] - sx, yb[i] - sy, zr, zb, l00, l10, l11, cross) + wb[i]
+    return out
+
+
+@jit(inline="always")
+def _range_bearing_term(dx, dy, zr, zb, l00, l10, l11, cross):
+    """``-1/2 |L^-1 nu|^2`` for one particle at ``(dx, dy)`` from the sensor (:func:`range_bearing_log_weights`)."""
+    nr = zr - math.sqrt(dx * dx + dy * dy)
+    a = zb - atan2(dy, dx)
+    # wrap to (-pi, pi]: a - 2 pi ceil((a - pi) / 2 pi)
+    nb = a - two_pi * math.ceil((a - pi) * inv_two_pi)
+    # white = L^-1 nu;  -1/2 nu^T R^-1 nu = -1/2 |white|^2
+    w0 = l00 * nr
+    w1 = l10 * nr + l11 * nb if cross else l11 * nb
+    return -0.5 * (w0 * w0 + w1 * w1)
+
+
+@jit
+def _weigh_tile(px, py, zr, zb, sensor, linv, prev, out):
+    """:func:`range_bearing_log_weights` of one item's tile (1-D views); returns the tile's max (NaN where one
+    log-weight is NaN).  Its own function, so that its loop vectorises with the full width
+    (:func:`.vector_width.wide_vectors`) while the draws of :func:`propagate_range_bearing` keep LLVM's choice."""
+    wide_vectors()
+    sx, sy = sensor[0], sensor[1]
+    l00, l10, l11 = linv[0, 0], linv[1, 0], linv[1, 1]
+    cross = l10 != 0.0
+    for i in range(out.shape[0]):
+        out[i] = _range_bearing_term(px[i] - sx, py[i] - sy, zr, zb, l00, l10, l11, cross) + prev[i]
+    m = -np.inf
+    nan = False
+    for i in range(out.shape[0]):
+        v = out[i]
+        m = v if v > m else m
+        nan |= v != v
+    return np.nan if nan else m
+
+
+@jit
+def propagate_range_bearing(out, x, rng, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top):
+    """:func:`propagate` and, for the items with ``present``, :func:`range_bearing_log_weights` and the rows' max
+    in one pass, one tile of particles at a time: a tile's particles are moved (the normals drawn from ``rng`` in
+    the order of ``rng.standard_normal((B, N, k))``), then weighed while they are in L1, instead of read back from
+    memory by a second pass.  The arithmetic per particle is those two functions' (the same inline code), so the
+    particles and log-weights are theirs bit for bit; ``top[b]`` is ``np.max(log_w[b])`` (NaN where a log-weight
+    is NaN).  Items without ``present``: moved, ``log_w = prev``, ``top`` not written.
+
+    Shapes: ``out, x (n, L)`` component rows with ``L = B N`` (``out`` not sharing memory with ``x``); ``k`` noise
+    columns; the plan ``src, coef, ptr`` of :func:`combine`; ``present (B,)``; ``z (B, 2)``; ``sensor (2,)``;
+    ``linv (2, 2)``; ``prev, log_w (B, N)``; ``top (B,)``.
+    """
+    B, N = log_w.shape
+    buf = np.empty((TILE, max(k, 1)))
+    for b in range(B):
+        weigh = present[b]
+        zr, zb = z[b, 0], z[b, 1]
+        m = -np.inf
+        nan = False
+        wb, ob = prev[b], log_w[b]
+        for lo in range(b * N, (b + 1) * N, TILE):
+            hi = min(lo + TILE, (b + 1) * N)
+            for t in range(hi - lo):
+                for j in range(k):
+                    buf[t, j] = rng.standard_normal()
+            _combine_tile(out, x, buf, lo, hi, src, coef, ptr)
+            a, c = lo - b * N, hi - b * N
+            if weigh:
+                v = _weigh_tile(out[0, lo:hi], out[1, lo:hi], zr, zb, sensor, linv, wb[a:c], ob[a:c])
+                nan |= v != v
+                m = v if v > m else m
+            else:
+                _copy(ob[a:c], wb[a:c])
+        if weigh:
+            top[b] = np.nan if nan else m
     return out
 
 

@@ -166,6 +166,19 @@ class MotionModel:
         # (6x slower for the UKF's (3000, 9, 4) sigma points)
         return (x.reshape(-1, x.shape[-1]) @ F.T).reshape(x.shape)
 
+    def particle_propagator(self) -> Callable | None:
+        """The compiled particle propagation this model declares for its bound step, or ``None`` (the default: a
+        particle filter propagates through :meth:`f` in NumPy, or through ``F`` for a linear model).
+
+        A model may return ``run(out, x, rng, k, src, coef, ptr)``: ``out_i = f(x_i) + G e_i`` for particles
+        ``x (n, L)`` stored component-major, ``e`` drawn inside the loop from the ``numpy.random.Generator``
+        ``rng`` in the order of ``rng.standard_normal((L, k))``, the noise added by the plan ``src, coef, ptr`` of
+        ``[I | G]`` (``G`` the non-zero columns of ``Q_sqrt``) in the order of
+        :func:`workbench.particle_core.combine_columns`.  :func:`workbench.particle_core.predict` calls it only
+        where the backend policy runs Numba, and holds it to its NumPy path (the same draws, :meth:`f`, the same
+        sums) as the twin."""
+        return None
+
     def jacobian(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
         """``df/dx`` at states ``x (..., n)`` -> ``(..., n, n)``: ``F`` everywhere for a linear model.
 
@@ -593,6 +606,21 @@ class CoordinatedTurnRate(MotionModel):
         out = np.empty(flat.shape + (5,))
         kernels.ct_rate_jacobian(flat, self._step(t, dt)[1], _TURN_SMALL, _SINC, _COSC, _DSINC, _DCOSC, out)
         return out.reshape(x.shape + (5,))
+
+    def particle_propagator(self) -> Callable | None:
+        """The compiled propagation :func:`workbench.kernels.motion_numba.ct_rate_propagate` over the bound step
+        (``f`` and the noise in one pass; see :meth:`MotionModel.particle_propagator`), or ``None`` for a subclass
+        that overrides :meth:`f` (its own ``f`` is then what the particle filter follows)."""
+        if type(self).f is not CoordinatedTurnRate.f:
+            return None
+        from ..kernels import motion_numba
+
+        T = float(self.dt)
+
+        def run(out, x, rng, k, src, coef, ptr):
+            return motion_numba.ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, _TURN_SMALL, _SINC, _COSC)
+
+        return run
 
     def f_numpy(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
         """:meth:`f` in NumPy (the twin of the compiled loop)."""

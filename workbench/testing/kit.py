@@ -19,14 +19,15 @@ Besides the conformance checks (shapes, batch consistency, covariances, seeds, a
 Kalman filter and NEES), the kit has one check for each bug plugin authors really make: items without
 a measurement updated anyway (:func:`check_partially_measured_batch`), bearings subtracted without
 wrapping (:func:`check_bearing_wrap`), a wrong ``h`` or an otherwise inaccurate filter
-(:func:`check_range_bearing_accuracy`), a state written in place (:func:`check_previous_state_unchanged`)
-and a NaN turned into a number (:func:`check_nan_not_hidden`).
+(:func:`check_range_bearing_accuracy`), a state written in place (:func:`check_previous_state_unchanged`),
+a NaN turned into a number (:func:`check_nan_not_hidden`) and a fused step that is not the three calls it
+stands for (:func:`check_step_matches_three_calls`).
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import fields, is_dataclass
+from dataclasses import fields, is_dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -1352,6 +1353,67 @@ def check_served_nees(spec: FilterSpec) -> str:
     return f"run-averaged NEES inside its 95 % band at {100 * inside:.0f} % of scans (mean {float(np.mean(e)):.3g}, n = {n})"
 
 
+# -- a fused step equals the three calls ------------------------------------------------------------------
+
+
+def check_step_matches_three_calls(spec: FilterSpec) -> str:
+    """The filter's fused ``step`` (:attr:`~workbench.specs.FilterSpec.step`) gives what ``predict``, ``update`` and
+    ``estimate`` give one after the other, bit for bit: the new state (every array and counter in it), the estimate,
+    the estimate of the predicted state where asked for (``None`` where not), and the generator left where the three
+    calls leave it, from the same seed and keys, over steps of its problem (in range and bearing too where it takes
+    them) with a full, a partially measured and an empty scan."""
+    problems = [("its problem", _problem(spec, 4, seed=23, steps=6))]
+    if _accepts_range_bearing(spec) and not _serves(spec) and not _uses_polar(spec):
+        problems.append(("range-bearing", _problem(spec, 4, seed=24, steps=6, nonlinear=True)))
+    checked = 0
+    for label, (_, scans, prior, motion, model) in problems:
+        rng_a, rng_b = generator(3, "kit-step", label), generator(3, "kit-step", label)
+        first = scans.scan(0).for_filter()
+        a = spec.update(spec.init(prior, rng_a), first, model, rng_a)
+        b = spec.update(spec.init(prior, rng_b), first, model, rng_b)
+        times = np.asarray(scans.times, dtype=float)
+        for k in range(1, scans.steps):
+            scan = scans.scan(k).for_filter()
+            if k == 2:  # items 1 and 3 without a measurement
+                valid = scan.valid.copy()
+                valid[1::2] = False
+                scan = replace(scan, valid=valid)
+            elif k == 3:
+                scan = Scan.empty(scans.batch, model.dim)
+            step_motion = motion.at(float(times[k - 1]), float(times[k] - times[k - 1]))
+            ask = k % 2 == 1
+            moved = spec.predict(a, step_motion, rng_a)
+            before = spec.estimate(moved) if ask else None
+            a = spec.update(moved, scan, model, rng_a)
+            after = spec.estimate(a)
+            out = spec.step(b, step_motion, scan, model, rng_b, predicted=ask)
+            if not (isinstance(out, tuple) and len(out) == 3):
+                raise AssertionError(f"step must return (state, estimate, predicted), got {type(out).__name__}"
+                                     + (f" of length {len(out)}" if isinstance(out, tuple) else ""))
+            b, est, pred = out
+            where = f"({label}, scan {k}{', partially measured' if k == 2 else ', empty' if k == 3 else ''})"
+            change = _first_change(_snapshot(a, "state"), _snapshot(b, "state"))
+            if change is not None:
+                raise AssertionError(f"step's state differs from predict + update {where}: {change}")
+            change = _first_change(_snapshot(after, "estimate"), _snapshot(est, "estimate"))
+            if change is not None:
+                raise AssertionError(f"step's estimate differs from estimate(update(predict(...))) {where}: {change}")
+            if not ask and pred is not None:
+                raise AssertionError(f"step gave a predicted estimate without predicted=True {where}")
+            if ask:
+                if pred is None:
+                    raise AssertionError(f"step gave no predicted estimate with predicted=True {where}")
+                change = _first_change(_snapshot(before, "predicted"), _snapshot(pred, "predicted"))
+                if change is not None:
+                    raise AssertionError(f"step's predicted estimate differs from estimate(predict(...)) {where}: "
+                                         f"{change}")
+            checked += 1
+        if not _same(rng_a.random(8), rng_b.random(8)):
+            raise AssertionError(f"step left the generator elsewhere than predict + update do ({label}): it draws "
+                                 f"other numbers, or in another order")
+    return f"{checked} steps equal the three calls bit for bit ({', '.join(label for label, _ in problems)})"
+
+
 _CV_ONLY = "a filter that declares no motion_models (the 4-D constant-velocity reference problems)"
 _SERVES = "a filter that declares the motion_models it serves"
 
@@ -1386,6 +1448,9 @@ CHECKS: tuple[Check, ...] = (
     Check("check_previous_state_unchanged", check_previous_state_unchanged.__doc__, lambda s: True,
           check_previous_state_unchanged),
     Check("check_nan_not_hidden", check_nan_not_hidden.__doc__, lambda s: True, check_nan_not_hidden),
+    Check("check_step_matches_three_calls", check_step_matches_three_calls.__doc__,
+          lambda s: getattr(s, "step", None) is not None, check_step_matches_three_calls,
+          "a filter that gives a fused step (FilterSpec.step)"),
     Check("check_irregular_time_steps", check_irregular_time_steps.__doc__, _takes_varied,
           check_irregular_time_steps, _VARIED),
     Check("check_noise_statistics", check_noise_statistics.__doc__,

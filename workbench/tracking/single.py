@@ -114,6 +114,24 @@ class Direct(SingleTarget):
     def associate(self, carry, scan, k, predicted):
         return scan, carry.ctx.model
 
+    def step(self, carry: _Carry, motion: MotionModel, scan: Scan, k: int) -> _Carry:
+        """:meth:`predict` then :meth:`update` through one call of the filter's fused ``FilterSpec.step`` (the time
+        loop's choice where the filter gives one): the scan does not depend on the prediction, so the filter may
+        predict, update and estimate in one go; the records are the two calls'.  A subclass that overrides how the
+        prediction is read, the scan chosen or a step recorded gets the two calls."""
+        ctx = carry.ctx
+        plain = all(getattr(type(self), name) is getattr(Direct, name)
+                    for name in ("predict", "predicted_mean", "associate", "update"))
+        if ctx.filter.step is None or not plain:
+            return self.update(self.predict(carry, motion, k), scan, k)
+        carry.state, est, predicted = ctx.filter.step(carry.state, motion, scan, ctx.model, ctx.rng, predicted=True)
+        carry.extra["motion"] = motion
+        carry.predicted[:, k] = predicted.mean
+        carry.mean[:, k] = est.mean
+        carry.cov[:, k] = est.cov
+        self.updated(carry, k, est)
+        return carry
+
 
 # -- gating by distance ---------------------------------------------------------------------------------
 
