@@ -55,7 +55,7 @@ __all__ = ["VERDICTS", "NOT_JUDGEABLE", "DIRECTIONS", "Criterion", "Precondition
            "binomial_interval", "judge", "criterion_from_runs", "criterion_from_counts", "replication_rate",
            "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL", "equivalence_band",
            "judge_equivalent", "criterion_equivalent", "EQUIVALENCE_DETAIL", "DeclaredUnknown", "UnknownVerdict",
-           "judge_across", "where_it_holds", "Vectorised", "vectorised"]
+           "judge_across", "where_it_holds", "Vectorised", "vectorised", "Confirmation", "confirm"]
 
 #: The verdict of a criterion whose precondition fails.
 NOT_JUDGEABLE = "not judgeable"
@@ -155,6 +155,10 @@ class Criterion:
         The same criterion judged at each grid value of the recipe's declared unknowns (:class:`DeclaredUnknown`,
         :func:`judge_across`); the verdict above is the one at the primary values.  Empty where the criterion
         does not hinge on an unknown, or the size judges none.
+    confirmation : Confirmation or None
+        The same criterion judged once more on the confirmation seed (a seed no tuning and no design choice has
+        seen) and whether that verdict agrees with this one (:func:`confirm`); ``None`` where the report ran no
+        confirmation (a quick report).
     """
 
     id: str
@@ -174,8 +178,11 @@ class Criterion:
     extra: dict = field(default_factory=dict)
     preconditions: tuple[Precondition, ...] = ()
     across: tuple["UnknownVerdict", ...] = ()
+    confirmation: "Confirmation | None" = None
 
     def __post_init__(self) -> None:
+        if self.confirmation is not None and not isinstance(self.confirmation, Confirmation):
+            object.__setattr__(self, "confirmation", Confirmation.from_dict(self.confirmation))
         object.__setattr__(self, "across", tuple(
             a if isinstance(a, UnknownVerdict) else UnknownVerdict.from_dict(a) for a in (self.across or ())))
         verdict = self.verdict
@@ -239,7 +246,8 @@ class Criterion:
         extra.setdefault("quick_verdict", self.verdict)
         verdict = "inconclusive" if self.verdict == "met" else self.verdict
         return replace(self, verdict=verdict, indicative=True, extra=extra,
-                       across=tuple(a.as_indicative() for a in self.across))
+                       across=tuple(a.as_indicative() for a in self.across),
+                       confirmation=None if self.confirmation is None else self.confirmation.as_indicative())
 
     def to_dict(self) -> dict:
         """A JSON-ready dict of every field, plus ``met`` (bool) for older readers.
@@ -249,13 +257,14 @@ class Criterion:
         dict
             ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication, min_n,
             method, statistics, detail, extra, preconditions`` (each ``name, holds, detail, values``), ``across``
-            (each :meth:`UnknownVerdict.to_dict`); numpy
+            (each :meth:`UnknownVerdict.to_dict`), ``confirmation`` (:meth:`Confirmation.to_dict` or None); numpy
             scalars become Python numbers, tuples become lists.
         """
         out = {f.name: _plain(getattr(self, f.name)) for f in fields(self)
-               if f.name not in ("preconditions", "across")}
+               if f.name not in ("preconditions", "across", "confirmation")}
         out["preconditions"] = [p.to_dict() for p in self.preconditions]
         out["across"] = [a.to_dict() for a in self.across]
+        out["confirmation"] = None if self.confirmation is None else self.confirmation.to_dict()
         out["met"] = bool(self.met)
         return out
 
@@ -281,6 +290,8 @@ class Criterion:
             kw["extra"] = {}
         kw["preconditions"] = tuple(Precondition.from_dict(p) for p in kw.get("preconditions") or ())
         kw["across"] = tuple(UnknownVerdict.from_dict(a) for a in kw.get("across") or ())
+        if kw.get("confirmation") is not None:
+            kw["confirmation"] = Confirmation.from_dict(kw["confirmation"])
         return cls(**kw)
 
 
@@ -1252,3 +1263,124 @@ def where_it_holds(across: Any, unknown: str | None = None) -> str:
     if quick:
         line += f" (indicative: the quick numbers alone pass at {_set_text(quick)})"
     return line
+
+
+
+# -- the confirmation seed: every criterion judged once more on a seed nothing was tuned on -------------------
+
+@dataclass(frozen=True)
+class Confirmation:
+    """A criterion judged once more on the confirmation seed, beside its verdict on the reported seed.
+
+    The report engine reruns the tasks a recipe's criteria read with the confirmation seed (a seed that no tuning
+    and no design choice has seen) and judges the criteria again, unchanged (:func:`confirm` pairs them by id).
+
+    Attributes
+    ----------
+    seed : int
+        The confirmation seed.
+    verdict : str or None
+        The criterion's verdict on that seed (one of :data:`VERDICTS`), or ``None`` where it could not be judged
+        there (a task failed, or the criteria did not return this id): ``detail`` says why.
+    primary : str
+        The verdict on the reported seed it is compared with.
+    ours, n, interval
+        The criterion's statistic, runs and interval on the confirmation seed.
+    failed : tuple of str
+        The preconditions that failed on the confirmation seed.
+    detail : str
+        Why there is no verdict, or a note.
+    indicative : bool
+        True in a quick report (the verdict is then never ``"met"``).
+    """
+
+    seed: int
+    verdict: str | None
+    primary: str
+    ours: Any = None
+    n: int | None = None
+    interval: tuple[float, float] | None = None
+    failed: tuple[str, ...] = ()
+    detail: str = ""
+    indicative: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("verdict", "primary"):
+            value = getattr(self, name)
+            if not (value in VERDICTS or (name == "verdict" and value is None)):
+                raise ValueError(f"confirmation on seed {self.seed}: {name} must be one of {VERDICTS}, got {value!r}")
+        if self.verdict is None and not str(self.detail).strip():
+            raise ValueError(f"confirmation on seed {self.seed}: without a verdict, the detail must say why")
+        object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "failed", tuple(str(f) for f in (self.failed or ())))
+        if self.interval is not None:
+            object.__setattr__(self, "interval", tuple(float(v) for v in self.interval))
+
+    @property
+    def agrees(self) -> bool | None:
+        """Whether the confirmation seed gives the same verdict as the reported seed (``None``: no verdict)."""
+        return None if self.verdict is None else self.verdict == self.primary
+
+    def text(self) -> str:
+        """``"agrees (met)"``, ``"differs: inconclusive (reported: met)"`` or ``"no verdict: WHY"``."""
+        if self.verdict is None:
+            return f"no verdict: {self.detail}"
+        if self.agrees:
+            return f"agrees ({self.verdict})"
+        return f"differs: {self.verdict} (reported seed: {self.primary})"
+
+    def as_indicative(self) -> "Confirmation":
+        """Marked as a quick-mode indication: ``"met"`` becomes ``"inconclusive"`` on both sides."""
+        if self.indicative:
+            return self
+        mark = lambda v: "inconclusive" if v == "met" else v  # noqa: E731
+        return replace(self, verdict=mark(self.verdict), primary=mark(self.primary), indicative=True)
+
+    def to_dict(self) -> dict:
+        """Every field, JSON-ready, plus ``agrees``."""
+        out = {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
+        out["agrees"] = self.agrees
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Confirmation":
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in data.items() if k in names}
+        if kw.get("interval") is not None:
+            kw["interval"] = tuple(kw["interval"])
+        kw["failed"] = tuple(kw.get("failed") or ())
+        return cls(**kw)
+
+
+def confirm(reported: Any, again: Any, seed: int, missing: str = "") -> list[Criterion]:
+    """The criteria judged on the reported seed, each with its :class:`Confirmation` from ``again``.
+
+    Parameters
+    ----------
+    reported : sequence of Criterion
+        The criteria as judged on the reported seed (their verdicts are the report's).
+    again : sequence of Criterion or None
+        The same recipe's criteria judged, unchanged, on results of the confirmation seed; paired with
+        ``reported`` by id.  ``None`` where they could not be judged there (``missing`` says why).
+    seed : int
+        The confirmation seed.
+    missing : str
+        Why a criterion has no verdict on the confirmation seed (for ``again=None``, or an id it lacks).
+
+    Returns
+    -------
+    list of Criterion
+        ``reported`` in order, each with ``confirmation`` set; their own verdicts are unchanged.
+    """
+    by_id = {c.id: c for c in (again or ())}
+    out = []
+    for c in reported:
+        other = by_id.get(c.id)
+        if other is None:
+            why = missing or f"the criteria judged on seed {seed} have no criterion {c.id!r}"
+            record = Confirmation(seed, None, c.verdict, detail=why)
+        else:
+            record = Confirmation(seed, other.verdict, c.verdict, other.ours, other.n, other.interval,
+                                  tuple(p.name for p in other.failed_preconditions))
+        out.append(replace(c, confirmation=record))
+    return out

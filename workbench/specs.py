@@ -708,6 +708,9 @@ class RecipeOptions:
     seed: int
     filters: tuple[str, ...]
     arch: str = "cpu"
+    #: the multi-target trackers to compare (tracker references, ``"gm-phd(prune=1e-5)"``): the recipe's
+    #: ``default_trackers`` with ``--trackers`` applied; empty for a recipe that compares none
+    trackers: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -779,6 +782,10 @@ class RecipeSpec:
         ``{"quick": {...}, "full": {...}}``: the values (runs, steps, particle counts...) of each size.
     default_filters : tuple of str
         The filters compared by default; ``--filters`` adds to or replaces them.
+    default_trackers : tuple of str
+        The multi-target trackers compared by default (e.g. ``("mofn",)``), for a recipe whose tasks run the
+        trackers of :attr:`RecipeOptions.trackers`; ``--trackers`` adds to or replaces them.  Empty (the default):
+        the recipe compares no installed trackers, and ``--trackers`` naming it is refused.
     tasks : callable
         ``tasks(options: RecipeOptions) -> list[Task]``.
     figures, tables : tuples of specs
@@ -801,6 +808,7 @@ class RecipeSpec:
     tables: tuple[TableSpec, ...] = ()
     criteria: Callable[[Results], Sequence[Criterion]] | None = None
     default_filters: tuple[str, ...] = ()
+    default_trackers: tuple[str, ...] = ()
     published: Mapping[str, Any] = field(default_factory=dict)
     notes: str = ""
     unknowns: tuple[Any, ...] = ()

@@ -24,6 +24,13 @@ failure (a ``MemoryError``, a race) is not replayed until the code changes.
 
 Only the full size gives firm verdicts: the criteria of any other size (the quick report) are marked
 indicative (:meth:`workbench.criteria.Criterion.as_indicative`), so a quick report never says *met*.
+
+The confirmation seed: the full report judges every criterion once more on :data:`CONFIRMATION_SEED`, a seed no
+tuning and no design choice has seen.  It reruns only the tasks the recipe's criteria read (recorded while they
+judge the reported seed's results), with that seed in place of the report's, judges the criteria again unchanged
+and records, per criterion, the verdict there and whether it agrees
+(:class:`workbench.criteria.Confirmation`); the confirmation tasks are cached under their own seed like any other.
+A quick report runs no confirmation (its verdicts are indications already).
 """
 
 from __future__ import annotations
@@ -46,7 +53,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from ..plugins import PluginHost, UnknownComponent
-from ..criteria import Criterion, DeclaredUnknown
+from ..criteria import Criterion, DeclaredUnknown, confirm
 from ..specs import RecipeOptions, RecipeSpec, Table, TaskContext
 from ..types import InputError
 if TYPE_CHECKING:
@@ -54,10 +61,11 @@ if TYPE_CHECKING:
 from .cache import (CacheEntryUnreadable, TaskCache, code_version, components_digest, save_arrays, task_key,
                     write_text_atomic)
 
-__all__ = ["resolve_filters", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
+__all__ = ["resolve_filters", "resolve_trackers", "tracker_request", "tracker_papers", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
            "dask_executor", "component_failure", "component_errors", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
-           "report_lock", "recording_host", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats"]
+           "report_lock", "recording_host", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats",
+           "CONFIRMATION_SEED", "CONFIRMATION_SPAN", "check_report_seed", "judged_tasks"]
 
 #: The file, inside ``OUT/paperNNN``, that keeps a paper's rendered outcome.
 OUTCOME_FILE = "outcome.json"
@@ -68,6 +76,58 @@ FIRM_SIZE = "full"
 COMPONENT_ERROR_PREFIX = "error/"
 #: The lock file, inside the report folder, held while a report writes into it.
 LOCK_FILE = ".workbench-report.lock"
+#: The confirmation seed (the one place it is declared): the full report judges every criterion once more on it.
+#: No tuning and no design choice has seen it: the recipes' tuning seeds (paper 000: 101-104, paper 002: 7002,
+#: paper 003: 20031; paper 001 tunes on its own stream) and the default report seed 0 lie far from it
+#: (tests/test_confirmation_seed.py checks that every recipe's declared tuning seed differs from it).
+CONFIRMATION_SEED = 770_001
+#: Recipes derive further seeds from the report's as ``seed + j`` (paper 001's seed blocks): a report seed within
+#: this distance of :data:`CONFIRMATION_SEED` would share data with the confirmation, and is refused.
+CONFIRMATION_SPAN = 1000
+
+
+def check_report_seed(seed: int, confirmation_seed: int | None = CONFIRMATION_SEED) -> None:
+    """Refuse (one :class:`InputError` line) a report seed that is not an integer >= 0, or one within
+    :data:`CONFIRMATION_SPAN` of the confirmation seed (its runs would not be independent of the confirmation)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"--seed {seed!r}: a seed is an integer >= 0")
+    if confirmation_seed is not None and abs(int(seed) - int(confirmation_seed)) < CONFIRMATION_SPAN:
+        raise InputError(f"--seed {seed}: within {CONFIRMATION_SPAN} of the confirmation seed {confirmation_seed} "
+                         f"(the recipes derive seed + j from the report's seed, so its runs would overlap the "
+                         f"confirmation's); choose a seed below {int(confirmation_seed) - CONFIRMATION_SPAN + 1} or "
+                         f"above {int(confirmation_seed) + CONFIRMATION_SPAN - 1}")
+
+
+class _ReadRecorder(Mapping):
+    """A recipe's results, recording the task keys read through ``results[key]`` or ``results.get(key)``
+    (a membership test or a look at the keys reads nothing)."""
+
+    def __init__(self, results: Mapping):
+        self._results, self.read = results, set()
+
+    def __getitem__(self, key):
+        value = self._results[key]
+        self.read.add(key)
+        return value
+
+    def __contains__(self, key):
+        return key in self._results
+
+    def __iter__(self):
+        return iter(self._results)
+
+    def __len__(self):
+        return len(self._results)
+
+
+def judged_tasks(criteria: Callable[[Mapping], Sequence[Criterion]], results: Mapping) -> tuple[list[Criterion],
+                                                                                                 set[str]]:
+    """Judge ``criteria(results)`` and record which tasks' results it read: ``(criteria, task keys)``."""
+    recorder = _ReadRecorder(results)
+    judged = list(criteria(recorder))
+    return judged, set(recorder.read)
+
+
 #: The formats every figure is saved in by default: PNG (embedded in ``index.html``) and SVG (linked from it).
 FIGURE_FORMATS = ("png", "svg")
 #: The environment variable that chooses the formats where the caller does not (``png`` or ``png,svg``): the test
@@ -189,6 +249,112 @@ def resolve_filters(default: Sequence[str], request: str | None, host: PluginHos
     return tuple(text for text, _ in chosen)
 
 
+#: How a tracker list is written; the message for an empty list shows it.
+TRACKER_FORMS = "each a name such as 'gnn' or a configured tracker such as 'gm-phd(prune=1e-5)'"
+
+
+def tracker_reference(host: PluginHost, text: str, where: str) -> "FilterReference":
+    """One tracker reference, ``"name"`` or ``"name(key=value, ...)"``, checked against the installed trackers and
+    their declarations (an unknown one is refused naming the installed ones); errors are prefixed by ``where``.
+    The reference's ``key`` is the configured tracker's label (``base`` when no value differs from its defaults),
+    which decides whether two entries are the same tracker."""
+    from ..params import parse_reference
+    from ..references import FilterReference, UnknownReference
+
+    if not text.strip():
+        raise InputError(f"{where}: an empty entry where a tracker belongs ({TRACKER_FORMS})")
+    base, values = parse_reference(text, where)
+    try:
+        spec = host.tracker(base)
+        checked = spec.check(**values)
+    except UnknownComponent as exc:
+        raise UnknownReference(f"{where}: {exc}") from None
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    changed = spec.changed(checked)
+    return FilterReference(text.strip(), base, spec.configure(**changed).name if changed else base, changed)
+
+
+def tracker_request(request: str, host: PluginHost) -> list[tuple[str, "FilterReference"]]:
+    """``--trackers`` read and checked on its own (before any recipe's or scenario's defaults): ``[(sign,
+    reference), ...]``, the rules of ``--filters`` (:func:`filter_request`) for installed trackers: not empty, no
+    empty entry, every name an installed tracker, values checked against its declarations, none added or removed
+    twice (in any spelling)."""
+    from ..references import refuse_repeats, require_entries
+
+    parts = split_references(request)
+    require_entries(parts, "--trackers", "tracker", TRACKER_FORMS)
+    out = []
+    for i, part in enumerate(parts):
+        sign = {"+": "+", "-": "-", "~": "-"}.get(part[:1], "")
+        text = part[1:].strip() if sign else part
+        if sign and not text:
+            raise InputError(f"--trackers: entry {i + 1} of {request!r} ({part!r}) has no tracker name after "
+                             f"{part[0]!r}")
+        out.append((sign, tracker_reference(host, text, f"--trackers {text!r}")))
+    refuse_repeats(((ref.text, ref.key) for sign, ref in out if sign != "-"), "--trackers", "tracker")
+    refuse_repeats(((sign + ref.text, ref.key) for sign, ref in out if sign == "-"), "--trackers", "tracker")
+    return out
+
+
+def resolve_trackers(default: Sequence[str], request: str | None, host: PluginHost,
+                     whose: str = "the recipe's") -> tuple[str, ...]:
+    """Apply ``--trackers`` to a default list of trackers (a recipe's ``default_trackers``, a scenario's
+    ``[trackers]``), as :func:`resolve_filters` applies ``--filters``: ``+name`` adds, ``-name`` / ``~name``
+    removes one that is in the list, a list without signs replaces the defaults; the result is not empty.  A tracker
+    is matched by what it is (its configured label), not how it is spelled."""
+    if request is None:
+        return tuple(default)
+    entries = tracker_request(request, host)
+    plain = [ref for sign, ref in entries if not sign]
+    if plain:
+        chosen = [(ref.text, ref.key) for ref in plain]
+    else:
+        chosen = []
+        for name in default:
+            ref = tracker_reference(host, name, f"{whose} default tracker {name!r}")
+            chosen.append((ref.text, ref.key))
+    for sign, ref in entries:
+        keys = [key for _, key in chosen]
+        if sign == "+" and ref.key not in keys:
+            chosen.append((ref.text, ref.key))
+        elif sign == "-":
+            if ref.key not in keys:
+                raise InputError(f"--trackers: cannot remove {ref.text!r}: it is not among "
+                                 f"{', '.join(text for text, _ in chosen) or 'none'}")
+            del chosen[keys.index(ref.key)]
+    if not chosen:
+        raise InputError(f"--trackers {request!r} leaves no tracker to compare")
+    return tuple(text for text, _ in chosen)
+
+
+def tracker_papers(recipes: Sequence[RecipeSpec], request: str | None, host: PluginHost,
+                   named: bool) -> dict[str, str | None]:
+    """Which recipes ``--trackers`` goes to, checked before any paper runs: ``{paper: request or None}``.
+
+    A recipe takes it when it declares ``default_trackers`` (its tasks run :attr:`RecipeOptions.trackers`).
+    Papers the user ``named`` (``--paper``) must each take it, or the request is refused naming them; without
+    ``--paper`` it goes to every paper that takes it (the others compare no trackers and run as they are), and is
+    refused when none does.  The request itself is checked first (:func:`tracker_request`)."""
+    if request is None:
+        return {r.paper: None for r in recipes}
+    tracker_request(request, host)
+    takers = [r.paper for r in recipes if r.default_trackers]
+    refused = [r.paper for r in recipes if not r.default_trackers]
+    if (named and refused) or not takers:
+        which = refused if named else [r.paper for r in recipes]
+        raise InputError(f"--trackers {request!r}: paper{'s' if len(which) > 1 else ''} {', '.join(which)} "
+                         f"compare{'' if len(which) > 1 else 's'} no installed multi-target trackers (no "
+                         f"default_trackers declared), so the request would be ignored"
+                         + (f"; papers that take --trackers: {', '.join(takers)}" if takers else ""))
+    resolved = {}
+    for r in recipes:
+        if r.default_trackers:
+            resolve_trackers(r.default_trackers, request, host, f"paper {r.paper}'s")  # refused now, not mid-report
+        resolved[r.paper] = request if r.default_trackers else None
+    return resolved
+
+
 @dataclass
 class PaperOutcome:
     """One paper's rendered outcome: what ``index.html`` and ``summary.json`` show of it.
@@ -217,6 +383,8 @@ class PaperOutcome:
     finished: str = ""  # UTC time stamp
     saved: bool = False
     unknowns: list[DeclaredUnknown] = field(default_factory=list)
+    #: The seed the criteria were judged on once more (``Criterion.confirmation``); None where none ran.
+    confirmation_seed: int | None = None
 
 
 @dataclass
@@ -280,7 +448,8 @@ def outcome_dict(outcome: PaperOutcome, out: Path) -> dict:
         "format": 1,
         "paper": outcome.paper, "title": outcome.title, "size": outcome.size, "filters": list(outcome.filters),
         "notes": outcome.notes, "published": _jsonable(outcome.published),
-        "seed": outcome.seed, "command": outcome.command, "finished": outcome.finished,
+        "seed": outcome.seed, "confirmation_seed": outcome.confirmation_seed, "command": outcome.command,
+        "finished": outcome.finished,
         "seconds": outcome.seconds, "errors": list(outcome.errors), "warnings": list(outcome.warnings),
         "figures": [{"id": f["id"], "caption": f["caption"],
                      **{k: _rel(f.get(k), out) for k in ("png", "svg", "data")}} for f in outcome.figures],
@@ -325,7 +494,8 @@ def load_outcome(path: Path, out: Path) -> PaperOutcome:
         warnings=list(data.get("warnings", [])),
         seconds=float(data.get("seconds", 0.0)), seed=data.get("seed"), command=str(data.get("command", "")),
         finished=str(data.get("finished", "")), saved=True,
-        unknowns=[DeclaredUnknown.from_dict(u) for u in data.get("unknowns", [])])
+        unknowns=[DeclaredUnknown.from_dict(u) for u in data.get("unknowns", [])],
+        confirmation_seed=data.get("confirmation_seed"))
 
 
 def saved_outcomes(out: Path, skip: Iterable[str] = ()) -> tuple[list[PaperOutcome], list[str]]:
@@ -374,26 +544,36 @@ def _write_table(table: Table, path: Path) -> None:
 
 
 def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "quick", seed: int = 0,
-               filters: str | None = None, arch: str = "cpu", progress: bool = True,
+               filters: str | None = None, arch: str = "cpu", progress: bool = True, trackers: str | None = None,
                on_task: Callable[[str], None] | None = None, executor: "Executor | None" = None,
-               command: str = "", formats: Sequence[str] | str | None = None) -> PaperOutcome:
+               command: str = "", formats: Sequence[str] | str | None = None,
+               confirmation_seed: int | None | str = "auto") -> PaperOutcome:
     """Run one recipe into ``out/paperNNN`` using the cache in ``out/cache``.
 
     The criteria of any size but ``"full"`` are marked indicative (never *met*), and the outcome is saved
     to ``out/paperNNN/outcome.json``.  Figures are saved in ``formats`` (:func:`figure_formats`: by default PNG
-    and SVG).
+    and SVG).  ``confirmation_seed``: the seed every criterion is judged on once more (``"auto"``:
+    :data:`CONFIRMATION_SEED` for the full size, none for any other; ``None``: none); only the tasks the criteria
+    read are rerun with it.
     """
     import matplotlib
 
     matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
 
     start = time.perf_counter()
     formats = figure_formats(formats)
+    if confirmation_seed == "auto":
+        confirmation_seed = CONFIRMATION_SEED if size == FIRM_SIZE else None
+    check_report_seed(seed, confirmation_seed)
     if size not in recipe.sizes:
         raise InputError(f"recipe {recipe.paper} has no size {size!r} (sizes: {', '.join(recipe.sizes)})")
     chosen = resolve_filters(recipe.default_filters, filters, host) if recipe.default_filters else ()
-    options = RecipeOptions(size=size, values=dict(recipe.sizes[size]), seed=seed, filters=chosen, arch=arch)
+    if trackers is not None and not recipe.default_trackers:
+        tracker_papers([recipe], trackers, host, named=True)  # refused, naming the paper
+    chosen_trackers = (resolve_trackers(recipe.default_trackers, trackers, host, f"paper {recipe.paper}'s")
+                       if recipe.default_trackers else ())
+    options = RecipeOptions(size=size, values=dict(recipe.sizes[size]), seed=seed, filters=chosen, arch=arch,
+                            trackers=chosen_trackers)
     outcome = PaperOutcome(recipe.paper, recipe.title, size, chosen, recipe.notes, dict(recipe.published),
                            seed=seed, command=command, unknowns=list(getattr(recipe, "unknowns", ()) or ()))
     paper_dir = out / f"paper{recipe.paper}"
@@ -410,8 +590,74 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     modules = {recipe.tasks.__module__} | {getattr(t.run, "__module__", None) for t in tasks}
     module_files = tuple(sorted(f for m in modules if m and (f := getattr(sys.modules.get(m), "__file__", None))))
     version = code_version(module_files)
+    run = executor if executor is not None else InProcess(host)
+    results = _run_tasks(recipe, tasks, host, cache, run, outcome, seed=seed, size=size, arch=arch, version=version,
+                         progress=progress, on_task=on_task, label=f"paper {recipe.paper} ({size})")
+    outcome.tasks.sort(key=lambda t: keys.index(t["key"]))
+    for entry in outcome.tasks:  # components that failed inside a task whose other results were kept
+        failed = component_errors(results.get(entry["key"], {}))
+        if failed:
+            entry["partial"] = [f"{what} failed: {msg}" for what, msg in failed]
+            outcome.errors.extend(f"task {entry['key']!r}: {what} failed: {msg} (the task's other results are kept)"
+                                  for what, msg in failed)
+    _draw_and_tabulate(recipe, results, outcome, paper_dir, formats)
+    if recipe.criteria is not None:
+        read: set[str] = set()
+        try:
+            outcome.criteria, read = judged_tasks(recipe.criteria, results)
+        except Exception as exc:  # noqa: BLE001
+            outcome.errors.append(f"criteria not evaluated: {type(exc).__name__}: {exc}")
+        if outcome.criteria and confirmation_seed is not None:
+            outcome.criteria = _confirmation(recipe, host, cache, run, outcome, options, read, results,
+                                             seed=int(confirmation_seed), version=version, progress=progress,
+                                             on_task=on_task)
+        if size != FIRM_SIZE:
+            outcome.criteria = [c.as_indicative() for c in outcome.criteria]
+    outcome.confirmation_seed = None if confirmation_seed is None else int(confirmation_seed)
+    outcome.seconds = time.perf_counter() - start
+    outcome.finished = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    save_outcome(outcome, out)
+    return outcome
+
+
+def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
+                  options: RecipeOptions, read: set[str], results: Mapping, *, seed: int, version: str,
+                  progress: bool, on_task) -> list[Criterion]:
+    """The criteria with their verdicts on the confirmation seed: the tasks they read rerun with ``seed``
+    (cached under it), the criteria judged again unchanged on those results (the other tasks' results are the
+    reported seed's, which the criteria do not read)."""
+    again_options = dataclasses.replace(options, seed=seed)
+    tasks = [t for t in recipe.tasks(again_options) if t.key in read]
+    note = PaperOutcome(recipe.paper, recipe.title, options.size, options.filters, "", {})
+    fresh = _run_tasks(recipe, tasks, host, cache, run, note, seed=seed, size=options.size, arch=options.arch,
+                       version=version, progress=progress, on_task=on_task,
+                       label=f"paper {recipe.paper} ({options.size}, confirmation seed {seed})")
+    for entry in note.tasks:
+        outcome.tasks.append({**entry, "key": f"confirmation/{entry['key']}", "seed": seed})
+    outcome.warnings.extend(note.warnings)
+    outcome.warnings.extend(f"paper {recipe.paper}, confirmation seed {seed}: {line}" for line in note.errors)
+    lost = [t.key for t in tasks if t.key not in fresh]
+    if lost:
+        why = (f"the task(s) {', '.join(lost)} failed on the confirmation seed {seed}: "
+               + "; ".join(note.errors or ["a component failed inside them"]))
+        outcome.warnings.append(f"paper {recipe.paper}: no confirmation: {why}")
+        return confirm(outcome.criteria, None, seed, why)
+    try:
+        again = list(recipe.criteria({**results, **fresh}))
+    except Exception as exc:  # noqa: BLE001 - the reported verdicts stand; the confirmation says why it has none
+        why = f"the criteria raised on the confirmation seed {seed}: {type(exc).__name__}: {exc}"
+        outcome.warnings.append(f"paper {recipe.paper}: no confirmation: {why}")
+        return confirm(outcome.criteria, None, seed, why)
+    return confirm(outcome.criteria, again, seed)
+
+
+def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
+               *, seed: int, size: str, arch: str, version: str, progress: bool, on_task,
+               label: str) -> dict[str, dict[str, np.ndarray]]:
+    """Run ``tasks`` with ``seed`` (each finished one cached at once, a cached one reused); their results, with
+    each task's timing in ``outcome.tasks`` and failures in ``outcome.errors``."""
     results: dict[str, dict[str, np.ndarray]] = {}
-    bar = _progress_bar(len(tasks), f"paper {recipe.paper} ({size})", progress)
+    bar = _progress_bar(len(tasks), label, progress)
     pending = []
     for task in tasks:
         digest = task_key(recipe.paper, task.key, task.params, seed, version, size=size, arch=arch)
@@ -430,7 +676,6 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
             bar.update(1)
         else:
             pending.append((task, digest))
-    run = executor if executor is not None else InProcess(host)
     for task, arrays, seconds, error in run.execute([t for t, _ in pending], seed, arch, on_task):
         digest = next(d for t, d in pending if t.key == task.key)
         if error is None:
@@ -448,13 +693,13 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
                                   "traceback": error[1]})
         bar.update(1)
     bar.close()
-    outcome.tasks.sort(key=lambda t: keys.index(t["key"]))
-    for entry in outcome.tasks:  # components that failed inside a task whose other results were kept
-        failed = component_errors(results.get(entry["key"], {}))
-        if failed:
-            entry["partial"] = [f"{what} failed: {msg}" for what, msg in failed]
-            outcome.errors.extend(f"task {entry['key']!r}: {what} failed: {msg} (the task's other results are kept)"
-                                  for what, msg in failed)
+    return results
+
+
+def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutcome, paper_dir: Path,
+                       formats: Sequence[str]) -> None:
+    """The recipe's figures (data, PNG and SVG) and tables from ``results``, into ``paper_dir`` and ``outcome``."""
+    from matplotlib.figure import Figure
 
     for spec in recipe.figures:
         try:
@@ -481,17 +726,6 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
                                    "rows": [list(r) for r in table.rows], "csv": paper_dir / f"{spec.id}.csv"})
         except Exception as exc:  # noqa: BLE001
             outcome.errors.append(f"table {spec.id} not produced: {type(exc).__name__}: {exc}")
-    if recipe.criteria is not None:
-        try:
-            outcome.criteria = list(recipe.criteria(results))
-        except Exception as exc:  # noqa: BLE001
-            outcome.errors.append(f"criteria not evaluated: {type(exc).__name__}: {exc}")
-        if size != FIRM_SIZE:
-            outcome.criteria = [c.as_indicative() for c in outcome.criteria]
-    outcome.seconds = time.perf_counter() - start
-    outcome.finished = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-    save_outcome(outcome, out)
-    return outcome
 
 
 class _UsageTable(Mapping):
@@ -870,6 +1104,7 @@ def report_lock(out: Path, command: str = "", wait: float = 0.0, poll: float = 0
 
 def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = None, size: str = "quick",
                seed: int = 0, filters: str | None = None, arch: str = "cpu", progress: bool = True,
+               trackers: str | None = None,
                command: str = "", executor: "Executor | None" = None, wait: float = 0.0,
                formats: Sequence[str] | str | None = None) -> ReportOutcome:
     """Run the chosen recipes (default: every registered one) and write ``index.html`` and ``summary.json``.
@@ -891,11 +1126,13 @@ def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = No
             recipes.append(host.recipe(paper))
         except UnknownComponent as exc:
             raise InputError(str(exc)) from None
+    routed = tracker_papers(recipes, trackers, host, named=bool(papers))  # --trackers refused before any paper runs
     with report_lock(out, command, wait) as notes:
         start = time.perf_counter()
         outcomes = []
         for recipe in recipes:
             outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
+                                       trackers=routed[recipe.paper],
                                        progress=progress, executor=executor, command=command, formats=formats))
         saved, warnings = saved_outcomes(out, skip=[o.paper for o in outcomes])
         warnings = [*notes, *(w for o in outcomes for w in o.warnings), *warnings]

@@ -346,9 +346,12 @@ def _scoreboard(p) -> str:
     if not crit:
         return "<p class='meta'>This recipe declares no criteria.</p>"
     with_rep = any(c.replication is not None for c in crit)
+    with_conf = any(c.confirmation is not None for c in crit)
     columns = ["id", "criterion", "verdict", "ours", "published", "n", "95 % interval", "threshold"]
     if with_rep:
         columns.append("paper's protocol, replicated")
+    if with_conf:
+        columns.append("confirmation")
     rows, cells, classes = [], [], []
     for c in crit:
         interval = None
@@ -383,6 +386,10 @@ def _scoreboard(p) -> str:
             row.append(None if c.replication is None else f"{c.replication[0]}/{c.replication[1]}")
             cell.append("n/a" if c.replication is None else
                         f"holds in {c.replication[0]} of {c.replication[1]}")
+        if with_conf:
+            text, html = _confirmation_cell(c.confirmation)
+            row.append(text)
+            cell.append(html)
         if all(x is None for x in row[3:]) and not c.threshold:  # a pass/fail check without statistics
             cell[3] = _Span("n/a: a pass/fail check with no sample size, interval or threshold recorded; "
                             "its numbers are in the detail", len(row) - 3)
@@ -394,7 +401,53 @@ def _scoreboard(p) -> str:
     numeric[6] = True  # the interval reads as numbers
     if with_rep:
         numeric[8] = False
+    if with_conf:
+        numeric[-1] = False
     return _table(columns, rows, cls="scoreboard", row_classes=classes, html_cells=cells, numeric=numeric)
+
+
+def _confirmation_cell(record) -> tuple[str | None, str]:
+    """The scoreboard's confirmation cell: whether the verdict on the confirmation seed agrees, with that verdict,
+    ours and the interval there (text, html)."""
+    if record is None:
+        return None, "n/a: not run"
+    if record.verdict is None:
+        return record.text(), f"<div class='would'>no verdict on seed {_esc(record.seed)}</div>" \
+                              f"<div class='detail'>{_esc(record.detail)}</div>"
+    head = "agrees" if record.agrees else "DIFFERS"
+    # the verdict in words, not as a badge: the scoreboard's badges are the reported seed's verdicts
+    cell = f"<b>{head}</b> (seed {_esc(record.seed)}): <i>{_esc(record.verdict)}</i>"
+    if record.failed:
+        cell += f"<div class='would'>failed: {_esc(', '.join(record.failed))}</div>"
+    nums = []
+    if isinstance(record.ours, (int, float)) and not isinstance(record.ours, bool):
+        nums.append(format_value(record.ours))
+    if record.interval is not None and not any(math.isnan(v) for v in record.interval):
+        nums.append(f"[{format_value(record.interval[0])}, {format_value(record.interval[1])}]")
+    if record.n is not None:
+        nums.append(f"n = {format_value(record.n)}")
+    if nums:
+        cell += f"<div class='detail'>{_esc(' '.join(nums))}</div>"
+    return record.text(), cell
+
+
+def _confirmation_summary(p) -> tuple[str, str]:
+    """The at-a-glance cell: how many verdicts the confirmation seed agrees with, and which differ (text, html)."""
+    records = [(c.id, c.confirmation) for c in p.criteria if c.confirmation is not None]
+    if not records:
+        why = "off (quick run)" if p.size != "full" else "not run"
+        return why, _esc(why)
+    seed = records[0][1].seed
+    judged = [(i, r) for i, r in records if r.verdict is not None]
+    agree = sum(1 for _, r in judged if r.agrees)
+    text = f"seed {seed}: {agree} of {len(records)} agree"
+    differ = [f"{i}: {r.primary} -> {r.verdict}" for i, r in judged if not r.agrees]
+    none = [str(i) for i, r in records if r.verdict is None]
+    if differ:
+        text += "; differ: " + ", ".join(differ)
+    if none:
+        text += "; no verdict: " + ", ".join(none)
+    return text, _esc(text)
 
 
 def _verdict_at(record) -> str:
@@ -592,12 +645,14 @@ def _overview(papers) -> str:
     for p in papers:
         counts = _tally(p.criteria)
         why, why_html = _not_judgeable_cell(p.criteria)
-        rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), why, len(p.errors)])
+        conf, conf_html = _confirmation_summary(p)
+        rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), why, conf, len(p.errors)])
         cells.append([f"<a href='#{_anchor(p.paper)}'>{_esc(p.paper)}</a>", None, None,
                       *(f"<span class='badge {_CLASS[v]}'>{counts[v]}</span>" if counts[v] else "0" for v in _ORDER),
-                      why_html, None])
-    columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition", "problems"]
-    numeric = [False, False, False, *(True for _ in _ORDER), False, True]
+                      why_html, conf_html, None])
+    columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition",
+               "confirmation seed: verdicts that agree", "problems"]
+    numeric = [False, False, False, *(True for _ in _ORDER), False, False, True]
     return _table(columns, rows, html_cells=cells, numeric=numeric)
 
 
@@ -606,6 +661,9 @@ def _provenance(report, host: PluginHost) -> list[tuple[str, str]]:
     rows = [
         ("command", report.command or "(library call)"),
         ("seed", str(report.seed)),
+        ("confirmation seed", ", ".join(sorted({str(p.confirmation_seed) for p in report.papers
+                                                if getattr(p, "confirmation_seed", None) is not None}))
+         or "none (quick run: the confirmation seed runs with --full)"),
         ("size", report.size),
         ("wall time", f"{report.seconds:.1f} s"),
         ("finished", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")),
