@@ -206,8 +206,8 @@ def test_host_lists_configures_and_refuses_trackers_by_name():
         HOST.tracker("gnn(gate_probability=2)")
     with pytest.raises(InputError, match="gate"):
         HOST.tracker("gnn(gate=9)")  # gnn declares a gate probability, not a gate
-    with pytest.raises(UnknownComponent, match="no tracker named 'jpda'"):
-        HOST.tracker("jpda")
+    with pytest.raises(UnknownComponent, match="no tracker named 'tomht'"):
+        HOST.tracker("tomht")
     with pytest.raises(UnknownComponent, match="is a filter, not a tracker"):
         HOST.tracker("kf")
     # TrackerConfig's own rule, reached through the declared parameters

@@ -106,6 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="comma-separated filters, each 'name' or 'name(key=value, ...)': '+name' adds to each "
                           "recipe's defaults, '-name' or '~name' removes one, a plain list replaces them "
                           "(e.g. --filters '+sir(particles=2000),~ekf')")
+    rep.add_argument("--trackers", default=None, action=_Once,
+                     help="comma-separated multi-target trackers, as --filters: '+name' adds to the defaults of each "
+                          "recipe that compares trackers, '-name' or '~name' removes one, a plain list replaces them "
+                          "(e.g. --trackers '+gm-phd(prune=1e-5)'); refused for a --paper that compares none")
     rep.add_argument("--seed", type=int, default=0, help="base seed of every random stream (default 0)")
     rep.add_argument("--arch", default="cpu", choices=list(kernel_policy.ARCHES),
                      help="Taichi backend for kernels (default cpu; auto falls back to cpu)")
@@ -122,9 +126,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scenario", help="scenario TOML file")
     run.add_argument("--out", default=None, help="output folder (default: next to the scenario, <name>-results)")
     run.add_argument("--seed", type=int, default=None, help="override the scenario's seed")
+    run.add_argument("--trackers", default=None, action=_Once,
+                     help="comma-separated installed trackers applied to the scenario's [trackers] names, as "
+                          "'workbench report --trackers': '+name' adds, '-name' or '~name' removes, a plain list "
+                          "replaces (e.g. --trackers '+gm-phd(prune=1e-5)'); refused for a scenario without "
+                          "[trackers]")
 
     chk = sub.add_parser("check-plugin", help="run the test kit that fits an installed filter, sensor, clutter "
-                                              "generator, clutter remover or motion model")
+                                              "generator, clutter remover, motion model or tracker")
     chk.add_argument("name", help="component name (as listed by 'workbench plugins')")
     chk.add_argument("--kind", choices=sorted(KIT_KINDS), default=None,
                      help="which kind of component NAME is, where two kinds share the name (default: every kind "
@@ -252,6 +261,11 @@ def cmd_report(args) -> int:
     _check_papers(host, args.paper)
     if args.filters is not None:
         filter_request(args.filters, host)  # the whole request checked before any paper runs
+    if args.trackers is not None:
+        from .report.engine import tracker_papers
+
+        tracker_papers([host.recipe(p) for p in (args.paper or sorted(host.recipes))], args.trackers, host,
+                       named=bool(args.paper))
     if args.arch != "cpu":
         from .kernels.runtime import TaichiUnavailable, ensure_taichi
 
@@ -276,6 +290,7 @@ def cmd_report(args) -> int:
     try:
         report = run_report(host, Path(args.out), papers=args.paper or None, size=args.size, seed=args.seed,
                             filters=args.filters, arch=args.arch, progress=not args.no_progress, command=command,
+                            trackers=args.trackers,
                             executor=executor, wait=args.wait)
     except DaskClusterLost as exc:  # the cluster went away mid-run: the network's exit code, as an unreachable one
         raise NetworkError(str(exc)) from None
@@ -307,6 +322,8 @@ def cmd_run(args) -> int:
     with warnings.catch_warnings():  # printed below, as the command line's own warning lines
         warnings.simplefilter("ignore", ImplausibleValueWarning)
         scenario = load_scenario(Path(args.scenario), host)
+    if args.trackers is not None:
+        scenario = _scenario_trackers(scenario, args.trackers, host)
     for note in scenario.notes:
         print(f"workbench: warning: {note}", file=sys.stderr)
     out = Path(args.out) if args.out else Path(args.scenario).with_name(f"{scenario.name}-results")
@@ -319,9 +336,36 @@ def cmd_run(args) -> int:
     return 0
 
 
+def _scenario_trackers(scenario, request: str, host: PluginHost):
+    """The scenario with ``--trackers`` applied to its ``[trackers]`` names (:func:`workbench.report.engine.
+    resolve_trackers`), each checked against its declarations and against the scenario's detections as the file's
+    own are; refused, naming the file, for a scenario that runs no installed trackers."""
+    import dataclasses
+
+    from .params import parse_reference
+    from .report.engine import resolve_trackers, tracker_request
+    from .scenario import INSTALLED_TRACKERS, Component, _check_frames
+
+    tracker_request(request, host)  # the request's own mistakes first, whatever the scenario
+    if scenario.tracker != INSTALLED_TRACKERS:
+        raise InputError(f"--trackers {request!r}: scenario {scenario.path} runs no installed multi-target trackers "
+                         f"(it has no [trackers] table: list its objects in [[targets]] or declare [births], and name "
+                         f"the trackers in [trackers]), so the request would be ignored")
+    chosen = resolve_trackers([c.label for c in scenario.trackers], request, host, f"{scenario.path} [trackers]")
+    components = []
+    for text in chosen:
+        base, values = parse_reference(text, f"--trackers {text!r}")
+        spec = host.tracker(base)
+        changed = spec.changed(spec.check(**values))
+        components.append(Component(base, changed, spec.configure(**changed).name if changed else base))
+    _check_frames(scenario.path, host, scenario.sensor, scenario.clutter, scenario.removers, scenario.tracker,
+                  scenario.detections_format, tuple(host.tracker(c.plugin) for c in components))
+    return dataclasses.replace(scenario, trackers=tuple(components))
+
+
 #: ``--kind`` value -> the kind label of :data:`workbench.plugins.KINDS` of the components that have a test kit.
 KIT_KINDS = {"filter": "filter", "sensor": "sensor", "clutter-generator": "clutter generator",
-             "clutter-remover": "clutter remover", "motion-model": "motion model"}
+             "clutter-remover": "clutter remover", "motion-model": "motion model", "tracker": "tracker"}
 
 #: outcome status -> the word printed for it
 _STATUS = {"passed": "PASSED", "failed": "FAILED", "xfailed": "XFAIL", "xpassed": "XPASS", "skipped": "SKIPPED"}
@@ -335,7 +379,8 @@ def check_plugin(host: PluginHost, name: str, kind: str | None = None, out=print
     labels = set(KIT_KINDS.values()) if kind is None else {KIT_KINDS[kind]}
     found = [(label, spec) for label, spec in host.find(name) if label in labels]
     if not found:
-        what = "filter, sensor, clutter generator, clutter remover or motion model" if kind is None else KIT_KINDS[kind]
+        what = ("filter, sensor, clutter generator, clutter remover, motion model or tracker" if kind is None
+                else KIT_KINDS[kind])
         known = sorted({n for label in labels for n in _names(host, label)})
         raise UnknownComponent(f"no {what} named {name!r} is installed" + _unavailable(host, name)
                                + f" (installed: {', '.join(known) or 'none'})")
@@ -421,11 +466,13 @@ COMMANDS = {"plugins": cmd_plugins, "report": cmd_report, "run": cmd_run, "check
 
 
 def _normalise_argv(argv: list[str]) -> list[str]:
-    """``--filters -ekf`` as ``--filters=-ekf``: a value that starts with '-' would otherwise read as an option."""
+    """``--filters -ekf`` as ``--filters=-ekf`` (and ``--trackers -gnn`` likewise): a value that starts with '-'
+    would otherwise read as an option."""
     out, i = [], 0
     while i < len(argv):
-        if argv[i] == "--filters" and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1] != "--":
-            out.append(f"--filters={argv[i + 1]}")
+        if argv[i] in ("--filters", "--trackers") and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and argv[i + 1] != "--":
+            out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
             continue
         out.append(argv[i])

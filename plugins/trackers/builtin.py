@@ -23,6 +23,8 @@ from workbench.tracking.gnn import run_gnn
 from workbench.tracking.mofn import run_tracker
 from workbench.tracking.records import PRIORS, TrackerConfig
 
+from . import gmphd, jipda
+
 _DEFAULT = TrackerConfig()
 
 #: The parameters both trackers share (TrackerConfig's fields, less the gate).
@@ -83,6 +85,8 @@ def trackers() -> list[TrackerSpec]:
               _mofn, (_GATE, *_SHARED)),
         _spec("gnn", "global nearest neighbour (least-cost assignment) with M-of-N initiation and confirmation",
               _gnn, (_GATE_PROBABILITY, *_SHARED)),
+        gmphd.spec(),
+        *jipda.trackers(),
     ]
 
 

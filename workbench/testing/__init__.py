@@ -1,5 +1,5 @@
 """The plugin test kits: filters (:mod:`.kit`), sensors (:mod:`.sensors`), clutter generators and removers
-(:mod:`.clutter`), motion models (:mod:`.motion`).
+(:mod:`.clutter`), motion models (:mod:`.motion`), multi-target trackers (:mod:`.trackers`).
 
 From pytest::
 
@@ -18,17 +18,18 @@ NAME`` or :func:`run_checks`.
 """
 
 from ..models import MotionModel
-from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, SensorSpec
+from ..specs import ClutterGeneratorSpec, ClutterRemoverSpec, FilterSpec, SensorSpec, TrackerSpec
 from . import kit
 from ._common import Check, Outcome, Outcomes
 from .clutter import GENERATOR_CHECKS, REMOVER_CHECKS, generator_checks_for, remover_checks_for
 from .kit import CHECKS, reference_kalman
 from .motion import MOTION_CHECKS, motion_checks_for, run_motion_checks
 from .sensors import SENSOR_CHECKS, sensor_checks_for
+from .trackers import TRACKER_CHECKS, run_tracker_checks, tracker_checks_for
 
 __all__ = ["CHECKS", "SENSOR_CHECKS", "GENERATOR_CHECKS", "REMOVER_CHECKS", "MOTION_CHECKS", "Check", "Outcome",
            "Outcomes", "checks_for", "kit_checks", "run_checks", "reference_kalman", "parametrize_with_checks",
-           "motion_checks_for", "run_motion_checks"]
+           "motion_checks_for", "run_motion_checks", "TRACKER_CHECKS", "run_tracker_checks"]
 
 #: spec type -> (every check of its kit, the applicable ones)
 _KITS = {
@@ -37,6 +38,7 @@ _KITS = {
     ClutterGeneratorSpec: (GENERATOR_CHECKS, generator_checks_for),
     ClutterRemoverSpec: (REMOVER_CHECKS, remover_checks_for),
     MotionModel: (MOTION_CHECKS, motion_checks_for),
+    TrackerSpec: (TRACKER_CHECKS, tracker_checks_for),
 }
 
 
@@ -45,7 +47,7 @@ def _kit(spec):
         if isinstance(spec, kind):
             return entry
     raise TypeError(f"no test kit for {type(spec).__name__}; the kits check FilterSpec, SensorSpec, "
-                    f"ClutterGeneratorSpec, ClutterRemoverSpec and MotionModel")
+                    f"ClutterGeneratorSpec, ClutterRemoverSpec, MotionModel and TrackerSpec")
 
 
 def kit_checks(spec) -> tuple[Check, ...]:
