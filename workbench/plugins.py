@@ -247,9 +247,17 @@ def load_host(block: Iterable[str] = (), entry_points: Iterable[metadata.EntryPo
 
     Parameters
     ----------
-    block : names of plugins (entry-point names) not to load; ``WORKBENCH_BLOCK`` adds to these.
-    entry_points : the entry points to load (default: the installed group ``workbench``).
-    extra_plugins : ``(name, module_or_object)`` pairs registered directly (tests use this).
+    block : iterable of str
+        Names of plugins (entry-point names) not to load; ``WORKBENCH_BLOCK`` adds to these.
+    entry_points : iterable of importlib.metadata.EntryPoint or None
+        The entry points to load (default: the installed group ``workbench``).
+    extra_plugins : iterable of (str, object)
+        ``(name, module_or_object)`` pairs registered directly (tests use this).
+
+    Returns
+    -------
+    PluginHost
+        The host, with every plugin's components indexed and each plugin's :class:`PluginInfo` status.
 
     Notes
     -----
