@@ -16,12 +16,15 @@ The public API (stable names; everything else is reached through its module):
   :class:`Gated`, :class:`NearestNeighbour`, :class:`MofN` with :class:`TrackerConfig`, and their outputs
   :class:`Track`, :class:`TrackLog`
 - metrics: :func:`position_sq_error`, :func:`rmse`, :func:`nees`
+- figures: the ``workbench.plot`` module (``wb.plot.truth``, ``wb.plot.tracks``, ...; Matplotlib is imported
+  on its first use)
 
 See ``docs/quickstart.md``.
 """
 
 from importlib.metadata import PackageNotFoundError, version
 
+from . import plot
 from .filtering import run_filter
 from .hookspecs import hookimpl
 from .metrics import nees, position_sq_error, rmse
@@ -57,4 +60,6 @@ __all__ = [
     "run", "run_filter", "Direct", "Gated", "NearestNeighbour", "MofN", "TrackerConfig", "Track", "TrackLog",
     # metrics
     "position_sq_error", "rmse", "nees",
+    # figures
+    "plot",
 ]

@@ -33,6 +33,7 @@ from .params import memory_limit, when_text
 from .plugins import PluginHost
 from .rng import generator
 from .trajectory import Leg, piecewise_trajectory, sample_motion
+from .truth import BirthProcess, MultiTruth, ObjectSpec, simulate_objects
 from .types import Gaussian, InputError, Scans, Truth
 from .textfields import ImplausibleValueWarning
 from .units import parse_quantity
@@ -46,6 +47,8 @@ __all__ = ["Component", "Scenario", "load_scenario", "run_scenario", "ScenarioRe
 
 MOTION_MODELS = ("constant_velocity", "random_walk_velocity", "range_rate")
 TRACKERS = ("direct", "nearest-neighbour", "multi-target")
+#: :attr:`Scenario.tracker` of a scenario with several objects: the installed trackers of ``[trackers]`` run.
+INSTALLED_TRACKERS = "installed-trackers"
 DETECTION_FORMATS = ("sonar", "pcl")
 #: The measurement frame of each recorded-detection format.
 FORMAT_FRAMES = {"sonar": "cartesian-2d", "pcl": "bistatic-range-rate"}
@@ -107,6 +110,19 @@ class Scenario:
     notes: tuple[str, ...] = ()
     #: the truth's own motion model (``[truth] motion``), or None: the truth moves as :attr:`motion` says
     truth_motion: MotionModel | None = None
+    #: several objects per run (:mod:`workbench.truth`): the listed ``[[targets]]`` and the ``[births]`` process
+    targets: tuple[ObjectSpec, ...] = ()
+    births: BirthProcess | None = None
+    #: the installed trackers of ``[trackers]`` (each run with every filter of ``[filters]``), and the GOSPA / OSPA
+    #: cut-off (m) and order that score them
+    trackers: tuple[Component, ...] = ()
+    cutoff: float = 10.0
+    order: float = 2.0
+
+    @property
+    def multi(self) -> bool:
+        """Whether the scenario has several objects per run (``[[targets]]`` or ``[births]``)."""
+        return bool(self.targets) or self.births is not None
 
     @property
     def filter_names(self) -> tuple[str, ...]:
@@ -255,6 +271,165 @@ def check_request_size(path: Path, runs: int, steps: int, n: int, filters: int, 
                          f"memory): ask for fewer runs or steps")
 
 
+def _check_multi_tables(path: Path, raw: Mapping, multi: bool) -> None:
+    """Which tables go with several objects per run: ``[[targets]]`` and / or ``[births]`` with ``[trackers]``,
+    and neither ``[truth]`` (one object), ``[prior]`` (the trackers start their own tracks) nor recorded
+    ``[detections]``."""
+    if "trackers" in raw and not multi:
+        raise InputError(f"{path}: [trackers] runs installed trackers on several objects per run; list the objects "
+                         f"in [[targets]] or declare a [births] process (or remove [trackers])")
+    if not multi:
+        return
+    given = "[[targets]]" if "targets" in raw else "[births]"
+    for table, why in (("truth", "holds one object; list every object in [[targets]] instead"),
+                       ("prior", "is not used: the trackers initiate their own tracks"),
+                       ("detections", "replaces the simulation, which has no truth to list objects in")):
+        if table in raw:
+            raise InputError(f"{path}: [{table}] {why}; it cannot go with {given}: remove [{table}]")
+    if "targets" in raw and (not isinstance(raw["targets"], list) or not raw["targets"]):
+        raise InputError(f"{path}: [[targets]] must be one or more tables (write each as [[targets]]), got "
+                         f"{raw['targets']!r}")
+
+
+def _probability(reader: _Reader, key: str) -> float | None:
+    if key not in reader.table:
+        reader.used.add(key)
+        return None
+    value = reader.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= float(value) <= 1.0:
+        raise InputError(f"{reader.where(key)}: expected a probability in [0, 1], got {value!r}")
+    return float(value)
+
+
+def _targets(path: Path, tables, host: PluginHost, motion: MotionModel, dt: float, steps: int
+             ) -> tuple[ObjectSpec, ...]:
+    """``[[targets]]``: each with ``initial_state`` (at its first scan), optional ``initial_std``, ``motion`` (an
+    installed motion model, default ``[motion]``'s), ``p_d`` (default the sensor's), ``first`` and ``last`` scans
+    (default 0 and the last) and ``label``."""
+    n = motion.dim
+    out = []
+    for i, table in enumerate(tables):
+        tr = _Reader(path, table, f"targets[{i}]")
+        x0 = tr.vector("initial_state", n)
+        std = tr.vector("initial_std", n, nonneg=True) if "initial_std" in tr.table else None
+        tr.used.add("initial_std")
+        own = None
+        if "motion" in tr.table:
+            entry = tr.get("motion")
+            if not isinstance(entry, str):
+                raise InputError(f"{tr.where('motion')}: expected a motion model such as \"ct-rate\", got {entry!r}")
+            own, _ = _motion_model(host, tr.where("motion"), entry, dt, {}, tr.where)
+            if own.dim != n:
+                raise InputError(f"{tr.where('motion')}: {entry!r} has a state of {own.dim} components, but [motion] "
+                                 f"model {motion.name!r} has {n}: the filters estimate every object's state, so they "
+                                 f"must share it")
+        tr.used.add("motion")
+        p_d = _probability(tr, "p_d")
+        first = tr.integer("first", 0, 0)
+        last = tr.integer("last", steps - 1, 0) if "last" in tr.table else None
+        tr.used.add("last")
+        for key, value in (("first", first), ("last", last)):
+            if value is not None and value >= steps:
+                raise InputError(f"{tr.where(key)}: scan {value} is past the run's last scan ({steps - 1}; [scenario] "
+                                 f"steps = {steps})")
+        if last is not None and last < first:
+            raise InputError(f"{tr.where('last')}: scan {last} comes before first = {first}")
+        label = tr.get("label", f"target {i}")
+        if not isinstance(label, str):
+            raise InputError(f"{tr.where('label')}: expected a name, got {label!r}")
+        tr.done()
+        out.append(ObjectSpec(x0, std, own, p_d, first, last, label))
+    return tuple(out)
+
+
+def _births(path: Path, table, motion: MotionModel) -> BirthProcess:
+    """``[births]``: ``rate`` (births per scan), ``region`` (one ``[low, high]`` pair per position axis),
+    ``velocity_std`` (and optional ``velocity_mean``), ``max_objects``, optional ``survival`` and ``p_d``."""
+    br = _Reader(path, table, "births")
+    rate = br.get("rate")
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not (np.isfinite(rate) and rate >= 0):
+        raise InputError(f"{br.where('rate')}: expected a number of births per scan >= 0, got {rate!r}")
+    region = br.get("region")
+    d = motion.dim // 2
+    if not isinstance(region, list) or not all(isinstance(r, list) and len(r) == 2 for r in region):
+        raise InputError(f"{br.where('region')}: expected one [low, high] pair per position axis, e.g. "
+                         f"[[\"0 m\", \"1 km\"], [\"0 m\", \"1 km\"]], got {region!r}")
+    if len(region) != d or motion.dim != 2 * d:
+        raise InputError(f"{br.where('region')}: {len(region)} axes, but born objects take the state [p, v] of "
+                         f"[motion] model {motion.name!r} ({motion.dim} components: {d} position axes)")
+    box = [[parse_quantity(v, "length", f"{br.where('region')}[{a}][{j}]") for j, v in enumerate(pair)]
+           for a, pair in enumerate(region)]
+    for a, (lo, hi) in enumerate(box):
+        if not lo < hi:
+            raise InputError(f"{br.where('region')}[{a}]: expected low < high, got [{lo:g}, {hi:g}] m")
+
+    def speeds(key: str, default):
+        value = br.get(key, default)
+        if isinstance(value, list):
+            return br.vector(key, d, nonneg=key == "velocity_std", dimension="speed")
+        v = parse_quantity(value, "speed", br.where(key))
+        if key == "velocity_std" and v < 0:
+            raise InputError(f"{br.where(key)}: must be >= 0, got {v}")
+        return v
+
+    vstd, vmean = speeds("velocity_std", ...), speeds("velocity_mean", 0.0)
+    max_objects = br.integer("max_objects", minimum=1)
+    survival = br.get("survival", 1.0)
+    if isinstance(survival, bool) or not isinstance(survival, (int, float)) or not 0.0 < survival <= 1.0:
+        raise InputError(f"{br.where('survival')}: expected a probability in (0, 1] of living on from one scan to "
+                         f"the next, got {survival!r}")
+    p_d = _probability(br, "p_d")
+    br.done()
+    try:
+        return BirthProcess(float(rate), box, vstd, max_objects, vmean, float(survival), p_d)
+    except InputError as exc:
+        raise InputError(f"{path}: [births] {exc}") from None
+
+
+def _trackers(path: Path, table, host: PluginHost) -> tuple[tuple[Component, ...], float, float]:
+    """``[trackers]``: ``names`` (installed trackers: ``"gnn"``, ``"gnn(gate_probability=0.95)"`` or a table
+    ``{name = "gnn", gate_probability = 0.95}``), each checked against its declared parameters; ``cutoff`` (the
+    GOSPA / OSPA cut-off, default 10 m) and ``order`` (default 2)."""
+    from .params import parse_reference
+    from .plugins import UnknownComponent
+
+    tk = _Reader(path, table, "trackers")
+    names = tk.get("names")
+    cutoff = tk.quantity("cutoff", "length", "10 m")
+    order = tk.get("order", 2.0)
+    tk.done()
+    if not cutoff > 0 or not np.isfinite(cutoff):
+        raise InputError(f"{tk.where('cutoff')}: must be a finite length > 0, got {cutoff}")
+    if isinstance(order, bool) or not isinstance(order, (int, float)) or not (np.isfinite(order) and order >= 1):
+        raise InputError(f"{tk.where('order')}: the GOSPA / OSPA order must be a number >= 1, got {order!r}")
+    forms = "a tracker name, 'name(key=value, ...)' or a table {name = \"gnn\", gate_probability = 0.95}"
+    if not isinstance(names, list) or not names:
+        raise InputError(f"{tk.where('names')}: expected a list of installed trackers ({forms}), got {names!r}")
+    out, seen = [], set()
+    for i, entry in enumerate(names):
+        where = f"{tk.where('names')}[{i}]"
+        if isinstance(entry, str):
+            base, values = parse_reference(entry, where)
+        elif isinstance(entry, Mapping) and isinstance(entry.get("name"), str):
+            base, values = entry["name"], {k: v for k, v in entry.items() if k != "name"}
+        else:
+            raise InputError(f"{where}: expected {forms}, got {entry!r}")
+        try:
+            spec = host.tracker(base)
+            checked = spec.check(**values)
+        except UnknownComponent as exc:
+            raise InputError(f"{where}: {exc}") from None
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
+        changed = spec.changed(checked)
+        label = spec.configure(**changed).name if changed else base
+        if label in seen:
+            raise InputError(f"{where}: tracker {label!r} is listed twice")
+        seen.add(label)
+        out.append(Component(base, changed, label))
+    return tuple(out), float(cutoff), float(order)
+
+
 def load_scenario(path: Path, host: PluginHost) -> Scenario:
     """Read and validate a scenario file; every problem is reported with the file and key."""
     path = Path(path)
@@ -268,12 +443,16 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
         raise InputError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
-    known = {"scenario", "motion", "truth", "sensor", "clutter", "remover", "prior", "filters", "detections"}
+    known = {"scenario", "motion", "truth", "sensor", "clutter", "remover", "prior", "filters", "detections",
+             "targets", "births", "trackers"}
     unknown = set(raw) - known
     if unknown:
         raise InputError(f"{path}: unknown table(s) {sorted(unknown)} (expected: {', '.join(sorted(known))})")
     recorded = "detections" in raw
-    required = ("scenario", "motion", "sensor", "filters") + (() if recorded else ("truth", "prior"))
+    multi = "targets" in raw or "births" in raw
+    _check_multi_tables(path, raw, multi)
+    required = ("scenario", "motion", "sensor", "filters") + (
+        ("trackers",) if multi else () if recorded else ("truth", "prior"))
     for table in required:
         if table not in raw:
             raise InputError(f"{path}: missing table [{table}]")
@@ -284,9 +463,16 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
         raise InputError(f"{sc.where('name')}: expected a non-empty string")
     seed, runs, steps = sc.integer("seed", 0), sc.integer("runs", 1, 1), sc.integer("steps", minimum=2)
     dt = sc.quantity("dt", "time", minimum=1e-12)
+    if multi:
+        for key in ("tracker", "gate"):
+            if key in sc.table:
+                raise InputError(f"{sc.where(key)}: with [[targets]] or [births] the trackers named in [trackers] "
+                                 f"track the objects (each with its own parameters there); remove {key}")
     tracker = sc.get("tracker", "direct")
     if tracker not in TRACKERS:
         raise InputError(f"{sc.where('tracker')}: expected one of {TRACKERS}, got {tracker!r}")
+    if multi:
+        tracker = INSTALLED_TRACKERS
     gate = sc.quantity("gate", "gate", None, minimum=1e-12) if "gate" in sc.table else None
     sc.done()
 
@@ -377,17 +563,33 @@ def load_scenario(path: Path, host: PluginHost) -> Scenario:
         raise InputError(f"{pr.where('std')}: the nearest-neighbour tracker needs the prior's standard deviations")
 
     filters = _filters(path, raw["filters"], host)
-    frame = _check_frames(path, host, sensor, clutter, removers, tracker, det_format)
+    targets, births, trackers, cutoff, order = (), None, (), 10.0, 2.0
+    if multi:
+        targets = _targets(path, raw.get("targets", []), host, motion, dt, steps)
+        births = _births(path, raw["births"], motion) if "births" in raw else None
+        trackers, cutoff, order = _trackers(path, raw["trackers"], host)
+        declared = {q.name for q in host.sensor(sensor.plugin).declared}
+        own = [(f"[targets[{i}]] p_d", t.p_d) for i, t in enumerate(targets) if t.p_d is not None]
+        own += [("[births] p_d", births.p_d)] if births is not None and births.p_d is not None else []
+        if own and "pd" not in declared:
+            raise InputError(f"{path}: {own[0][0]} = {own[0][1]:g}, but sensor {sensor.plugin!r} declares no parameter "
+                             f"'pd' that sets its detection probability, so an object's own p_d cannot be honoured; "
+                             f"remove it or use a sensor with one")
+    frame = _check_frames(path, host, sensor, clutter, removers, tracker, det_format,
+                          tuple(host.tracker(c.plugin) for c in trackers))
     data, notes = None, ()
     if recorded:
         data, notes = _read_recorded(path, detections, det_format, dt, steps, host, sensor)
         for note in notes:  # kept in Scenario.notes too; the command line prints them as its own warning lines
             warnings.warn(note, ImplausibleValueWarning, stacklevel=2)
+    elif multi:
+        objects = len(targets) + (births.max_objects if births is not None else 0)
+        check_request_size(path, runs, steps, n * objects, len(filters) * len(trackers), objects + len(clutter))
     else:
         check_request_size(path, runs, steps, n, len(filters), 1 + len(clutter))
     return Scenario(path, name, seed, runs, steps, dt, motion, x0, x0_std, tuple(legs), sensor, clutter,
                     removers, prior_mean, prior_std, filters, tracker, gate, detections, det_format, frame, data,
-                    tuple(notes), truth_motion)
+                    tuple(notes), truth_motion, targets, births, trackers, cutoff, order)
 
 
 @dataclass(frozen=True)
@@ -532,8 +734,11 @@ def _check_sensor_keys(path: Path, file: Path, spec, plugin: str, given: Mapping
 
 
 def _check_frames(path: Path, host: PluginHost, sensor: Component, clutter, removers, tracker: str,
-                  det_format: str) -> str:
-    """The frame of the scenario's detections; components of other frames are refused, naming both."""
+                  det_format: str, trackers=()) -> str:
+    """The frame of the scenario's detections; components of other frames are refused, naming both.  With
+    installed ``trackers`` (specs), one that declares ``cartesian_2d`` needs Cartesian detections (it maps them
+    through the sensor's model, as the multi-target tracker does), and any other needs the sensor's model to
+    describe the detections."""
     spec = host.sensor(sensor.plugin)
     frame = FORMAT_FRAMES[det_format] if det_format else spec.detection_frame(**sensor.params)
     who = f"the recorded {det_format} file" if det_format else f"sensor {sensor.plugin!r}"
@@ -549,6 +754,17 @@ def _check_frames(path: Path, host: PluginHost, sensor: Component, clutter, remo
             raise InputError(f"{path}: [remover[{i}]] clutter remover {comp.plugin!r} works on {', '.join(frames)} "
                              f"detections, but {who} makes {frame} detections")
     model = spec.measurement_model(**sensor.params)
+    if tracker == INSTALLED_TRACKERS:
+        for t in trackers:
+            if "cartesian_2d" in t.capabilities and frame and frame != "cartesian-2d":
+                raise InputError(f"{path}: [trackers] tracker {t.name!r} takes Cartesian (x, y) detections "
+                                 f"(capability cartesian_2d), but {who} makes {frame} detections")
+            if "cartesian_2d" not in t.capabilities and frame and model.frame and model.frame != frame:
+                raise InputError(f"{path}: [sensor] {who} makes {frame} detections but its measurement model "
+                                 f"{model.name!r} describes {model.frame} measurements, and tracker {t.name!r} reads "
+                                 f"the detections through that model: choose the sensor's model of its own "
+                                 f"detections")
+        return frame
     if tracker == "multi-target" and frame and frame != "cartesian-2d":
         raise InputError(f"{path}: [scenario] tracker: the multi-target tracker takes Cartesian (x, y) detections, "
                          f"but {who} makes {frame} detections")
@@ -571,11 +787,18 @@ class ScenarioResult:
     lines: tuple[str, ...] = ()
     failed: Mapping[str, str] = field(default_factory=dict)
     plot: Mapping[str, np.ndarray] = field(default_factory=dict)
+    #: several objects per run: each tracker's (``tracker/filter``) mean GOSPA and OSPA (m) over runs and scans
+    gospa: Mapping[str, float] = field(default_factory=dict)
+    ospa: Mapping[str, float] = field(default_factory=dict)
+    #: the Matplotlib figure saved as ``tracks.png`` (drawn through :mod:`workbench.plot`)
+    figure: Any = field(default=None, compare=False, repr=False)
 
     def summary_text(self) -> str:
         lines = [f"scenario {self.name}: results in {self.out}"]
         for fname, value in self.rmse.items():
             lines.append(f"  {fname:12s} position RMSE (time-averaged) {value:.4g} m")
+        for fname, value in self.gospa.items():
+            lines.append(f"  {fname:12s} mean GOSPA {value:.4g} m, mean OSPA {self.ospa.get(fname, np.nan):.4g} m")
         lines.extend(f"  {line}" for line in self.lines)
         for fname, why in self.failed.items():
             lines.append(f"  {fname:12s} FAILED: {why}")
@@ -599,6 +822,8 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | N
         for comp in scenario.removers:
             scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
         return None, scans
+    if scenario.multi:
+        return _simulate_multi(scenario, host, seed)
     rng = generator(seed, "scenario", scenario.name)
     moved_by = scenario.truth_motion or scenario.motion
     if scenario.legs:
@@ -614,6 +839,26 @@ def simulate(scenario: Scenario, host: PluginHost, seed: int) -> tuple[Truth | N
     # in draw order: the sensor, then each clutter generator; merged in one pass
     scans = Scans.merge_all([sensor.simulate(truth, rng, **scenario.sensor.params)]
                             + [host.clutter_generator(c.plugin).generate(truth, rng, **c.params)
+                               for c in scenario.clutter])
+    for comp in scenario.removers:
+        scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
+    return truth, scans
+
+
+def _simulate_multi(scenario: Scenario, host: PluginHost, seed: int) -> tuple[MultiTruth, Scans]:
+    """Several objects per run: the listed targets and the born objects (:func:`workbench.truth.simulate_objects`,
+    draws from ``generator(seed, "scenario", name, ...)``), every object's detections
+    (:func:`workbench.sensing.detect_objects`), then each clutter generator (given object 0 as its truth: they
+    read its shape and times), then the removers."""
+    from .sensing.objects import detect_objects
+
+    truth = simulate_objects(scenario.targets, scenario.births, runs=scenario.runs, steps=scenario.steps,
+                             motion=scenario.truth_motion or scenario.motion, seed=seed,
+                             key=("scenario", scenario.name))
+    rng = generator(seed, "scenario", scenario.name, "detections")
+    sensor = host.sensor(scenario.sensor.plugin)
+    scans = Scans.merge_all([detect_objects(sensor, truth, rng, **scenario.sensor.params)]
+                            + [host.clutter_generator(c.plugin).generate(truth.as_truth(), rng, **c.params)
                                for c in scenario.clutter])
     for comp in scenario.removers:
         scans = host.clutter_remover(comp.plugin).remove(scans, **comp.params)
@@ -748,6 +993,11 @@ def _plot_data(scenario: Scenario, model, scans: Scans, truth: Truth | None, est
             err = position_sq_error(truth.states, est.mean, dims)
             data[f"rmse_{name}"] = np.sqrt(err.mean(axis=0))
         data["right_labels"] = np.array(["time (s)", "position RMSE (m)", f"position RMSE over {scans.batch} runs"])
+    elif estimates and all("nis" in est.records for est in estimates.values()):
+        for name, est in estimates.items():
+            data[f"nis_{name}"] = est.records["nis"]
+        data["right_labels"] = np.array(["time (s)", f"NIS (dimensionless; {model.dim} dof)",
+                                         "NIS of the updates (no truth: recorded data)"])
     else:
         data["count_detections"] = scans.valid.sum(axis=2).mean(axis=0)
         data["right_labels"] = np.array(["time (s)", "detections per scan (mean over runs)",
@@ -755,31 +1005,119 @@ def _plot_data(scenario: Scenario, model, scans: Scans, truth: Truth | None, est
     return data
 
 
-def _draw(data: Mapping[str, np.ndarray], fig) -> None:
+def _draw_single(fig, data: Mapping[str, np.ndarray], scenario: Scenario, model, scans: Scans,
+                 truth: Truth | None, estimates: dict, logs: dict) -> None:
+    """``tracks.png`` of a single-target scenario, through :mod:`workbench.plot`: run 0's detections (positions
+    where the frame gives them), the truth and each filter's estimate (or each tracker's tracks) with start
+    markers, one colour and line style per filter; beside it the position RMSE per step (log axis), each
+    filter's NIS with its chi-square band (recorded data), or confirmed tracks per scan (trackers)."""
+    from . import plot
+
     ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    d = data["detections_xy"]
-    ax1.plot(d[:, 0], d[:, 1], ".", color="0.7", ms=3, label="detections")
-    if "truth_xy" in data:
-        ax1.plot(data["truth_xy"][:, 0], data["truth_xy"][:, 1], "k-", label="truth")
+    frame = FRAMES.get(scenario.frame)
+    planar = frame is not None and frame.position is not None and scenario.motion.position_dims >= 2
+    dims = (0, 1) if planar else 0
+    plot.detections(ax1, scans, model=model, frame=frame, component=None if planar else 0)
+    if truth is not None:
+        plot.truth(ax1, truth, dims=dims, motion=scenario.truth_motion or scenario.motion)
     if "own_ship_xy" in data:
-        ax1.plot(data["own_ship_xy"][:, 0], data["own_ship_xy"][:, 1], "--", color="tab:green", label="own ship")
-    for key, value in data.items():
-        if key.startswith("track_"):
-            ax1.plot(value[:, 0], value[:, 1], label=key[len("track_"):])
-        elif key.startswith("confirmed_"):
-            ax1.plot(value[:, 0], value[:, 1], "o", mfc="none", ms=5, label=f"{key[len('confirmed_'):]} confirmed")
-    x, y, title = (str(v) for v in data["left_labels"])
-    ax1.set(xlabel=x, ylabel=y, title=title)
-    for key, value in data.items():
-        if key.startswith("rmse_"):
-            ax2.semilogy(data["times"], value, label=key[len("rmse_"):])
-        elif key.startswith("count_"):
-            ax2.step(data["times"] if key == "count_detections" else np.arange(value.size), value, where="mid",
-                     label=key[len("count_"):])
-    x, y, title = (str(v) for v in data["right_labels"])
-    ax2.set(xlabel=x, ylabel=y, title=title)
+        ax1.plot(data["own_ship_xy"][:, 0], data["own_ship_xy"][:, 1], "--", color="tab:green", label="own ship",
+                 gid="own-ship")
+    styles = plot.LINESTYLES
+    for i, (name, est) in enumerate(estimates.items()):
+        plot.estimate(ax1, est, dims=dims, motion=scenario.motion, times=scans.times, color=f"C{i}",
+                      linestyle=styles[i % len(styles)], label=name, linewidth=_width(i))
+    for i, (name, log) in enumerate(logs.items()):
+        plot.tracks(ax1, log, dims=dims, motion=scenario.motion, times=scans.times, color=f"C{i}",
+                    linestyle=styles[i % len(styles)], label=f"{name} confirmed", linewidth=_width(i))
+    if not planar:  # the first measured component over time: its own label, not the state's
+        ax1.set_ylabel(frame.labels()[0] if frame is not None else "measurement component 0")
+    ax1.set_title(str(data["left_labels"][2]))
+    for i, (name, log) in enumerate(logs.items()):
+        plot.track_counts(ax2, log, times=scans.times, color=f"C{i}", linestyle=styles[i % len(styles)],
+                          label=name)
+    if not logs and truth is not None:
+        for i, (name, est) in enumerate(estimates.items()):
+            plot.rmse(ax2, truth, est, motion=scenario.motion, times=scans.times, color=f"C{i}",
+                      linestyle=styles[i % len(styles)], label=name, linewidth=_width(i))
+    elif not logs:
+        for i, name in enumerate(estimates):
+            if f"nis_{name}" in data:
+                plot.nis(ax2, data[f"nis_{name}"], dof=model.dim, times=scans.times, color=f"C{i}", label=name)
+        if "count_detections" in data:
+            ax2.step(scans.times, data["count_detections"], where="mid", label="detections", gid="detections")
+            ax2.set(xlabel="time (s)", ylabel=str(data["right_labels"][1]))
+    ax2.set_title(str(data["right_labels"][2]))
     ax1.legend(fontsize=7)
     ax2.legend(fontsize=7)
+
+
+def _draw_multi(fig, data: Mapping[str, np.ndarray], scenario: Scenario, model, scans: Scans, truth: MultiTruth,
+                logs: dict, per_scan: Mapping[str, np.ndarray]) -> None:
+    """``tracks.png`` of a multi-object scenario, through :mod:`workbench.plot`: run 0's clutter and target
+    detections, every object's true path (start marked), each tracker's confirmed tracks, one line per track
+    identity (a colour and a line style per tracker/filter); beside it GOSPA per scan, mean over runs."""
+    from . import plot
+
+    ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    frame = FRAMES.get(scenario.frame)
+    if frame is not None and frame.position is not None:
+        plot.detections(ax1, scans, model=model, frame=frame)
+    plot.truth(ax1, truth, motion=scenario.truth_motion or scenario.motion)
+    styles = plot.LINESTYLES
+    for i, (label, log) in enumerate(logs.items()):
+        plot.tracks(ax1, log, motion=scenario.motion, color=f"C{i}", linestyle=styles[i % len(styles)],
+                    label=label, linewidth=_width(i))
+        plot.gospa(ax2, per_scan[label], times=scans.times, cutoff=scenario.cutoff, order=scenario.order,
+                   unit=_position_unit(scenario.motion), color=f"C{i}", linestyle=styles[i % len(styles)],
+                   label=label, linewidth=_width(i))
+    ax1.set_title(str(data["left_labels"][2]))
+    ax2.set_title(str(data["right_labels"][2]))
+    ax1.legend(fontsize=7)
+    if logs:
+        ax2.legend(fontsize=7)
+
+
+def _width(i: int) -> float:
+    """The line width of the ``i``-th filter or tracker drawn on one Axes: the first widest, so that a later one
+    drawn over it (dashed) leaves it visible where the two agree."""
+    return max(2.4 - 0.6 * i, 0.9)
+
+
+def _position_unit(motion: MotionModel) -> str | None:
+    """The declared unit of the motion model's first (position) component, or ``None``."""
+    units = tuple(motion.state_units)
+    return units[0] if len(units) == motion.dim and motion.position_dims else None
+
+
+def _recorded_line(scans: Scans, estimates: dict, logs: dict, model) -> str:
+    """The console summary of a recorded-data run: scans, detections, tracks (and each filter's updates and mean
+    NIS against the chi-square band of a mean of that many updates)."""
+    from .plot import chi2_band
+
+    parts = []
+    for name, est in estimates.items():
+        text = f"{name}: 1 track"
+        if "updated" in est.records:
+            updated = np.asarray(est.records["updated"], dtype=bool)[:, 1:]
+            text += f", updated on {int(updated.sum())} and coasted on {int((~updated).sum())} scans"
+        if "nis" in est.records:
+            nis = np.asarray(est.records["nis"], dtype=float)
+            nis = nis[np.isfinite(nis)]
+            if nis.size:
+                lo, hi = (float(v) for v in chi2_band(model.dim, nis.size))
+                verdict = "inside" if lo <= nis.mean() <= hi else "OUTSIDE"
+                text += (f", mean NIS {nis.mean():.3g} ({verdict} the 95 % band [{lo:.3g}, {hi:.3g}] of a mean "
+                         f"of {nis.size} updates, {model.dim} dof)")
+        parts.append(text)
+    for name, log in logs.items():
+        from .tracking import CONFIRMED
+
+        confirmed = np.unique(log.track_id[log.status == CONFIRMED]).size
+        parts.append(f"{name}: {confirmed} confirmed track{'s' * (confirmed != 1)}")
+    runs = f" x {scans.batch} runs" if scans.batch != 1 else ""
+    return (f"recorded data: {scans.steps} scans{runs}, {int(scans.valid.sum())} detections; tracks: "
+            + ("; ".join(parts) or "none"))
 
 
 def _file_label(label: str) -> str:
@@ -805,6 +1143,8 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another --out")
+    if scenario.multi:
+        return _run_multi(scenario, host, out, seed)
     planned = set(OUTPUT_NAMES) | {f"tracks-{_file_label(c.label)}.csv" for c in scenario.filters}
     earlier = _check_out(out, planned)  # before any work: a folder that would mix results is refused at once
     truth, scans = simulate(scenario, host, seed)
@@ -852,6 +1192,8 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
             rmse[fname] = float(np.sqrt(err.mean(axis=0)).mean())
     # claim every file this run may write or remove before writing any, so an interrupted run leaves a manifest
     # that still names them all
+    if scenario.detections is not None:
+        lines.append(_recorded_line(scans, estimates, logs, model))
     _write_manifest(out, scenario, earlier | planned)
     save_arrays(out / "results.npz", arrays)
     from .tracks_io import write_track, write_track_log
@@ -871,11 +1213,111 @@ def run_scenario(scenario: Scenario, host: PluginHost, out: Path, seed: int | No
     plot = _plot_data(scenario, model, scans, truth, estimates, logs)
     save_arrays(out / "tracks.npz", plot)
     fig = Figure(figsize=(10, 4.5), layout="constrained")
-    _draw(plot, fig)
+    _draw_single(fig, plot, scenario, model, scans, truth, estimates, logs)
     fig.savefig(out / "tracks.png", dpi=110)
     written = set(OUTPUT_NAMES) | {f"tracks-{_file_label(f)}.csv" for f in (*estimates, *logs)}
     # an earlier run's files (and a failed filter's old track file) that this run did not write again
     for name in sorted((earlier | planned) - written):
         (out / name).unlink(missing_ok=True)
     _write_manifest(out, scenario, written)
-    return ScenarioResult(out, scenario.name, rmse, diag, tuple(lines), failed, plot)
+    return ScenarioResult(out, scenario.name, rmse, diag, tuple(lines), failed, plot, figure=fig)
+
+
+def _tracker_label(tracker: Component, filt: Component) -> str:
+    return f"{tracker.label}/{filt.label}"
+
+
+def _run_multi(scenario: Scenario, host: PluginHost, out: Path, seed: int) -> ScenarioResult:
+    """Several objects per run: every tracker of ``[trackers]`` with every filter of ``[filters]`` on the same truth
+    and detections, each scored by GOSPA and OSPA (``[trackers] cutoff``, ``order``) per run and scan against the
+    live objects; track files with covariances (where the tracker keeps them), ``results.npz`` (the truth, its
+    mask, each log, per-scan ``gospa_<label>`` and ``ospa_<label>`` arrays ``(B, T)``), ``summary.json`` and the
+    plot.  A tracker that raises, or returns NaN or inf, is named in the result and the others still run."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    from .metrics.ospa import gospa, track_gospa, track_ospa
+    from .report.cache import save_arrays
+    from .tracking import CONFIRMED
+    from .tracks_io import write_track_log
+
+    pairs = [(t, f) for t in scenario.trackers for f in scenario.filters]
+    planned = set(OUTPUT_NAMES) | {f"tracks-{_file_label(_tracker_label(t, f))}.csv" for t, f in pairs}
+    earlier = _check_out(out, planned)
+    truth, scans = simulate(scenario, host, seed)
+    sensor = host.sensor(scenario.sensor.plugin)
+    model = sensor.measurement_model(**scenario.sensor.params)
+    dims = scenario.motion.position_dims
+    c, p = scenario.cutoff, scenario.order
+    out.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, np.ndarray] = {"times": scans.times, "z": scans.z, "valid": scans.valid,
+                                     "origin": scans.origin, "truth": truth.states, "alive": truth.alive}
+    empty = np.zeros(truth.alive.shape[:2] + (0, dims))
+    no_tracks = gospa(empty, truth.states[..., :dims], c, p, y_valid=truth.alive).distance
+    means_g, means_o, lines, failed, logs = {}, {}, [], {}, {}
+    for tcomp, fcomp in pairs:
+        label = _tracker_label(tcomp, fcomp)
+        try:
+            tracker = host.tracker(tcomp.plugin).configure(name=tcomp.label, **tcomp.params)
+            log = tracker.run(scans, host.filter(fcomp.label), scenario.motion, model, seed=seed,
+                              key=("tracker", label))
+            if not np.all(np.isfinite(log.mean)) or (log.cov is not None and not np.all(np.isfinite(log.cov))):
+                raise FloatingPointError("its track estimates hold NaN or inf")
+            g = track_gospa(log, truth.states, c, p, truth_valid=truth.alive, dims=dims)
+            o = track_ospa(log, truth.states, c, p, truth_valid=truth.alive, dims=dims)
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:  # noqa: BLE001 - one tracker failing must not lose the others' results
+            failed[label] = f"{type(exc).__name__}: {exc}"
+            continue
+        logs[label] = log
+        arrays.update(log.to_arrays(prefix=f"{label}_"))
+        arrays[f"gospa_{label}"] = g.distance
+        arrays[f"ospa_{label}"] = o.distance
+        means_g[label], means_o[label] = float(g.distance.mean()), float(o.distance.mean())
+        lines.append(f"{label:12s} missed {float(g.n_missed.mean()):.3g}, false {float(g.n_false.mean()):.3g} "
+                     f"objects per scan; confirmed tracks per scan (run 0): {log.confirmed_counts()[0].tolist()}")
+    _write_manifest(out, scenario, earlier | planned)
+    save_arrays(out / "results.npz", arrays)
+    for label, log in logs.items():
+        write_track_log(out / f"tracks-{_file_label(label)}.csv", log, scans.times, motion=scenario.motion,
+                        notes=(f"scenario {scenario.name}, tracker/filter {label}, seed {seed}",))
+    (out / "summary.json").write_text(json.dumps({
+        "scenario": scenario.name, "seed": seed, "runs": scans.batch, "steps": scans.steps,
+        "objects": list(truth.labels), "live_objects_per_scan_run0": truth.counts()[0].tolist(),
+        "trackers": {t.label: {"plugin": t.plugin, "params": dict(t.params)} for t in scenario.trackers},
+        "filters": {f.label: {"plugin": f.plugin, "params": dict(f.params)} for f in scenario.filters},
+        "gospa": {"cutoff_m": c, "order": p, "alpha": 2, "mean": means_g, "no_tracks": float(no_tracks.mean()),
+                  "per_scan_mean": {k: arrays[f"gospa_{k}"].mean(axis=0).tolist() for k in logs}},
+        "ospa": {"cutoff_m": c, "order": p, "mean": means_o}, "failed": failed, "notes": lines,
+        "frame": scenario.frame}, indent=2, default=str), encoding="utf-8")
+    frame = FRAMES.get(scenario.frame)
+    shown = scans.valid[0]
+    plot: dict[str, np.ndarray] = {"times": scans.times}
+    if frame is not None and frame.position is not None:
+        plot["detections_xy"] = frame.to_position(scans.z[0][shown], model.sensor_position
+                                                  if model.frame == frame.name else None)[:, :2]
+    else:
+        plot["detections_xy"] = np.zeros((0, 2))
+    # every object of run 0, one after the other, a NaN row between them (a break in the line)
+    paths = [np.vstack([truth.states[0, :, k, :2], np.full((1, 2), np.nan)]) for k in range(truth.objects)
+             if truth.alive[0, :, k].any()]
+    plot["truth_xy"] = np.vstack(paths) if paths else np.zeros((0, 2))
+    plot["left_labels"] = np.array(["x (m)", "y (m)", "run 0: objects, detections, confirmed tracks"])
+    for label, log in logs.items():
+        conf = (log.status == CONFIRMED) & (log.run == 0)
+        plot[f"confirmed_{label}"] = log.mean[conf, :2]
+        plot[f"gospa_{label}"] = arrays[f"gospa_{label}"].mean(axis=0)
+    plot["right_labels"] = np.array(["time (s)", f"GOSPA (m; c = {c:g} m, p = {p:g})",
+                                     f"GOSPA per scan, mean over {scans.batch} runs"])
+    save_arrays(out / "tracks.npz", plot)
+    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    _draw_multi(fig, plot, scenario, model, scans, truth, logs, {k: arrays[f"gospa_{k}"] for k in logs})
+    fig.savefig(out / "tracks.png", dpi=110)
+    written = set(OUTPUT_NAMES) | {f"tracks-{_file_label(label)}.csv" for label in logs}
+    for name in sorted((earlier | planned) - written):
+        (out / name).unlink(missing_ok=True)
+    _write_manifest(out, scenario, written)
+    return ScenarioResult(out, scenario.name, {}, {}, tuple(lines), failed, plot, means_g, means_o, figure=fig)
