@@ -143,9 +143,11 @@ def load_pcl_candidates(path, frequency_hz: float | None = None) -> Scans:
 
     Parameters
     ----------
-    path : the CSV file.
-    frequency_hz : carrier frequency used to convert between Doppler and range-rate; default: the file's
-        ``#! carrier_hz`` line, else 701 MHz.  Given both, they must agree.
+    path : str or Path
+        The CSV file.
+    frequency_hz : float or None
+        Carrier frequency used to convert between Doppler and range-rate; default: the file's ``#! carrier_hz``
+        line, else 701 MHz.  Given both, they must agree.
 
     Shapes
     ------

@@ -166,10 +166,14 @@ def load_sonar_recording(path, dt: float = 1.0, sensor: Sequence[float] = (0.0, 
 
     Parameters
     ----------
-    path : file name.
-    dt : time between pings for a ``ping`` column (scan times ``ping * dt``).
-    sensor : sensor position for ``range, bearing`` rows of a file without own-ship columns.
-    pings : number of pings to return (``ping`` files only); default ``max(ping) + 1``.
+    path : str or Path
+        The file name.
+    dt : float
+        Time between pings for a ``ping`` column (scan times ``ping * dt``).
+    sensor : sequence of float
+        Sensor position for ``range, bearing`` rows of a file without own-ship columns.
+    pings : int or None
+        Number of pings to return (``ping`` files only); default ``max(ping) + 1``.
 
     Shapes
     ------
