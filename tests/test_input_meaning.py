@@ -82,8 +82,9 @@ def _builtin_components():
                 yield hook, name, spec
 
 
-#: Dimensions whose values may be negative (positions, levels in dB, gains): their range is the dimension's limit.
-SIGNED = {"length", "decibel", "angle"}
+#: Dimensions whose values may be negative (positions, levels in dB, gains, a state's own components such as a
+#: birth mean): their range is the dimension's limit.
+SIGNED = {"length", "decibel", "angle", "state"}
 
 
 def test_every_builtin_parameter_declares_a_dimension_and_a_range():

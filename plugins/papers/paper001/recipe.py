@@ -47,6 +47,7 @@ from workbench.metrics import track_gospa
 from workbench.metrics import (TrackCounts, continuity, false_track_sums, pooled_rmse, removal_rate_pooled_per_ping,
                                removal_ratio, track_counts, track_truth_match)
 from workbench.models import MeasurementModel, constant_velocity
+from workbench.params import parse_reference
 from workbench.plugins import PluginHost
 from workbench.report.engine import component_errors, component_failure
 from workbench.recorded.sonar import load_sonar_csv, write_sonar_csv
@@ -139,6 +140,31 @@ PROTOCOL_RUNS = 20  # the paper's own protocol: 20 pings, averaged as a 20-run M
 SURROGATE_SEED = 20240201
 SURROGATE_FILE = Path(__file__).resolve().parents[3] / "examples" / "data" / "sonar_sea_trial_surrogate.csv"
 SURROGATE_LABEL = "SYNTHETIC SURROGATE - not sea-trial data"
+
+#: The multi-target trackers paper 001 compares (issue 25), ``RecipeSpec.default_trackers``; ``--trackers`` adds,
+#: removes or replaces them.  ``"mofn"`` as declared (no values) stands for the paper's own M-of-N rows (the judged
+#: ``paper`` arm, and beside it the ``stated`` arm), never rerun: M-of-N is the paper's method.  Every other reference
+#: (``gnn``, ``jipda``, ``gm-phd``, a configured ``mofn(...)``, an installed third-party tracker) is an EXTENSION row,
+#: run by the ``trackers/<block>`` tasks on the same detections as the paper rows (common random numbers), before and
+#: after the Hough remover.
+DEFAULT_TRACKERS = ("mofn", "gnn", "jipda", "gm-phd")
+PAPER_TRACKER = "mofn"
+#: The extension rows' filter and measurement model: the linear Kalman filter on the Cartesian detections with the
+#: sensor's stated accuracy (R = 2.0^2 I, the ``stated`` arm's R).  CMKF-L takes range-bearing only, and the JIPDA
+#: and GM-PHD take detections in the measurement model's own frame (GM-PHD's adaptive birth needs a linear model).
+EXT_FILTER = "kf"
+#: The built-in trackers' settings on this scenario (a reference's own values override them; a third-party tracker
+#: runs with its own defaults and the values its reference gives): M-of-N and GNN take the brief's track management
+#: (TRACKER; GNN's gate_probability default 0.99 is the same chi2_2 gate 9.21), the JIPDA, JPDA and GM-PHD the
+#: sensor's P_D = 0.8; the clutter density is left to each tracker's own per-scan estimate (it changes by an order
+#: of magnitude with the remover), every other value is the tracker's declared default.
+TRACKER_SETTINGS = {
+    "mofn": dict(TRACKER),
+    "gnn": {k: v for k, v in TRACKER.items() if k != "gate"},
+    "jipda": {"p_detection": SONAR["pd"]},
+    "jpda": {"p_detection": SONAR["pd"]},
+    "gm-phd": {"p_detection": SONAR["pd"]},
+}
 
 SIZES = {"quick": {"runs": 10, "seeds": 1, "tuning_runs": 10, "variant_seeds": 1},
          "full": {"runs": 50, "seeds": 4, "tuning_runs": 100, "variant_seeds": 2}}
@@ -235,6 +261,10 @@ docs/paper001.md):
   confirmed true track; criterion 3 compares before/after on the (run, ping) pairs held in both.
 - Every criterion: n runs, a 95 % interval (bootstrap over runs, or exact binomial) and a three-way verdict;
   the paper's 20-run protocol is repeated on disjoint batches of the reported runs (replications).
+- Trackers compared (EXTENSION, not in the paper): GNN, JIPDA and GM-PHD (--trackers adds or removes any
+  installed tracker) beside the paper's M-of-N rows, on the same runs before and after removal, each with the
+  Kalman filter and R from the sensor's stated accuracy, P_D 0.8 where the tracker takes one, clutter density
+  estimated per scan; scored by GOSPA, false tracks per ping and the share of pings the target is held.
 - Sea trial: SYNTHETIC SURROGATE only (clutter x 2 plus 5 persistent sites re-detected w.p. 0.7), shipped as
   examples/data/sonar_sea_trial_surrogate.csv (one run, Figs 7-8, 11-12) and drawn as Monte Carlo runs.
 """
@@ -602,6 +632,54 @@ def _timing_task(ctx: TaskContext) -> dict:
     return out
 
 
+def extension_tracker(host: PluginHost, reference: str):
+    """The installed tracker of ``reference`` (``"gnn"``, ``"gm-phd(prune=1e-4)"``) configured for this scenario:
+    :data:`TRACKER_SETTINGS` of its base name, then the reference's own values (checked against its declarations,
+    refused by name), named by the reference."""
+    base, values = parse_reference(reference, f"paper 001: tracker {reference!r}")
+    return host.tracker(base).configure(name=reference, **{**TRACKER_SETTINGS.get(base, {}), **values})
+
+
+def _tracker_prefix(reference: str, phase: str) -> str:
+    return f"tracker:{reference}/{phase}/"
+
+
+def _trackers_task(ctx: TaskContext) -> dict:
+    """One seed block of the extension trackers (every reference of ``p["trackers"]`` but the paper's own
+    ``"mofn"``), each before and after the Hough remover, on the detections of the block's paper rows (the same
+    seed and stream: common random numbers): GOSPA and its terms, the paper's counts per run and ping, and the
+    confirmed tracks' log (``.../log/``, for recomputing).  A tracker that raises loses its own rows only (named
+    in the report: ``error/tracker:<reference>``)."""
+    p, host = ctx.params, ctx.host
+    seed = ctx.seed + int(p["block"])
+    refs = [str(t) for t in p["trackers"]]
+    out = {"order": np.array(refs, dtype=str), "first_output_ping": np.array(_warm(p["hough"]))}
+    extensions = [t for t in refs if t != PAPER_TRACKER]
+    if not extensions:
+        return out
+    scans = simulate_scans(host, seed, "sim", int(p["runs"]))
+    after = host.clutter_remover(REMOVER).remove(scans, **p["hough"])
+    truth_pos = target_truth(scans.batch).states[..., :2]
+    model = host.sensor(SENSOR).measurement_model(**p["sonar"], **p["model"])
+    out["runs"] = np.array(scans.batch)
+    for ref in extensions:
+        rows = {}
+        try:
+            spec = extension_tracker(host, ref)
+            filt = host.filter(p["filter"])
+            for phase, data in (("before", scans), ("after", after)):
+                log = spec.run(data, filt, motion_model(), model, seed=seed, key=("paper001", "tracker", ref, phase))
+                prefix = _tracker_prefix(ref, phase)
+                rows.update(_counts_arrays(prefix, track_counts(log, truth_pos, TRUE_RADIUS, TRUE_FRACTION)))
+                rows.update(_gospa_arrays(prefix, log, truth_pos))
+                rows.update(log.select(log.status == CONFIRMED).to_arrays(prefix + "log/"))
+        except Exception as exc:  # noqa: BLE001 - isolated: reported by the report engine, the other rows kept
+            out.update(component_failure(f"tracker:{ref}", exc))
+            continue
+        out.update(rows)
+    return out
+
+
 def tasks(options: RecipeOptions) -> list[Task]:
     v = options.values
     runs, seeds = int(v["runs"]), int(v["seeds"])
@@ -612,6 +690,13 @@ def tasks(options: RecipeOptions) -> list[Task]:
     for block in range(seeds):
         out.append(Task(f"sim/{block}", {**common, "block": block, "hough_previous": HOUGH_PREVIOUS,
                                           "tracker_previous": TRACKER_PREVIOUS, "filters": list(filters)}, _sim_task))
+    # the trackers compared (options.trackers: DEFAULT_TRACKERS with --trackers applied; empty: none compared)
+    if options.trackers:
+        for block in range(seeds):
+            out.append(Task(f"trackers/{block}", {"runs": runs, "block": block, "hough": HOUGH, "sonar": SONAR,
+                                                   "clutter": SIM_CLUTTER, "model": MATCHED, "filter": EXT_FILTER,
+                                                   "trackers": list(options.trackers),
+                                                   "settings": TRACKER_SETTINGS}, _trackers_task))
     for block in range(min(int(v["variant_seeds"]), seeds)):
         out.append(Task(f"variants/{block}", {**common, "block": block, "variants": VARIANTS}, _variants_task))
     for unknown in UNKNOWNS:
@@ -1162,6 +1247,156 @@ FIGURES = FIGURES + (
 )
 
 
+# -- the trackers compared (issue 25): the paper's M-of-N rows and the extension rows ------------------------------
+
+
+def _tracker_blocks(results: Mapping) -> list[str]:
+    return sorted((k for k in results if k.startswith("trackers/")), key=lambda k: int(k.split("/")[1]))
+
+
+def tracker_order(results: Mapping) -> list[str]:
+    """The trackers compared, in ``RecipeOptions.trackers`` order (empty when the report compares none)."""
+    keys = _tracker_blocks(results)
+    return [str(t) for t in np.atleast_1d(results[keys[0]]["order"])] if keys else []
+
+
+def comparison_rows(results: Mapping) -> list[tuple[str, str, str, tuple[str, str]]]:
+    """``(reference, label, kind, source)`` of every row of the tracker comparison: the paper's ``"mofn"`` gives
+    two rows read from the simulation blocks' arms (``("arm", "paper")``: the judged rows; ``("arm", "stated")``:
+    the same M-of-N with the extension rows' R), any other reference one EXTENSION row from the ``trackers/``
+    blocks (``("tracker", reference)``)."""
+    rows = []
+    for ref in tracker_order(results):
+        if ref == PAPER_TRACKER:
+            rows.append((ref, "M-of-N, " + ARM_LABELS["paper"], "paper's method (judged rows)", ("arm", "paper")))
+            rows.append((ref, "M-of-N, " + ARM_LABELS["stated"] + ": the extension rows' R", "paper's method, "
+                         "principled R (not judged)", ("arm", "stated")))
+        else:
+            rows.append((ref, f"{ref}, Kalman filter with R from the sensor's stated accuracy (sigma 2.0)",
+                         "EXTENSION (not in the paper)", ("tracker", ref)))
+    return rows
+
+
+def comparison_series(results: Mapping, source: tuple[str, str], phase: str) -> tuple[TrackCounts, np.ndarray] | None:
+    """A comparison row's counts and GOSPA ``(B, T)`` at ``phase``, pooled over the seed blocks (``None`` where the
+    row failed in a block or is absent)."""
+    kind, name = source
+    keys, prefix = ((_blocks(results), f"{name}/{phase}/") if kind == "arm"
+                    else (_tracker_blocks(results), _tracker_prefix(name, phase)))
+    if not keys or any(f"{prefix}gospa" not in results[k] or f"{prefix}confirmed" not in results[k] for k in keys):
+        return None
+    parts = [TrackCounts.from_arrays(results[k], prefix) for k in keys]
+    counts = TrackCounts(*(np.concatenate([getattr(c, f) for c in parts]) for f in FIELDS))
+    return counts, np.concatenate([np.asarray(results[k][f"{prefix}gospa"], dtype=float) for k in keys])
+
+
+def _tracker_post(results: Mapping, T: int) -> np.ndarray:
+    """The pings after the Hough warm-up (the paper rows' and the extension rows' warm-up are the same)."""
+    keys = [k for k in results if k.startswith("sim/")] or _tracker_blocks(results)
+    return np.arange(T) >= int(results[keys[0]]["first_output_ping"])
+
+
+def _failed_trackers(results: Mapping) -> dict[str, str]:
+    failed: dict[str, str] = {}
+    for key in _tracker_blocks(results):
+        for what, message in component_errors(results[key]):
+            if what.startswith("tracker:"):
+                failed.setdefault(what[len("tracker:"):], f"{key}: {message}")
+    return failed
+
+
+def _mean_text(per_run: np.ndarray, scale: float = 1.0, digits: int = 2, unit: str = "") -> str:
+    """The mean over runs of per-run values with its 95 % bootstrap interval over runs."""
+    if per_run.size == 0:
+        return "n/a"
+    lo, hi = bootstrap_interval(per_run) if per_run.size > 1 else (np.nan, np.nan)
+    mean = f"{scale * per_run.mean():.{digits}f}{unit}"
+    return mean if not np.isfinite(lo) else f"{mean} [{scale * lo:.{digits}f}, {scale * hi:.{digits}f}]"
+
+
+def tracker_stats(counts: TrackCounts, gospa: np.ndarray, post: np.ndarray) -> dict:
+    """Per run over the pings in ``post``: mean GOSPA, false tracks per ping and the share of pings at which a
+    confirmed true track holds the target; and each run's continuity (criterion 2's statistic)."""
+    return {"gospa": gospa[:, post].mean(axis=1), "false": counts.false[:, post].mean(axis=1),
+            "held": counts.held[:, post].mean(axis=1), "continuity": continuity(counts.held)}
+
+
+def _trackers_table(results) -> Table:
+    """Every tracker compared, before and after removal on the same runs: GOSPA, false tracks per ping, the share of
+    pings the target is held (each a mean over runs of per-run means over the pings after the warm-up, 95 %
+    bootstrap interval over runs), runs holding the target >= 80 % (exact binomial interval) and the removal rate
+    (ratio of sums, paired bootstrap)."""
+    rows = []
+    for ref, label, kind, source in comparison_rows(results):
+        got = {phase: comparison_series(results, source, phase) for phase in ("before", "after")}
+        if got["before"] is None or got["after"] is None:
+            continue
+        post = _tracker_post(results, got["before"][1].shape[1])
+        for phase in ("before", "after"):
+            counts, gospa = got[phase]
+            st = tracker_stats(counts, gospa, post)
+            rate = ("-" if phase == "before" else
+                    _rate_text(false_track_sums(got["before"][0].false, counts.false, post)))
+            rows.append((ref, label, kind, phase, _mean_text(st["gospa"]), _mean_text(st["false"]),
+                         _mean_text(st["held"], 100.0, 1, " %"),
+                         _share_text(int(np.sum(st["continuity"] >= TRUE_FRACTION)), st["continuity"].size), rate,
+                         st["gospa"].size))
+    rows += [(ref, f"FAILED, no rows: {msg}", "EXTENSION (not in the paper)", *([""] * 7))
+             for ref, msg in sorted(_failed_trackers(results).items())]
+    return Table(("tracker", "row", "kind", "removal", "GOSPA (c = 10, p = 2) per ping [95 % CI]",
+                  "false tracks/ping [95 % CI]", "share of pings the target is held [95 % CI]",
+                  "runs holding the target >= 80 % of the pings after initiation [CI]",
+                  "removal rate, ratio of sums [95 % CI]", "runs"), tuple(rows))
+
+
+def _trackers_gospa_data(results):
+    """GOSPA per ping (mean over runs) of every comparison row, before and after removal: ``rows`` (the row
+    labels: the reference, ``mofn`` twice as ``mofn (paper rows)`` and ``mofn (stated R)``), ``gospa_before`` and
+    ``gospa_after`` ``(rows, T)``."""
+    names, before, after = [], [], []
+    T = None
+    for ref, _, _, source in comparison_rows(results):
+        b, a = comparison_series(results, source, "before"), comparison_series(results, source, "after")
+        if b is None or a is None:
+            continue
+        names.append(ref if source[0] == "tracker" else f"{ref} ({'paper rows' if source[1] == 'paper' else 'stated R'})")
+        before.append(b[1].mean(axis=0))
+        after.append(a[1].mean(axis=0))
+        T = b[1].shape[1]
+    if T is None:
+        T = np.asarray(results[_blocks(results)[0]]["paper/before/gospa"]).shape[1] if any(
+            k.startswith("sim/") for k in results) else PINGS
+    keys = [k for k in results if k.startswith("sim/")] or _tracker_blocks(results)
+    first = int(results[keys[0]]["first_output_ping"]) if keys else _warm(HOUGH)
+    return {"rows": np.array(names, dtype=str), "ping": np.arange(T),
+            "gospa_before": np.array(before, dtype=float).reshape(len(names), T),
+            "gospa_after": np.array(after, dtype=float).reshape(len(names), T),
+            "first_output_ping": np.array(first), "c": np.array(GOSPA_C)}
+
+
+def _trackers_gospa_draw(data, fig):
+    axes = fig.subplots(1, 2, sharey=True)
+    for ax, phase in zip(axes, ("before", "after")):
+        for i, name in enumerate(data["rows"]):
+            paper = str(name).startswith(PAPER_TRACKER + " (")
+            ax.plot(data["ping"], data[f"gospa_{phase}"][i], "o-" if paper else ".--", color=f"C{i % 10}", lw=1.2 if
+                    paper else 0.9, label=str(name) + ("" if paper else " (extension)"))
+        ax.axvline(float(data["first_output_ping"]) - 0.5, color="0.6", lw=0.8)
+        ax.axhline(float(data["c"]) / np.sqrt(2.0), color="0.3", ls=":", lw=0.8, label="one missed target (c / sqrt 2)")
+        ax.set(xlabel="ping", title=f"{phase} Hough removal")
+    axes[0].set_ylabel("GOSPA (c = 10, p = 2), position units")
+    axes[0].legend(fontsize=7)
+
+
+FIGURES = FIGURES + (
+    FigureSpec("gospa-trackers", "GOSPA of the confirmed tracks per ping (mean over runs) of every tracker compared, "
+               "before (left) and after (right) Hough removal on the same runs: the paper's M-of-N rows (solid) and "
+               "the EXTENSION rows (dashed: trackers the paper does not have, each with the Kalman filter and R from "
+               "the sensor's stated accuracy); the grey line marks the end of the warm-up.",
+               _trackers_gospa_data, _trackers_gospa_draw, size=(11.0, 4.5)),
+)
+
+
 def _seed_table(results) -> Table:
     """Criterion 2 (paper rows) seed block by seed block."""
     rows = []
@@ -1271,6 +1506,12 @@ TABLES = (
     TableSpec("timing", "Per-ping time of the remover and the tracker, paper scenario, warmed up.", _timing_table),
     TableSpec("gospa", "GOSPA (alpha 2, c = 10, p = 2) of the confirmed tracks beside the paper's counts, every row "
               "before and after removal, over the pings after the Hough warm-up.", _gospa_table),
+    TableSpec("trackers", "The trackers compared (--trackers; default M-of-N, GNN, JIPDA, GM-PHD), before and after "
+              "Hough removal on the same runs: the paper's M-of-N rows and the EXTENSION rows (not in the paper: the "
+              "Kalman filter with R from the sensor's stated accuracy, each tracker's scenario settings in "
+              "docs/paper001.md). GOSPA, false tracks and the share of pings held are per-run means over pings 6-20 "
+              "with 95 % bootstrap intervals over runs; runs holding >= 80 % with exact binomial intervals.",
+              _trackers_table),
 )
 
 
@@ -1473,6 +1714,7 @@ RECIPE = RecipeSpec(
     tables=TABLES,
     criteria=criteria,
     default_filters=(PAPER_FILTER,),
+    default_trackers=DEFAULT_TRACKERS,
     published=PUBLISHED,
     notes=NOTES,
     unknowns=UNKNOWNS,

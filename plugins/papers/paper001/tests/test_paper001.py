@@ -76,7 +76,7 @@ def report():
 def test_xy_figures_show_the_simulated_and_recorded_detections(report):
     recipe, results = report
     figs = {f.id: f.data(results) for f in recipe.figures}
-    assert set(figs) == {f"fig{i}" for i in range(3, 13)} | {"gospa-per-ping"}
+    assert set(figs) == {f"fig{i}" for i in range(3, 13)} | {"gospa-per-ping", "gospa-trackers"}
     # Figs 5-6: exactly the detections of run 0 of the first seed block, drawn again here
     scans = paper001.simulate_scans(HOST, 1, "sim", 1)
     v = scans.valid[0]
