@@ -20,6 +20,9 @@
 - the state components, named and with units in the ``state`` line; then, when the ``covariance`` line says
   ``upper triangle``, the covariance's upper triangle row by row, ``cov_a_b = Cov(a, b)`` (unit: unit of ``a``
   times unit of ``b``); ``covariance: none`` and no such columns when the writer had none.
+- ``existence``, last, only where the header has the line ``# existence: column``: the track's probability of
+  existence (JIPDA) or its Gaussian component's weight (GM-PHD, which may exceed 1), a finite number >= 0.
+  Without the line (or with ``# existence: none``) there is no such column.
 
 Numbers are written with Python's ``repr`` (the shortest text that reads back to the same double), so a file reads
 back exactly.  The file is written and read with the standard :mod:`csv` module; :func:`read_tracks` refuses a
@@ -97,6 +100,7 @@ class TrackFile:
     time : (R,) seconds
     mean : (R, n)
     cov : (R, n, n) or None
+    existence : (R,) or None, each track's probability of existence or PHD weight (finite, >= 0)
 
     ``names`` and ``units`` name the ``n`` state components; ``runs`` and ``steps`` are the extent of the scan
     series the tracks came from (a step may hold no track); ``notes`` are free comment lines.
@@ -116,6 +120,7 @@ class TrackFile:
     cov: np.ndarray | None = None
     notes: tuple[str, ...] = field(default=())
     version: int = VERSION
+    existence: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.names)
@@ -156,11 +161,19 @@ class TrackFile:
                 raise InputError(f"TrackFile.cov must have shape ({R}, {n}, {n}), got {cov.shape}")
             if not np.all(np.isfinite(cov)):
                 raise InputError("TrackFile: the covariances must be finite")
+        existence = None
+        if self.existence is not None:
+            existence = np.asarray(self.existence, dtype=float)
+            if existence.shape != (R,):
+                raise InputError(f"TrackFile.existence must have shape ({R},), one per row, got {existence.shape}")
+            if not np.all(np.isfinite(existence)) or np.any(existence < 0):
+                raise InputError("TrackFile: the existence values must be finite numbers >= 0")
         for key, arr in ints.items():
             object.__setattr__(self, key, arr)
         object.__setattr__(self, "time", time)
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "cov", cov)
+        object.__setattr__(self, "existence", existence)
         object.__setattr__(self, "names", tuple(self.names))
         object.__setattr__(self, "units", tuple(self.units))
         object.__setattr__(self, "notes", tuple(self.notes))
@@ -171,12 +184,15 @@ class TrackFile:
 
     def to_track_log(self) -> TrackLog:
         """The rows as a :class:`~workbench.tracking.TrackLog` (ordered by run, then step; ``updated`` becomes
-        ``hit``, which must be known on every row)."""
+        ``hit``, which must be known on every row), with the covariances and existence values where the file has
+        them."""
         if np.any(self.updated < 0):
             raise InputError("a TrackLog needs to know whether every track was updated; the file leaves it open")
         order = np.lexsort((self.step, self.run))
         return TrackLog(self.run[order], self.step[order], self.track[order], self.status[order].astype(np.int8),
-                        self.updated[order] == 1, self.mean[order], self.runs, self.steps)
+                        self.updated[order] == 1, self.mean[order], self.runs, self.steps,
+                        None if self.cov is None else self.cov[order],
+                        None if self.existence is None else self.existence[order])
 
     def single_target(self) -> tuple[np.ndarray, np.ndarray | None]:
         """One track per run at every step (a single-target filter's output): ``mean (B, T, n)`` and ``cov
@@ -240,9 +256,11 @@ def write_tracks(path, tracks: TrackFile) -> Path:
     header = ["# workbench track file", f"# format: {FORMAT} {tracks.version}",
               "# state: " + ", ".join(f"{a} [{u}]" for a, u in zip(tracks.names, tracks.units)),
               f"# covariance: {'none' if tracks.cov is None else 'upper triangle'}",
+              *([] if tracks.existence is None else ["# existence: column"]),
               f"# runs: {tracks.runs}", f"# steps: {tracks.steps}"]
     header += [f"# note: {line}" for note in tracks.notes for line in str(note).splitlines() or [""]]
     columns = list(LEADING) + list(tracks.names) + ([] if tracks.cov is None else _cov_names(tracks.names))
+    columns += [] if tracks.existence is None else ["existence"]
     if tracks.cov is not None:  # a file the reader would refuse is not written
         negative, not_psd = covariance_problems(tracks.cov)
         if negative.any() or not_psd.any():
@@ -262,6 +280,8 @@ def write_tracks(path, tracks: TrackFile) -> Path:
             row += [_float(v) for v in tracks.mean[r]]
             if tracks.cov is not None:
                 row += [_float(v) for v in tracks.cov[r][iu]]
+            if tracks.existence is not None:
+                row.append(_float(tracks.existence[r]))
             writer.writerow(row)
     return path
 
@@ -277,7 +297,7 @@ def _times(times, steps: int) -> np.ndarray:
 
 def write_track_log(path, log: TrackLog, times, *, motion: MotionModel | None = None,
                     names: Sequence[str] | None = None, units: Sequence[str] | None = None, cov=None,
-                    notes: Iterable[str] = ()) -> Path:
+                    existence=None, notes: Iterable[str] = ()) -> Path:
     """Write every track of a multi-target :class:`~workbench.tracking.TrackLog` (tentative and confirmed).
 
     Parameters
@@ -289,15 +309,22 @@ def write_track_log(path, log: TrackLog, times, *, motion: MotionModel | None = 
     motion : the tracker's motion model, for the names and units of the state (:func:`state_layout`)
     names, units : the state components' names and units, overriding the motion model's layout
     cov : array (R, n, n), optional
-        Each row's state covariance (a :class:`~workbench.tracking.TrackLog` carries none itself).
+        Each row's state covariance; by default the log's own (``TrackLog.cov``, where the tracker keeps it).
+    existence : array (R,), optional
+        Each row's probability of existence (or PHD weight); by default the log's own (``TrackLog.existence``,
+        where the tracker has one): the ``existence`` column.
     notes : free text lines for the header
     """
     n = log.mean.shape[1] if log.mean.ndim == 2 else 0
     names, units = state_layout(n, motion, names, units)
     times = _times(times, log.pings)
+    if cov is None:
+        cov = log.cov
+    if existence is None:
+        existence = log.existence
     return write_tracks(path, TrackFile(names, units, log.runs, log.pings, log.run, log.track_id, log.ping,
                                         times[log.ping], log.status, np.asarray(log.hit, dtype=np.int64), log.mean,
-                                        cov, tuple(notes)))
+                                        cov, tuple(notes), existence=existence))
 
 
 def write_track(path, track: Track, times, *, motion: MotionModel | None = None, names: Sequence[str] | None = None,
@@ -342,7 +369,7 @@ def _header_block(path: Path, lines: list[str]) -> tuple[dict[str, tuple[int, st
         key = key.strip().lower()
         if sep and key == "note":
             notes.append(value[1:] if value.startswith(" ") else value)
-        elif sep and key in ("format", "state", "covariance", "runs", "steps"):
+        elif sep and key in ("format", "state", "covariance", "existence", "runs", "steps"):
             if key in keys:
                 raise InputError(f"{path} line {i + 1}: the header gives '{key}' twice")
             keys[key] = (i + 1, value.strip())
@@ -366,11 +393,12 @@ def read_tracks(path) -> TrackFile:
     """Read a track file written by :func:`write_tracks` (or by hand, in the documented format).
 
     The header block must give the ``format`` (``workbench-tracks 1``), the ``state`` components with their
-    units, the ``covariance`` (``upper triangle`` or ``none``), ``runs`` and ``steps``; the column header must be
-    exactly the columns these imply.  Any other problem (a wrong field count, a value that is not a number, a
-    non-finite number, an unknown status, a run or step out of range, a track listed twice at one step, one step
-    with two times, times that do not increase with the step, a negative variance or a covariance that is not
-    positive semi-definite) raises :class:`~workbench.types.InputError` naming the file and the line (and the
+    units, the ``covariance`` (``upper triangle`` or ``none``), ``runs`` and ``steps``, and may give ``existence``
+    (``column`` or ``none``; none without the line); the column header must be exactly the columns these imply.
+    Any other problem (a wrong field count, a value that is not a number, a non-finite number, an unknown status,
+    a run or step out of range, a track listed twice at one step, one step with two times, times that do not
+    increase with the step, a negative variance or existence or a covariance that is not positive semi-definite)
+    raises :class:`~workbench.types.InputError` naming the file and the line (and the
     column where one field is at fault).
     """
     path = Path(path)
@@ -399,9 +427,14 @@ def read_tracks(path) -> TrackFile:
         where = f"line {keys['covariance'][0]}" if "covariance" in keys else "the header"
         raise InputError(f"{path} {where}: expected '# covariance: upper triangle' or '# covariance: none'")
     with_cov = keys["covariance"][1] == "upper triangle"
+    if "existence" in keys and keys["existence"][1] not in ("column", "none"):
+        raise InputError(f"{path} line {keys['existence'][0]}: expected '# existence: column' or '# existence: none', "
+                         f"got {keys['existence'][1]!r}")
+    with_existence = "existence" in keys and keys["existence"][1] == "column"
     runs, steps = _count(path, keys, "runs"), _count(path, keys, "steps")
     n = len(names)
     expected = list(LEADING) + names + (_cov_names(names) if with_cov else [])
+    expected += ["existence"] if with_existence else []
     reader = csv.reader(lines[head:])
     columns = [c.strip() for c in next(reader)]
     if columns != expected:
@@ -412,7 +445,8 @@ def read_tracks(path) -> TrackFile:
         raise InputError(f"{path} line {head + 1}: the column header does not match the state line ({detail}); "
                          f"expected {','.join(expected)}")
     iu = np.triu_indices(n)
-    rows: dict[str, list] = {k: [] for k in ("run", "track", "step", "time", "status", "updated", "mean", "cov")}
+    rows: dict[str, list] = {k: [] for k in ("run", "track", "step", "time", "status", "updated", "mean", "cov",
+                                             "existence")}
     seen: dict[tuple[int, int, int], int] = {}
     step_time: dict[int, tuple[float, int]] = {}  # step -> (its time, the first line that gave it)
     lines_of: list[int] = []
@@ -465,6 +499,12 @@ def read_tracks(path) -> TrackFile:
                     raise InputError(f"{where(col)}: {float(c[i, i])!r} is the variance of {names[i]} of track "
                                      f"{track} (run {run}, step {step}) and must be >= 0")
             rows["cov"].append(c)
+        if with_existence:
+            e = finite_number(fields[-1], where("existence"))
+            if e < 0:
+                raise InputError(f"{where('existence')}: {e!r} is the existence of track {track} (run {run}, step "
+                                 f"{step}) and must be >= 0")
+            rows["existence"].append(e)
     R = len(rows["run"])
     ordered = sorted(step_time)
     for a, b in zip(ordered, ordered[1:]):
@@ -484,7 +524,8 @@ def read_tracks(path) -> TrackFile:
                      np.array(rows["track"], dtype=np.int64), np.array(rows["step"], dtype=np.int64),
                      np.array(rows["time"], dtype=float), np.array(rows["status"], dtype=np.int64),
                      np.array(rows["updated"], dtype=np.int64), np.array(rows["mean"], dtype=float).reshape(R, n),
-                     np.array(rows["cov"]).reshape(R, n, n) if with_cov else None, tuple(notes), VERSION)
+                     np.array(rows["cov"]).reshape(R, n, n) if with_cov else None, tuple(notes), VERSION,
+                     np.array(rows["existence"], dtype=float) if with_existence else None)
 
 
 def _integer(text: str, where: str) -> int:

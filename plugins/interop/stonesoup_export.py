@@ -6,7 +6,9 @@
   yields them; ``Clutter`` for rows whose origin is :data:`~workbench.types.CLUTTER`, ``Detection`` otherwise
   (with ``origin``, ``snr``, ``doppler`` in the metadata where known);
 - :func:`track_log_tracks`: the tracks of one run of a :class:`~workbench.tracking.TrackLog`, one ``Track`` of
-  ``State`` (or ``GaussianState`` where covariances are given) per track id;
+  ``GaussianState`` (the log's own covariance, or the one given; ``State`` where there is none) per track id,
+  in the tracker's state order or in Stone Soup's (``order="stonesoup"``: ``[x, vx, y, vy]``), the layout
+  written stated in each track's metadata (``state_layout``, ``state_order``);
 - :func:`filter_tracks`: a single-target filter's :class:`~workbench.tracking.Track`, one ``Track`` of
   ``GaussianState`` per run.
 
@@ -23,16 +25,19 @@ from typing import Sequence
 
 import numpy as np
 
-from workbench.models import MeasurementModel
+from workbench.models import MeasurementModel, MotionModel
 from workbench.tracking import CONFIRMED, Track as WorkbenchTrack, TrackLog
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
 from .stonesoup_filters import AVAILABLE, EPOCH, REASON, StoneSoupMissing
 
-__all__ = ["EPOCH", "timestamps", "seconds", "ground_truth_paths", "detections", "track_log_tracks",
-           "filter_tracks"]
+__all__ = ["EPOCH", "ORDERS", "timestamps", "seconds", "ground_truth_paths", "detections", "state_order",
+           "track_log_tracks", "filter_tracks"]
 
-#: The default time of ``t = 0``.
+#: The state orders :func:`track_log_tracks` writes: ``workbench``, the tracker's own (the motion model's layout,
+#: positions first: ``[x, y, vx, vy]``); ``stonesoup``, Stone Soup's, each position followed by its derivatives
+#: (``[x, vx, y, vy]``, as its ``CombinedLinearGaussianTransitionModel`` of ``ConstantVelocity`` models has it).
+ORDERS = ("workbench", "stonesoup")
 
 
 def _require() -> None:
@@ -110,23 +115,59 @@ def detections(scans: Scans, *, run: int = 0, model: MeasurementModel | None = N
     return out
 
 
+def state_order(names: Sequence[str], order: str) -> list[int]:
+    """The permutation ``perm`` that puts a state of the layout ``names`` (the motion model's ``state_names``) in
+    ``order`` (:data:`ORDERS`): ``x_out = x[perm]``, ``P_out = P[perm][:, perm]``.
+
+    ``stonesoup``: every position ``a`` whose velocity ``va`` the layout names, in the layout's order, followed by
+    ``va`` (and its acceleration ``aa`` where named); any other component (a turn rate ``omega``) after them, in
+    the layout's order.  ``["x", "y", "vx", "vy"]`` gives ``[0, 2, 1, 3]``."""
+    if order not in ORDERS:
+        raise InputError(f"order must be one of {', '.join(ORDERS)}, got {order!r}")
+    names = list(names)
+    if order == "workbench":
+        return list(range(len(names)))
+    axes = [a for a in names if f"v{a}" in names]
+    if not axes:
+        raise InputError(f"order='stonesoup' needs a state layout with positions and their velocities (x, ..., vx, "
+                         f"...), declared by the motion model (motion=) or by names=; got {', '.join(names)}")
+    perm = [names.index(f"{p}{a}") for a in axes for p in ("", "v", "a") if f"{p}{a}" in names]
+    return perm + [i for i in range(len(names)) if i not in perm]
+
+
 def track_log_tracks(log: TrackLog, times, *, run: int = 0, cov=None, confirmed_only: bool = True,
-                     start: datetime = EPOCH) -> list:
+                     start: datetime = EPOCH, motion: MotionModel | None = None, names: Sequence[str] | None = None,
+                     order: str = "workbench") -> list:
     """The tracks of run ``run`` of a tracker's log as Stone Soup ``Track`` s (``id`` ``"<run>-<track id>"``).
 
-    Each holds a ``State`` per ping at which the track is live (confirmed, with ``confirmed_only``), with the full
-    state ``(n, 1)``; with ``cov (R, n, n)`` (one per log row) a ``GaussianState``.  ``times (T,)``: each ping's time
-    in seconds.
+    Each holds a ``GaussianState`` per ping at which the track is live (confirmed, with ``confirmed_only``): the
+    full state ``(n, 1)`` and its covariance, ``cov (R, n, n)`` (one per log row) where given, else the log's own
+    (``TrackLog.cov``); a ``State`` where neither is there.  ``times (T,)``: each ping's time in seconds.
+
+    The state's layout is the motion model's (``motion.state_names``) or ``names``, ``s0, s1, ...`` without
+    either (:func:`workbench.tracks_io.state_layout`).  ``order`` (:data:`ORDERS`): ``workbench`` writes the
+    state as the log holds it; ``stonesoup`` in Stone Soup's order, each position followed by its velocity
+    (``[x, vx, y, vy]``), the covariance permuted with it (:func:`state_order`); it needs a declared layout.  Every
+    track's metadata states what was written: ``state_layout`` (the component names, in the order written),
+    ``state_order``, ``run`` and ``track_id``.
     """
     _require()
     from stonesoup.types.state import GaussianState, State
     from stonesoup.types.track import Track
 
+    from workbench.tracks_io import state_layout
+
+    n = log.mean.shape[1]
+    layout, _ = state_layout(n, motion, names)
+    perm = state_order(layout, order)
     stamps = timestamps(times, start)
     if len(stamps) != log.pings:
         raise InputError(f"times must have one entry per ping ({log.pings}), got {len(stamps)}")
-    if cov is not None and np.shape(cov) != (log.run.size, log.mean.shape[1], log.mean.shape[1]):
+    if cov is None:
+        cov = log.cov
+    if cov is not None and np.shape(cov) != (log.run.size, n, n):
         raise InputError(f"cov must have shape ({log.run.size}, n, n), one per log row, got {np.shape(cov)}")
+    written = tuple(layout[i] for i in perm)
     sel = log.run == run
     if confirmed_only:
         sel &= log.status == CONFIRMED
@@ -134,10 +175,13 @@ def track_log_tracks(log: TrackLog, times, *, run: int = 0, cov=None, confirmed_
     for tid in np.unique(log.track_id[sel]):
         rows = np.flatnonzero(sel & (log.track_id == tid))
         rows = rows[np.argsort(log.ping[rows], kind="stable")]
-        states = [State(_column(log.mean[r]), timestamp=stamps[log.ping[r]]) if cov is None else
-                  GaussianState(_column(log.mean[r]), np.array(cov[r], dtype=float), timestamp=stamps[log.ping[r]])
+        states = [State(_column(log.mean[r][perm]), timestamp=stamps[log.ping[r]]) if cov is None else
+                  GaussianState(_column(log.mean[r][perm]), np.array(cov[r], dtype=float)[np.ix_(perm, perm)],
+                                timestamp=stamps[log.ping[r]])
                   for r in rows]
-        tracks.append(Track(states, id=f"{run}-{int(tid)}"))
+        tracks.append(Track(states, id=f"{run}-{int(tid)}",
+                            init_metadata={"state_layout": written, "state_order": order, "run": int(run),
+                                           "track_id": int(tid)}))
     return tracks
 
 
