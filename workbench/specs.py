@@ -732,11 +732,26 @@ class Task:
     key made of the recipe, ``key``, ``params``, the seed and the code version, so a re-run reuses
     finished tasks and a changed parameter recomputes only the tasks whose ``params`` changed.
     ``params`` must be JSON-serialisable.
+
+    ``runs``: the number of runs (Monte Carlo repetitions) the task computes, where it has such a count; the
+    report's time table shows it beside the task's seconds (None: not declared, shown as "-").
+    ``seeded``: False for a task whose result does not depend on the report's seed (a tuning task that draws from
+    its own fixed tuning seed): the confirmation seed reuses its result on the reported seed instead of running it
+    again.  Declared by the recipe, never guessed; a task that reads ``ctx.seed`` must leave it True.
     """
 
     key: str
     params: Mapping[str, Any]
     run: Callable[[TaskContext], Mapping[str, np.ndarray]]
+    runs: int | None = None
+    seeded: bool = True
+
+    def __post_init__(self) -> None:
+        if self.runs is not None and (isinstance(self.runs, bool) or not isinstance(self.runs, (int, np.integer))
+                                      or self.runs < 1):
+            raise InputError(f"task {self.key!r}: runs is a whole number >= 1 or None, got {self.runs!r}")
+        if not isinstance(self.seeded, bool):
+            raise InputError(f"task {self.key!r}: seeded is True or False, got {self.seeded!r}")
 
 
 #: Results of a recipe's tasks: task key -> that task's arrays.

@@ -30,7 +30,15 @@ tuning and no design choice has seen.  It reruns only the tasks the recipe's cri
 judge the reported seed's results), with that seed in place of the report's, judges the criteria again unchanged
 and records, per criterion, the verdict there and whether it agrees
 (:class:`workbench.criteria.Confirmation`); the confirmation tasks are cached under their own seed like any other.
-A quick report runs no confirmation (its verdicts are indications already).
+A task declared ``seeded=False`` (:class:`workbench.specs.Task`: a tuning task on its own fixed tuning seed) is not
+run again: the confirmation reuses its result on the reported seed.  A quick report runs no confirmation (its verdicts
+are indications already).
+
+The time table: every task the report runs (on the reported seed, at the declared unknowns' grid points, on the
+confirmation seed) records its seconds and, where the task declares it, its number of runs;
+:func:`task_time_table` turns them into a table per paper (task, runs, seconds, share of the paper's task compute,
+computed / cached / reused / failed), written into ``outcome.json`` and ``summary.json`` (``task_times``) and shown,
+collapsed, in the paper's section of ``index.html``; the ``report`` benchmark prints the report's top tasks by share.
 """
 
 from __future__ import annotations
@@ -54,7 +62,7 @@ import numpy as np
 
 from ..plugins import PluginHost, UnknownComponent
 from ..criteria import Criterion, DeclaredUnknown, confirm
-from ..specs import RecipeOptions, RecipeSpec, Table, TaskContext
+from ..specs import RecipeOptions, RecipeSpec, Table, Task, TaskContext
 from ..types import InputError
 if TYPE_CHECKING:
     from ..references import FilterReference
@@ -65,7 +73,8 @@ __all__ = ["resolve_filters", "resolve_trackers", "tracker_request", "tracker_pa
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
            "dask_executor", "component_failure", "component_errors", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
            "report_lock", "recording_host", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats",
-           "CONFIRMATION_SEED", "CONFIRMATION_SPAN", "check_report_seed", "judged_tasks"]
+           "CONFIRMATION_SEED", "CONFIRMATION_SPAN", "check_report_seed", "judged_tasks", "task_time_table",
+           "paper_time_table", "TASK_STATUSES"]
 
 #: The file, inside ``OUT/paperNNN``, that keeps a paper's rendered outcome.
 OUTCOME_FILE = "outcome.json"
@@ -126,6 +135,57 @@ def judged_tasks(criteria: Callable[[Mapping], Sequence[Criterion]], results: Ma
     recorder = _ReadRecorder(results)
     judged = list(criteria(recorder))
     return judged, set(recorder.read)
+
+
+#: How a task of the time table got its result: run now, read from the cache (0 s), reused on the confirmation seed
+#: from the reported seed (a task declared ``seeded=False``: 0 s), or failed (its seconds were spent all the same).
+TASK_STATUSES = ("computed", "cached", "reused", "failed")
+
+
+def _task_status(entry: Mapping) -> str:
+    if entry.get("error"):
+        return "failed"
+    if entry.get("reused"):
+        return "reused"
+    return "cached" if entry.get("cached") else "computed"
+
+
+def _shares(seconds: Sequence[float]) -> list[float]:
+    """Percent shares of ``seconds`` in hundredths of a percent, by largest remainder: they sum to exactly 100 %
+    (in hundredths) when any second was spent, and every one is 0 when none was."""
+    total = float(sum(seconds))
+    if not total > 0.0:
+        return [0.0 for _ in seconds]
+    exact = [10_000.0 * s / total for s in seconds]
+    parts = [int(np.floor(e)) for e in exact]
+    for i in sorted(range(len(exact)), key=lambda i: (parts[i] - exact[i], i))[:10_000 - sum(parts)]:
+        parts[i] += 1
+    return [p / 100.0 for p in parts]
+
+
+def task_time_table(entries: Iterable[Mapping]) -> dict:
+    """The time table of a report's task entries (``PaperOutcome.tasks``: ``key, seconds, cached, error`` and, where
+    recorded, ``runs`` and ``reused``).
+
+    Returns ``{"computed_seconds", "counts", "rows"}``: ``rows`` holds one ``{task, runs, seconds, share_percent,
+    status}`` per entry, the largest first (ties in the entries' order); ``status`` is one of
+    :data:`TASK_STATUSES`.  A cached or reused task counts 0 s; the shares are of the seconds the tasks spent (the
+    computed and the failed ones), in hundredths of a percent, and sum to exactly 100 % (all 0 where every task was
+    cached).
+    """
+    entries = list(entries)
+    statuses = [_task_status(e) for e in entries]
+    seconds = [0.0 if st in ("cached", "reused") else max(float(e.get("seconds") or 0.0), 0.0)
+               for e, st in zip(entries, statuses)]
+    shares = _shares(seconds)
+    rows = [{"task": str(e.get("key")),
+             "runs": None if e.get("runs") is None else int(e["runs"]),
+             "seconds": s, "share_percent": sh, "status": st}
+            for e, st, s, sh in zip(entries, statuses, seconds, shares)]
+    order = sorted(range(len(rows)), key=lambda i: (-rows[i]["seconds"], i))
+    return {"computed_seconds": float(sum(seconds)),
+            "counts": {st: statuses.count(st) for st in TASK_STATUSES},
+            "rows": [rows[i] for i in order]}
 
 
 #: The formats every figure is saved in by default: PNG (embedded in ``index.html``) and SVG (linked from it).
@@ -385,6 +445,24 @@ class PaperOutcome:
     unknowns: list[DeclaredUnknown] = field(default_factory=list)
     #: The seed the criteria were judged on once more (``Criterion.confirmation``); None where none ran.
     confirmation_seed: int | None = None
+    #: Seconds spent outside the tasks, by stage (``"figures and tables"``, ``"criteria"``): the time table's margin.
+    stage_seconds: dict = field(default_factory=dict)
+    #: Seconds of each figure and table, by part: ``{"figure fig3": {"data": s, "csv": s, "draw and png": s,
+    #: "svg": s}, "table t1": {"make and csv": s}}``.
+    item_seconds: dict = field(default_factory=dict)
+
+
+def paper_time_table(outcome: PaperOutcome) -> dict:
+    """A paper's time table (:func:`task_time_table` of its tasks) with the paper's wall seconds and the seconds
+    spent outside the tasks: ``other_seconds`` by stage (figures and tables, criteria) and ``items``, each figure
+    and table with its seconds and their parts (``{what, seconds, parts}``, the largest first)."""
+    table = task_time_table(outcome.tasks)
+    table["paper_seconds"] = float(outcome.seconds)
+    table["other_seconds"] = {k: float(v) for k, v in outcome.stage_seconds.items()}
+    items = [{"what": str(k), "seconds": float(sum(parts.values())), "parts": {p: float(v) for p, v in parts.items()}}
+             for k, parts in outcome.item_seconds.items()]
+    table["items"] = sorted(items, key=lambda item: -item["seconds"])
+    return table
 
 
 @dataclass
@@ -458,6 +536,7 @@ def outcome_dict(outcome: PaperOutcome, out: Path) -> dict:
         "criteria": [c.to_dict() for c in outcome.criteria],
         "unknowns": [u.to_dict() for u in outcome.unknowns],
         "tasks": [_jsonable(t) for t in outcome.tasks],
+        "task_times": _jsonable(paper_time_table(outcome)),
     }
 
 
@@ -495,7 +574,9 @@ def load_outcome(path: Path, out: Path) -> PaperOutcome:
         seconds=float(data.get("seconds", 0.0)), seed=data.get("seed"), command=str(data.get("command", "")),
         finished=str(data.get("finished", "")), saved=True,
         unknowns=[DeclaredUnknown.from_dict(u) for u in data.get("unknowns", [])],
-        confirmation_seed=data.get("confirmation_seed"))
+        confirmation_seed=data.get("confirmation_seed"),
+        stage_seconds=dict((data.get("task_times") or {}).get("other_seconds") or {}),
+        item_seconds={str(i["what"]): dict(i.get("parts") or {}) for i in (data.get("task_times") or {}).get("items", [])})
 
 
 def saved_outcomes(out: Path, skip: Iterable[str] = ()) -> tuple[list[PaperOutcome], list[str]]:
@@ -600,17 +681,21 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
             entry["partial"] = [f"{what} failed: {msg}" for what, msg in failed]
             outcome.errors.extend(f"task {entry['key']!r}: {what} failed: {msg} (the task's other results are kept)"
                                   for what, msg in failed)
+    t0 = time.perf_counter()
     _draw_and_tabulate(recipe, results, outcome, paper_dir, formats)
+    outcome.stage_seconds["figures and tables"] = time.perf_counter() - t0
     if recipe.criteria is not None:
         read: set[str] = set()
+        t0 = time.perf_counter()
         try:
             outcome.criteria, read = judged_tasks(recipe.criteria, results)
         except Exception as exc:  # noqa: BLE001
             outcome.errors.append(f"criteria not evaluated: {type(exc).__name__}: {exc}")
+        outcome.stage_seconds["criteria"] = time.perf_counter() - t0
         if outcome.criteria and confirmation_seed is not None:
             outcome.criteria = _confirmation(recipe, host, cache, run, outcome, options, read, results,
                                              seed=int(confirmation_seed), version=version, progress=progress,
-                                             on_task=on_task)
+                                             on_task=on_task, reported={t.key: t for t in tasks})
         if size != FIRM_SIZE:
             outcome.criteria = [c.as_indicative() for c in outcome.criteria]
     outcome.confirmation_seed = None if confirmation_seed is None else int(confirmation_seed)
@@ -622,16 +707,30 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
 
 def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
                   options: RecipeOptions, read: set[str], results: Mapping, *, seed: int, version: str,
-                  progress: bool, on_task) -> list[Criterion]:
+                  progress: bool, on_task, reported: Mapping[str, Task] | None = None) -> list[Criterion]:
     """The criteria with their verdicts on the confirmation seed: the tasks they read rerun with ``seed``
     (cached under it), the criteria judged again unchanged on those results (the other tasks' results are the
-    reported seed's, which the criteria do not read)."""
+    reported seed's, which the criteria do not read).  A task they read that is declared ``seeded=False`` is not
+    rerun: its result on the reported seed is the result on any seed, and is reused (where the reported seed's
+    task with that key had the same parameters and finished)."""
     again_options = dataclasses.replace(options, seed=seed)
-    tasks = [t for t in recipe.tasks(again_options) if t.key in read]
+    reported = reported or {}
+
+    def reusable(task: Task) -> bool:
+        before = reported.get(task.key)
+        return (not task.seeded and before is not None and not before.seeded and task.key in results
+                and dict(before.params) == dict(task.params))
+
+    wanted = [t for t in recipe.tasks(again_options) if t.key in read]
+    reused = [t for t in wanted if reusable(t)]
+    tasks = [t for t in wanted if not reusable(t)]
     note = PaperOutcome(recipe.paper, recipe.title, options.size, options.filters, "", {})
     fresh = _run_tasks(recipe, tasks, host, cache, run, note, seed=seed, size=options.size, arch=options.arch,
                        version=version, progress=progress, on_task=on_task,
                        label=f"paper {recipe.paper} ({options.size}, confirmation seed {seed})")
+    for task in reused:
+        outcome.tasks.append({"key": f"confirmation/{task.key}", "seconds": 0.0, "cached": False, "error": "",
+                              "runs": task.runs, "seed": seed, "reused": "the reported seed's result (seeded=False)"})
     for entry in note.tasks:
         outcome.tasks.append({**entry, "key": f"confirmation/{entry['key']}", "seed": seed})
     outcome.warnings.extend(note.warnings)
@@ -672,7 +771,7 @@ def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: Tas
             cached = None
         if cached is not None:
             results[task.key] = cached
-            outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": ""})
+            outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": "", "runs": task.runs})
             bar.update(1)
         else:
             pending.append((task, digest))
@@ -685,12 +784,13 @@ def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: Tas
             # saved the moment it finishes, with the fingerprints of the components it used
             cache.put(recipe.paper, task.key, digest, arrays, components_digest(host, used))
             results[task.key] = {k: np.asarray(v) for k, v in arrays.items()}
-            outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": ""})
+            outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": "",
+                                  "runs": task.runs})
         else:
             msg = f"task {task.key!r} failed: {error[0]}"
             outcome.errors.append(msg)
             outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": msg,
-                                  "traceback": error[1]})
+                                  "runs": task.runs, "traceback": error[1]})
         bar.update(1)
     bar.close()
     return results
@@ -703,25 +803,33 @@ def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutco
 
     for spec in recipe.figures:
         try:
+            parts, t0 = {}, time.perf_counter()
             data = {k: np.asarray(v) for k, v in spec.data(results).items()}
             save_arrays(paper_dir / f"{spec.id}.npz", data)
+            parts["data"], t0 = time.perf_counter() - t0, time.perf_counter()
             figure_data_csv(data, paper_dir / f"{spec.id}.csv")
+            parts["csv"], t0 = time.perf_counter() - t0, time.perf_counter()
             fig = Figure(figsize=spec.size, layout="constrained")
             spec.draw(data, fig)
             fig.savefig(paper_dir / f"{spec.id}.png", dpi=110)
+            parts["draw and png"], t0 = time.perf_counter() - t0, time.perf_counter()
             svg = paper_dir / f"{spec.id}.svg"
             if "svg" in formats:
                 fig.savefig(svg)
+                parts["svg"] = time.perf_counter() - t0
             else:
                 svg.unlink(missing_ok=True)  # never link an SVG of an earlier report beside this PNG
+            outcome.item_seconds[f"figure {spec.id}"] = parts
             outcome.figures.append({"id": spec.id, "caption": spec.caption, "png": paper_dir / f"{spec.id}.png",
                                     "svg": svg if "svg" in formats else None, "data": paper_dir / f"{spec.id}.npz"})
         except Exception as exc:  # noqa: BLE001
             outcome.errors.append(f"figure {spec.id} not produced: {type(exc).__name__}: {exc}")
     for spec in recipe.tables:
         try:
+            t0 = time.perf_counter()
             table = spec.make(results)
             _write_table(table, paper_dir / f"{spec.id}.csv")
+            outcome.item_seconds[f"table {spec.id}"] = {"make and csv": time.perf_counter() - t0}
             outcome.tables.append({"id": spec.id, "caption": spec.caption, "columns": list(table.columns),
                                    "rows": [list(r) for r in table.rows], "csv": paper_dir / f"{spec.id}.csv"})
         except Exception as exc:  # noqa: BLE001

@@ -609,12 +609,35 @@ def _paper_section(p, out: Path) -> str:
         items = list(p.published.items())
         numeric = [False, _numeric_columns([[v] for _, v in items], 1)[0]]
         parts.append(_table(["item", "published"], items, numeric=numeric))
-    parts.append(f"<details id='{_anchor(p.paper, 'tasks')}'><summary>Tasks ({len(p.tasks)})</summary>" + _table(
-        ["task", "seconds", "from cache", "error"],
-        [(t.get("key"), round(float(t.get("seconds", 0.0)), 3), "yes" if t.get("cached") else "no",
-          t.get("error", "")) for t in p.tasks]) + "</details>")
+    parts.append(_time_table(p))
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _time_table(p) -> str:
+    """The paper's time table, collapsed: each task (reported seed, unknowns' grid points, confirmation seed) with
+    its runs, seconds, share of the paper's task compute and whether it was computed, cached, reused or failed."""
+    from .engine import paper_time_table
+
+    table = paper_time_table(p)
+    counts = table["counts"]
+    errors = {str(t.get("key")): t.get("error", "") for t in p.tasks}
+    done = ", ".join(f"{n} {st}" for st, n in counts.items() if n) or "no task"
+    other = "; ".join(f"{k} {v:.1f} s" for k, v in table["other_seconds"].items())
+    head = (f"Time per task: {len(table['rows'])} tasks ({done}), {table['computed_seconds']:.1f} s of task compute"
+            f"{'; outside the tasks: ' + other if other else ''}")
+    rows = [(r["task"], "-" if r["runs"] is None else r["runs"], round(r["seconds"], 2),
+             f"{r['share_percent']:.2f} %", r["status"], errors.get(r["task"], "")) for r in table["rows"]]
+    return (f"<details id='{_anchor(p.paper, 'tasks')}'><summary>{_esc(head)}</summary>"
+            "<p class='meta'>Share: of the seconds the paper's tasks spent (a cached task, or one the confirmation "
+            "seed reuses because it does not depend on the seed, counts 0 s); the shares sum to 100 %.</p>"
+            + _table(["task", "runs", "seconds", "share of the paper's compute", "status", "error"], rows,
+                     numeric=[False, True, True, True, False, False])
+            + (_table(["figure or table (outside the tasks)", "seconds", "parts"],
+                      [(i["what"], round(i["seconds"], 2),
+                        ", ".join(f"{k} {v:.2f} s" for k, v in i["parts"].items())) for i in table["items"]],
+                      numeric=[False, True, False]) if table["items"] else "")
+            + "</details>")
 
 
 def _nav(papers) -> str:
@@ -651,7 +674,7 @@ def _overview(papers) -> str:
                       *(f"<span class='badge {_CLASS[v]}'>{counts[v]}</span>" if counts[v] else "0" for v in _ORDER),
                       why_html, conf_html, None])
     columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition",
-               "confirmation seed: verdicts that agree", "problems"]
+               "confirmation seed", "problems"]
     numeric = [False, False, False, *(True for _ in _ORDER), False, False, True]
     return _table(columns, rows, html_cells=cells, numeric=numeric)
 
@@ -723,12 +746,13 @@ def _criterion_summary(c) -> dict:
 def write_summary(report, host: PluginHost) -> None:
     """Write ``report.out/summary.json`` (atomically): every paper's criteria, tables, figures and tasks.
 
-    Each criterion carries ``id, statement (and text), ours, published, n, interval, threshold, verdict,
-    indicative, met`` (bool, for older readers), ``replication``, ``detail``, ``extra`` and ``preconditions``
+    Each paper carries ``task_times`` (:func:`workbench.report.engine.paper_time_table`: every task's runs,
+    seconds, share of the paper's task compute and status).  Each criterion carries ``id, statement (and text),
+    ours, published, n, interval, threshold, verdict, indicative, met`` (bool, for older readers), ``replication``, ``detail``, ``extra`` and ``preconditions``
     (each ``name, holds, detail, values``); a paper kept from an earlier run into the folder has
     ``from_saved: true``.
     """
-    from .engine import _jsonable
+    from .engine import _jsonable, paper_time_table
 
     summary = {
         "command": report.command,
@@ -748,6 +772,7 @@ def write_summary(report, host: PluginHost) -> None:
             "figures": [f["id"] for f in p.figures],
             "published": p.published,
             "tasks": [{k: v for k, v in t.items() if k != "traceback"} for t in p.tasks],
+            "task_times": paper_time_table(p),
         } for p in _papers(report)],
     }
     # strict JSON: NaN and infinities become null, so any JSON reader takes the file

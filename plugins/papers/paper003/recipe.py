@@ -397,7 +397,8 @@ def tasks(options: RecipeOptions) -> list[Task]:
                                 _mc_params(v, v["tuning_runs"], 0, filter="crpf-100",
                                            configure={"sigma0": s0, "delta": d}, label=tuning_label(s0, d),
                                            reading=reading, cases=list(cases), data_seed=TUNING_SEED,
-                                           stream=TUNING_STREAM), run_cases))
+                                           stream=TUNING_STREAM), run_cases,
+                                seeded=False))  # its own tuning seed: the confirmation reuses it
     for filt in options.filters:
         out.append(Task(f"timing/{filt}", {"filter": filt, "timing_runs": v["timing_runs"], "steps": v["steps"],
                                            "timing_repeats": v["timing_repeats"]}, run_timing))
