@@ -669,13 +669,16 @@ def _overview(papers) -> str:
         counts = _tally(p.criteria)
         why, why_html = _not_judgeable_cell(p.criteria)
         conf, conf_html = _confirmation_summary(p)
-        rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), why, conf, len(p.errors)])
+        # the failed preconditions and the confirmation seed's agreement share one text column (the table must fit
+        # the page's content column beside the navigation)
+        rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), f"{why or 'n/a'}; confirmation seed: {conf}",
+                     len(p.errors)])
         cells.append([f"<a href='#{_anchor(p.paper)}'>{_esc(p.paper)}</a>", None, None,
                       *(f"<span class='badge {_CLASS[v]}'>{counts[v]}</span>" if counts[v] else "0" for v in _ORDER),
-                      why_html, conf_html, None])
-    columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition",
-               "confirmation seed", "problems"]
-    numeric = [False, False, False, *(True for _ in _ORDER), False, False, True]
+                      f"{why_html}<div class='detail'>confirmation seed: {conf_html}</div>", None])
+    columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition; confirmation seed",
+               "problems"]
+    numeric = [False, False, False, *(True for _ in _ORDER), False, True]
     return _table(columns, rows, html_cells=cells, numeric=numeric)
 
 
