@@ -286,26 +286,28 @@ def resolve_filters(default: Sequence[str], request: str | None, host: PluginHos
 
     if request is None:
         return tuple(default)
-    entries = filter_request(request, host)
+    return _apply_request(filter_request(request, host), request, "--filters", "filter",
+                          lambda: [filter_reference(host, name, f"the recipe's default filter {name!r}")
+                                   for name in default])
+
+
+def _apply_request(entries, request: str, option: str, kind: str, defaults) -> tuple[str, ...]:
+    """``entries`` (sign, reference) of a ``--filters`` / ``--trackers`` request applied to the references
+    ``defaults()`` (read only where the request keeps them): a list without signs replaces them, ``+`` adds one not yet there, ``-`` removes one that is (by what
+    it is, not how it is spelled); the result is not empty."""
     plain = [ref for sign, ref in entries if not sign]
-    if plain:
-        chosen = [(ref.text, ref.key) for ref in plain]
-    else:
-        chosen = []
-        for name in default:
-            ref = filter_reference(host, name, f"the recipe's default filter {name!r}")
-            chosen.append((ref.text, ref.key))
+    chosen = [(ref.text, ref.key) for ref in (plain or defaults())]
     for sign, ref in entries:
         keys = [key for _, key in chosen]
         if sign == "+" and ref.key not in keys:
             chosen.append((ref.text, ref.key))
         elif sign == "-":
             if ref.key not in keys:
-                raise InputError(f"--filters: cannot remove {ref.text!r}: it is not among "
+                raise InputError(f"{option}: cannot remove {ref.text!r}: it is not among "
                                  f"{', '.join(text for text, _ in chosen) or 'none'}")
             del chosen[keys.index(ref.key)]
     if not chosen:
-        raise InputError(f"--filters {request!r} leaves no filter to compare")
+        raise InputError(f"{option} {request!r} leaves no {kind} to compare")
     return tuple(text for text, _ in chosen)
 
 
@@ -365,27 +367,9 @@ def resolve_trackers(default: Sequence[str], request: str | None, host: PluginHo
     is matched by what it is (its configured label), not how it is spelled."""
     if request is None:
         return tuple(default)
-    entries = tracker_request(request, host)
-    plain = [ref for sign, ref in entries if not sign]
-    if plain:
-        chosen = [(ref.text, ref.key) for ref in plain]
-    else:
-        chosen = []
-        for name in default:
-            ref = tracker_reference(host, name, f"{whose} default tracker {name!r}")
-            chosen.append((ref.text, ref.key))
-    for sign, ref in entries:
-        keys = [key for _, key in chosen]
-        if sign == "+" and ref.key not in keys:
-            chosen.append((ref.text, ref.key))
-        elif sign == "-":
-            if ref.key not in keys:
-                raise InputError(f"--trackers: cannot remove {ref.text!r}: it is not among "
-                                 f"{', '.join(text for text, _ in chosen) or 'none'}")
-            del chosen[keys.index(ref.key)]
-    if not chosen:
-        raise InputError(f"--trackers {request!r} leaves no tracker to compare")
-    return tuple(text for text, _ in chosen)
+    return _apply_request(tracker_request(request, host), request, "--trackers", "tracker",
+                          lambda: [tracker_reference(host, name, f"{whose} default tracker {name!r}")
+                                   for name in default])
 
 
 def tracker_papers(recipes: Sequence[RecipeSpec], request: str | None, host: PluginHost,
