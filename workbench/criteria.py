@@ -1092,6 +1092,17 @@ class DeclaredUnknown:
                    str(data["why"]))
 
 
+
+def _verdict_record(cls, data: Mapping[str, Any]):
+    """A verdict record (:class:`UnknownVerdict`, :class:`Confirmation`) from its ``to_dict``: unknown keys ignored,
+    the interval and the failed preconditions back to tuples."""
+    names = {f.name for f in fields(cls)}
+    kw = {k: v for k, v in data.items() if k in names}
+    if kw.get("interval") is not None:
+        kw["interval"] = tuple(kw["interval"])
+    kw["failed"] = tuple(kw.get("failed") or ())
+    return cls(**kw)
+
 @dataclass(frozen=True)
 class UnknownVerdict:
     """A criterion's verdict at one grid value of a declared unknown (a row of ``Criterion.across``).
@@ -1158,12 +1169,7 @@ class UnknownVerdict:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "UnknownVerdict":
-        names = {f.name for f in fields(cls)}
-        kw = {k: v for k, v in data.items() if k in names}
-        if kw.get("interval") is not None:
-            kw["interval"] = tuple(kw["interval"])
-        kw["failed"] = tuple(kw.get("failed") or ())
-        return cls(**kw)
+        return _verdict_record(cls, data)
 
 
 def judge_across(unknown: DeclaredUnknown, judged: Mapping[Any, Criterion],
@@ -1344,12 +1350,7 @@ class Confirmation:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Confirmation":
-        names = {f.name for f in fields(cls)}
-        kw = {k: v for k, v in data.items() if k in names}
-        if kw.get("interval") is not None:
-            kw["interval"] = tuple(kw["interval"])
-        kw["failed"] = tuple(kw.get("failed") or ())
-        return cls(**kw)
+        return _verdict_record(cls, data)
 
 
 def confirm(reported: Any, again: Any, seed: int, missing: str = "") -> list[Criterion]:

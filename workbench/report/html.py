@@ -419,6 +419,12 @@ def _confirmation_cell(record) -> tuple[str | None, str]:
     cell = f"<b>{head}</b> (seed {_esc(record.seed)}): <i>{_esc(record.verdict)}</i>"
     if record.failed:
         cell += f"<div class='would'>failed: {_esc(', '.join(record.failed))}</div>"
+    cell += _numbers_line(record)
+    return record.text(), cell
+
+
+def _numbers_line(record) -> str:
+    """A verdict record's value, interval and n as one detail line (empty where it has none)."""
     nums = []
     if isinstance(record.ours, (int, float)) and not isinstance(record.ours, bool):
         nums.append(format_value(record.ours))
@@ -426,9 +432,7 @@ def _confirmation_cell(record) -> tuple[str | None, str]:
         nums.append(f"[{format_value(record.interval[0])}, {format_value(record.interval[1])}]")
     if record.n is not None:
         nums.append(f"n = {format_value(record.n)}")
-    if nums:
-        cell += f"<div class='detail'>{_esc(' '.join(nums))}</div>"
-    return record.text(), cell
+    return f"<div class='detail'>{_esc(' '.join(nums))}</div>" if nums else ""
 
 
 def _confirmation_summary(p) -> tuple[str, str]:
@@ -457,15 +461,7 @@ def _verdict_at(record) -> str:
         cell += f"<div class='would'>failed: {_esc(', '.join(record.failed))}</div>"
     if record.indicative and record.quick_verdict == "met":
         cell += "<div class='would'>quick-run numbers pass</div>"
-    nums = []
-    if isinstance(record.ours, (int, float)) and not isinstance(record.ours, bool):
-        nums.append(format_value(record.ours))
-    if record.interval is not None and not any(math.isnan(v) for v in record.interval):
-        nums.append(f"[{format_value(record.interval[0])}, {format_value(record.interval[1])}]")
-    if record.n is not None:
-        nums.append(f"n = {format_value(record.n)}")
-    if nums:
-        cell += f"<div class='detail'>{_esc(' '.join(nums))}</div>"
+    cell += _numbers_line(record)
     if record.detail:
         cell += f"<div class='detail'>{_esc(record.detail)}</div>"
     return cell
