@@ -1092,7 +1092,6 @@ class DeclaredUnknown:
                    str(data["why"]))
 
 
-
 def _verdict_record(cls, data: Mapping[str, Any]):
     """A verdict record (:class:`UnknownVerdict`, :class:`Confirmation`) from its ``to_dict``: unknown keys ignored,
     the interval and the failed preconditions back to tuples."""
