@@ -1,4 +1,5 @@
-"""The filter kit's check of the filter-state contract: a filter under the M-of-N tracker, and its take / join.
+"""The filter kit's check of the filter-state contract: a filter's take / join, and the filter under every built-in
+tracker.
 
 A multi-target tracker keeps one filter state per run whose batch items are the live tracks; it deletes tracks
 with the filter's ``take`` and adds new ones with its ``join`` (:meth:`workbench.specs.FilterSpec.take_items`,
@@ -15,7 +16,12 @@ per item, a mode-first array cut along the wrong axis), so :func:`check_under_tr
 2. the M-of-N tracker (:func:`workbench.tracking.run_tracker`, default configuration) on a short scene built
    here: target A over 12 pings with a missed detection at ping 6, target B born at ping 2 (its track joins A's)
    and last seen at ping 7 (deleted three misses later).  A's track must be confirmed, held through the miss
-   under one identity, and near A at the end; B's must be confirmed near B and then deleted.
+   under one identity, and near A at the end; B's must be confirmed near B and then deleted;
+3. every other built-in tracker (:func:`check_each_tracker`: ``gnn``, ``jipda``, ``jpda``, ``gm-phd``) on the same
+   scene (detections in the measurement model's own frame for a tracker without the ``cartesian_2d`` capability):
+   a valid track log holding A and B under one confirmed track each, or a refusal by ``InputError`` that names the
+   capability the tracker refuses the filter for (``gaussian`` lacking, ``stochastic`` present, or, for a
+   ``range_bearing_input`` filter, the kit's range-bearing model), which counts as a pass.
 
 It applies to filters of the kit's 2-D constant-velocity problem (M-of-N tracks ``[x, y, vx, vy]``); detections
 are seen in position (linear model) or, for a filter with ``range_bearing_input``, in range and bearing.
@@ -33,7 +39,7 @@ from ..specs import FilterSpec
 from ..types import Gaussian, InputError, Scan, Scans
 
 __all__ = ["check_under_trackers", "under_trackers_applies", "UNDER_TRACKERS_REQUIRES", "state_leaves",
-           "same_leaves", "tracker_scene"]
+           "same_leaves", "tracker_scene", "check_each_tracker", "builtin_trackers"]
 
 UNDER_TRACKERS_REQUIRES = ("a filter of the kit's 2-D constant-velocity problem (neither position_doppler_3d nor "
                            "motion models of its own)")
@@ -239,12 +245,105 @@ def check_mofn(spec: FilterSpec, seed: int = 0) -> str:
             f"joined, confirmed ({dist:.2f} units off) and deleted")
 
 
+# -- 3. under every built-in tracker ----------------------------------------------------------------------------
+
+#: Pings at which every tracker that takes the filter must hold each target: A before its miss and at B's last
+#: detection, B at its last detection (after B's track joined A's, before B's deletion).
+HELD_PINGS = {"A": (A_MISS - 1, B_LAST), "B": (B_LAST,)}
+
+#: The filter capabilities a tracker may refuse a filter for, each with whether the filter must have it (True:
+#: ``stochastic``, a filter that draws random numbers where the tracker moment-matches or batches a mixture) or lack
+#: it (False: ``gaussian``).
+_REFUSAL_WORDS = {"gaussian": False, "stochastic": True}
+
+
+def builtin_trackers() -> dict:
+    """The built-in trackers (distribution ``workbench``), by name: ``mofn``, ``gnn``, ``jipda``, ``jpda``,
+    ``gm-phd``.  An installed third-party tracker is left out (the filter kit must not depend on what else is
+    installed; a tracker has its own kit, :func:`workbench.testing.run_tracker_checks`)."""
+    from ..plugins import BUILTIN_DISTRIBUTION
+    from .kit import _host
+
+    host = _host()
+    return {name: spec for name, spec in host.trackers.items()
+            if host.plugin_of("workbench_trackers", name).distribution == BUILTIN_DISTRIBUTION}
+
+
+def _scene_for(tracker, model, scans: Scans) -> Scans:
+    """The scene's detections as the tracker declares it takes them: Cartesian ``(x, y)`` for a tracker with the
+    ``cartesian_2d`` capability, else in the measurement model's own frame (``h`` of the detection's position)."""
+    if "cartesian_2d" in tracker.capabilities or model.frame == "cartesian-2d":
+        return scans
+    x = np.zeros(scans.z.shape[:-1] + (4,))
+    x[..., :2] = scans.z
+    z = model.h(x.reshape(-1, 4)).reshape(scans.z.shape[:-1] + (model.dim,))
+    return Scans(np.where(scans.valid[..., None], z, 0.0), scans.valid, scans.times)
+
+
+def _refusal_names_capability(spec: FilterSpec, message: str) -> str | None:
+    """The capability a refusal names that the filter lacks, or has and the tracker cannot take (``None``: the
+    refusal names no such capability).  The measurement model the kit builds for a ``range_bearing_input`` filter
+    (no ``H``) counts as that capability where the refusal names the model."""
+    low = message.lower()
+    for word, has in _REFUSAL_WORDS.items():
+        if word in low and (word in spec.capabilities) == has:
+            return word
+    if "range_bearing_input" in spec.capabilities and repr(_model(spec).name) in message:
+        return "range_bearing_input"
+    return None
+
+
+def check_each_tracker(spec: FilterSpec, seed: int = 0) -> str:
+    """The filter under every built-in tracker but M-of-N (which :func:`check_mofn` holds to more) on the scene of
+    :func:`tracker_scene`: a valid track log (:func:`workbench.testing.trackers.check_log`) in which each of A and B
+    is held by exactly one confirmed track within :data:`NEAR` at its pings of :data:`HELD_PINGS`; or a refusal by
+    ``InputError`` that names the filter's capability it refuses for."""
+    from ..tracking import CONFIRMED
+    from .trackers import check_log
+
+    base, a, b = tracker_scene(seed)
+    motion, model = _motion(), _model(spec)
+    ran, refused = [], []
+    for name, tracker in sorted(builtin_trackers().items()):
+        if name == "mofn":
+            continue
+        scans = _scene_for(tracker, model, base)
+        try:
+            log = tracker.run(scans, spec, motion, model, seed=seed, key=("kit-trackers", name))
+        except InputError as exc:
+            word = _refusal_names_capability(spec, str(exc))
+            if word is None:
+                raise AssertionError(f"tracker {name!r} refused filter {spec.name!r} without naming a capability "
+                                     f"the filter lacks (or has and the tracker cannot take): {exc}") from None
+            refused.append(f"{name} ({word})")
+            continue
+        except Exception as exc:  # noqa: BLE001 - the point of the check: name what broke, in one line
+            raise AssertionError(f"tracker {name!r} broke on filter {spec.name!r}: {type(exc).__name__}: {exc}") \
+                from None
+        problems = check_log(log, 1, SCENE_PINGS, 4, tracker.capabilities, f"the log of tracker {name!r}")
+        if problems:
+            raise AssertionError("; ".join(problems))
+        for label, target in (("A", a), ("B", b)):
+            for ping in HELD_PINGS[label]:
+                rows = (log.ping == ping) & (log.status == CONFIRMED)
+                d = np.linalg.norm(log.mean[rows, :2] - target[ping], axis=1)
+                if int(np.sum(d <= NEAR)) != 1:
+                    raise AssertionError(f"under tracker {name!r}, target {label} is not held by exactly one "
+                                         f"confirmed track within {NEAR} units at ping {ping} ({int(np.sum(d <= NEAR))}"
+                                         f" such tracks; nearest {float(d.min()) if d.size else np.inf:.3g} units)")
+        ran.append(name)
+    return (f"under {', '.join(ran) or 'no other tracker'}: A held at pings {HELD_PINGS['A']}, B at {HELD_PINGS['B']}"
+            + (f"; refused by name: {', '.join(refused)}" if refused else ""))
+
+
 def check_under_trackers(spec: FilterSpec) -> str:
-    """The filter-state contract: take / join exact on a batch of 4 (= n) items, and the filter under the M-of-N
-    tracker through a join, a missed detection and a deletion."""
+    """The filter-state contract: take / join exact on a batch of 4 (= n) items, the filter under the M-of-N
+    tracker through a join, a missed detection and a deletion, and under every other built-in tracker (GNN, JIPDA,
+    JPDA, GM-PHD) holding both targets, or refused by name for a capability."""
     try:
         first = check_contract(spec)
         second = check_mofn(spec)
     except InputError as exc:
         raise AssertionError(str(exc)) from None
-    return f"{first}; {second}"
+    third = check_each_tracker(spec)
+    return f"{first}; {second}; {third}"
