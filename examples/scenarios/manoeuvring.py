@@ -103,23 +103,37 @@ def nees_band(runs: int, n: int = 4, level: float = 0.95) -> tuple[float, float]
     return float(stats.chi2.ppf(a, n * runs) / runs), float(stats.chi2.ppf(1.0 - a, n * runs) / runs)
 
 
-def association(scenario: Scenario):
-    """The file's tracker: every scan's one detection (``direct``) or gated nearest neighbour."""
+#: How the IMM is gated in clutter: on its moment-matched mixture (the file's nearest neighbour) or on its modes'
+#: own predictions (:class:`workbench_filters.imm.ModeGatedNearestNeighbour`).
+IMM_GATES = ("mixture", "modes")
+
+
+def association(scenario: Scenario, imm_gates: str = "mixture"):
+    """The file's tracker: every scan's one detection (``direct``) or gated nearest neighbour; with
+    ``imm_gates="modes"`` (for an IMM only) the nearest neighbour gated on the IMM's modes."""
+    if imm_gates not in IMM_GATES:
+        raise InputError(f"imm_gates must be one of {', '.join(IMM_GATES)}, got {imm_gates!r}")
     if scenario.tracker == "direct":
         return Direct()
     if scenario.tracker == "nearest-neighbour":
+        if imm_gates == "modes":
+            from workbench_filters.imm import ModeGatedNearestNeighbour
+
+            return ModeGatedNearestNeighbour(scenario.gate)
         return NearestNeighbour(scenario.gate)
     raise InputError(f"{scenario.path}: the manoeuvring study runs the direct or nearest-neighbour tracker, not "
                      f"{scenario.tracker!r}")
 
 
 def evaluate(scenario: Scenario, runs: int, seed: int, steps: int | None = None, host: PluginHost | None = None,
-             only: tuple[str, ...] | None = None, imm=None) -> dict[str, dict]:
+             only: tuple[str, ...] | None = None, imm=None, imm_gates: str = "mixture") -> dict[str, dict]:
     """``{label: figures}`` of each filter over ``runs`` runs: ``rmse_m``, ``rmse_turns_m``, ``mean_nees``,
     ``nees_straight`` and ``nees_turns`` (the mean NEES over the scans on the straight legs and in the turns),
     ``nees_in_band`` (share of scans whose run-averaged NEES is inside its 95 % band), ``per_scan_nees (T,)``,
     ``band``, ``lost`` (share of runs ending more than :data:`LOST_M` off) and, with a gated tracker, ``updated``
-    (share of scans updated with a detection).  ``imm``: another IMM spec to run instead of the file's (tuning)."""
+    (share of scans updated with a detection).  ``imm``: another IMM spec to run instead of the file's (tuning);
+    ``imm_gates``: how the IMM (only) is gated in clutter (:data:`IMM_GATES`; the single-model filters keep the
+    file's nearest neighbour)."""
     host = host or load_host()
     states, scans, prior, turning = simulate(scenario, runs, seed, steps, host)
     model = host.sensor(scenario.sensor.plugin).configure(**scenario.sensor.params).measurement_model()
@@ -131,7 +145,8 @@ def evaluate(scenario: Scenario, runs: int, seed: int, steps: int | None = None,
     for label, (spec, motion) in compared.items():
         if only is not None and label not in only:
             continue
-        track = run(spec, scans, motion, model, association=association(scenario), prior=prior,
+        gates = imm_gates if label == IMM else "mixture"
+        track = run(spec, scans, motion, model, association=association(scenario, gates), prior=prior,
                     rng=generator(seed, "manoeuvring-filter", label))
         err = track.mean - states
         sq = np.sum(err[..., :2] ** 2, axis=-1)
