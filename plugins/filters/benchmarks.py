@@ -118,26 +118,7 @@ def filter_runner(spec, batch: int, steps: int, seed: int = 0):
     """A function running ``spec`` over ``steps`` steps of a batch from a fixed initial state (predict +
     update + estimate each step, through the filter's fused ``step`` where it gives one, as the time loop runs it),
     and one returning the position RMSE (m) of its last run."""
-    truth, scans, prior, motion, model = problem(batch, steps, seed)
-    scan_list = [scans.scan(k).for_filter() for k in range(steps)]
-    start = spec.init(prior, generator(seed, "bench", "core", "init"))
-    means = []
-
-    def run():
-        rng = generator(seed, "bench", "core", "run")
-        state = start
-        means.clear()
-        for k in range(steps):
-            if k > 0 and spec.step is not None:
-                state, est, _ = spec.step(state, motion, scan_list[k], model, rng)
-                means.append(est.mean)
-                continue
-            if k > 0:
-                state = spec.predict(state, motion, rng)
-            state = spec.update(state, scan_list[k], model, rng)
-            means.append(spec.estimate(state).mean)
-
-    return run, lambda: _rmse(truth, means)
+    return _problem_runner(spec, problem(batch, steps, seed), seed, "core")
 
 
 def pf_runner(host, particles: int, seed: int = 0):

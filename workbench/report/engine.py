@@ -255,20 +255,29 @@ def filter_request(request: str, host: PluginHost) -> list[tuple[str, "FilterRef
     refused as a sensor), values checked against its declarations, no filter added twice or removed twice (in any
     spelling; ``ekf,-ekf`` adds and then removes it).
     """
-    from ..references import FILTER_FORMS, filter_reference, refuse_repeats, require_entries
+    from ..references import FILTER_FORMS, filter_reference
+
+    return _signed_references(request, "--filters", "filter", FILTER_FORMS,
+                               lambda text: filter_reference(host, text, f"--filters {text!r}"))
+
+
+def _signed_references(request: str, option: str, kind: str, forms: str, reference) -> list:
+    """``option``'s comma-separated entries as ``[(sign, reference(text)), ...]`` (sign ``"+"``, ``"-"`` for
+    ``-`` or ``~``, or ``""``): not empty, no empty entry, no sign without a name, none added or removed twice."""
+    from ..references import refuse_repeats, require_entries
 
     parts = split_references(request)
-    require_entries(parts, "--filters", "filter", FILTER_FORMS)
+    require_entries(parts, option, kind, forms)
     out = []
     for i, part in enumerate(parts):
         sign = {"+": "+", "-": "-", "~": "-"}.get(part[:1], "")
         text = part[1:].strip() if sign else part
         if sign and not text:
-            raise InputError(f"--filters: entry {i + 1} of {request!r} ({part!r}) has no filter name after "
+            raise InputError(f"{option}: entry {i + 1} of {request!r} ({part!r}) has no {kind} name after "
                              f"{part[0]!r}")
-        out.append((sign, filter_reference(host, text, f"--filters {text!r}")))
-    refuse_repeats(((ref.text, ref.key) for sign, ref in out if sign != "-"), "--filters", "filter")
-    refuse_repeats(((sign + ref.text, ref.key) for sign, ref in out if sign == "-"), "--filters", "filter")
+        out.append((sign, reference(text)))
+    refuse_repeats(((ref.text, ref.key) for sign, ref in out if sign != "-"), option, kind)
+    refuse_repeats(((sign + ref.text, ref.key) for sign, ref in out if sign == "-"), option, kind)
     return out
 
 
@@ -342,21 +351,8 @@ def tracker_request(request: str, host: PluginHost) -> list[tuple[str, "FilterRe
     reference), ...]``, the rules of ``--filters`` (:func:`filter_request`) for installed trackers: not empty, no
     empty entry, every name an installed tracker, values checked against its declarations, none added or removed
     twice (in any spelling)."""
-    from ..references import refuse_repeats, require_entries
-
-    parts = split_references(request)
-    require_entries(parts, "--trackers", "tracker", TRACKER_FORMS)
-    out = []
-    for i, part in enumerate(parts):
-        sign = {"+": "+", "-": "-", "~": "-"}.get(part[:1], "")
-        text = part[1:].strip() if sign else part
-        if sign and not text:
-            raise InputError(f"--trackers: entry {i + 1} of {request!r} ({part!r}) has no tracker name after "
-                             f"{part[0]!r}")
-        out.append((sign, tracker_reference(host, text, f"--trackers {text!r}")))
-    refuse_repeats(((ref.text, ref.key) for sign, ref in out if sign != "-"), "--trackers", "tracker")
-    refuse_repeats(((sign + ref.text, ref.key) for sign, ref in out if sign == "-"), "--trackers", "tracker")
-    return out
+    return _signed_references(request, "--trackers", "tracker", TRACKER_FORMS,
+                               lambda text: tracker_reference(host, text, f"--trackers {text!r}"))
 
 
 def resolve_trackers(default: Sequence[str], request: str | None, host: PluginHost,
