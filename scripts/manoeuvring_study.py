@@ -8,12 +8,13 @@ scan); in clutter also the share of scans updated with a detection (the file's n
 
     .venv/bin/python scripts/manoeuvring_study.py            # 500 runs, clean and clutter (a few minutes)
     .venv/bin/python scripts/manoeuvring_study.py --runs 100 --clean
-    .venv/bin/python scripts/manoeuvring_study.py --seed 24601 --clutter --imm-gates modes --imm-only
+    .venv/bin/python scripts/manoeuvring_study.py --seed 24601 --clutter --imm-gates mixture --imm-only
     .venv/bin/python scripts/manoeuvring_study.py --imm 'turn_rate=3 deg/s, turn_sigma_a=0.4, switch_probability=0.05'
 
 ``--imm`` replaces the file's IMM parameters (the CT-only filter keeps the registered imm's turn rate and noise);
-``--imm-gates modes`` gates the IMM (only) on its modes' own predictions in clutter
-(``workbench_filters.imm.ModeGatedNearestNeighbour``; docs/imm.md, "Gating on the modes").
+In clutter the IMM is gated on its modes' own predictions (the file's nearest neighbour: every IMM declares
+``FilterSpec.gate_candidates``; docs/imm.md, "Gating on the modes"); ``--imm-gates mixture`` gates it on its
+moment-matched mixture instead (``NearestNeighbour(gate, filter_candidates=False)``), as before that default.
 """
 
 from __future__ import annotations
@@ -42,8 +43,9 @@ def main(argv=None) -> int:
     parser.add_argument("--clutter", action="store_true", help="only the cluttered scenario")
     parser.add_argument("--imm", default="", help="the IMM's parameters instead of the file's, e.g. "
                         "'turn_rate=3 deg/s, turn_sigma_a=0.4, switch_probability=0.05'")
-    parser.add_argument("--imm-gates", default="mixture", choices=("mixture", "modes"),
-                        help="in clutter, gate the IMM on its mixture (the file's nearest neighbour) or on its modes")
+    parser.add_argument("--imm-gates", default="modes", choices=("mixture", "modes"),
+                        help="in clutter, gate the IMM on its modes (the default: the file's nearest neighbour) or "
+                        "on its moment-matched mixture")
     parser.add_argument("--imm-only", action="store_true", help="run only the IMM (not the single-model filters)")
     parser.add_argument("--workers", type=int, default=1, help="2: the clean and the cluttered study in parallel")
     args = parser.parse_args(argv)

@@ -146,3 +146,115 @@ def test_nn_role_rejects_bad_settings():
         NearestNeighbour(gate=0.0)
     with pytest.raises(InputError, match="reinit_after"):
         NearestNeighbour(reinit_after=0)
+
+
+# -- a filter's own candidate choice (FilterSpec.gate_candidates) and the roles' typed state ------------------------
+
+
+def _last_valid_row(seen):
+    """A filter's ``gate_candidates`` written plainly: every run's last valid row (-1 where none), recording the gate
+    it was given."""
+
+    def choose(state, scan, model, gate):
+        seen.append(gate)
+        out = np.full(scan.valid.shape[0], -1)
+        for b in range(scan.valid.shape[0]):
+            rows = np.flatnonzero(scan.valid[b])
+            if rows.size:
+                out[b] = rows[-1]
+        return out
+
+    return choose
+
+
+def test_nn_uses_the_filters_own_choice_where_it_declares_one_and_not_when_asked(host):
+    import dataclasses
+
+    # frame 1: the target near the prediction first, a far clutter point last (outside any chi-square gate)
+    scans = frames([[], [(505.0, -4.2, 0), (900.0, 3.0, CLUTTER)], []])
+    seen = []
+    kf = dataclasses.replace(host.filter("kf"), gate_candidates=_last_valid_row(seen))
+    own = nn_track(kf, PRIOR, scans, gate=GATE_99)
+    assert seen == [GATE_99, GATE_99]  # asked at scans 1 and 2, with the role's gate
+    np.testing.assert_array_equal(own.records["chosen"][0], [-1, 1, -1])
+    assert own.records["updated"][0].tolist() == [False, True, False]
+    # the update is the Kalman update with the chosen candidate; NIS its distance under S = P- + R
+    x_pred = MOTION.F @ PRIOR.mean[0]
+    P_pred = MOTION.F @ PRIOR.cov[0] @ MOTION.F.T + MOTION.Q
+    S = P_pred + MODEL.R
+    nu = np.array([900.0, 3.0]) - x_pred
+    assert own.records["nis"][0, 1] == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-12)
+    np.testing.assert_allclose(own.mean[0, 1], x_pred + P_pred @ np.linalg.solve(S, nu), rtol=1e-10)
+    np.testing.assert_allclose(own.records["chosen_z"][0, 1], [900.0, 3.0])
+    assert np.isnan(own.records["nis"][0, 2])  # an empty scan: coasting, as the nearest neighbour does
+    # filter_candidates=False: the nearest under N(x-, P-), the hook never asked
+    seen.clear()
+    plain = run(kf, scans, MOTION, MODEL, association=NearestNeighbour(GATE_99, filter_candidates=False),
+                prior=PRIOR)
+    assert seen == [] and plain.records["chosen"][0, 1] == 0
+
+
+@pytest.mark.parametrize("bad, message", [
+    (lambda s, scan, m, g: np.zeros(2, dtype=int), r"one integer row per run, shape \(1,\)"),
+    (lambda s, scan, m, g: np.zeros(1), r"one integer row per run"),
+    (lambda s, scan, m, g: np.array([2]), r"rows outside -1 \.\. 1: \[2\]"),
+    (lambda s, scan, m, g: np.array([1]), "chose an invalid"),
+    ("modes", "must be a function"),
+])
+def test_a_wrong_gate_candidates_is_refused_naming_the_filter(host, bad, message):
+    import dataclasses
+
+    scans = frames([[(500.0, -4.0, 0), (600.0, 0.0, CLUTTER)], [(505.0, -4.2, 0)]])  # frame 1: row 1 empty
+    kf = dataclasses.replace(host.filter("kf"), name="kf-own", gate_candidates=bad)
+    with pytest.raises(InputError, match=f"filter 'kf-own'.*{message}"):
+        nn_track(kf, PRIOR, scans, gate=GATE_99)
+
+
+def test_nn_filter_candidates_must_be_a_bool():
+    with pytest.raises(InputError, match="filter_candidates must be True or False"):
+        NearestNeighbour(GATE_99, filter_candidates="modes")
+
+
+def test_a_role_keeps_its_own_typed_state_and_a_dict_is_refused(host):
+    from dataclasses import dataclass
+
+    from workbench.tracking import Direct
+    from workbench.tracking.single import RoleState
+
+    @dataclass
+    class Counted(RoleState):
+        predicts: int = 0
+
+    class CountingRole(Direct):
+        state_class = Counted
+
+        def begin(self, ctx, prior, first):
+            return prior, Counted()
+
+        def predict(self, carry, motion, k):
+            carry.role.predicts += 1
+            return super().predict(carry, motion, k)
+
+        def finish(self, carry):
+            return carry.role.predicts
+
+    scans = frames([[(500.0, -4.0, 0)]] * 4)
+    assert run(host.filter("kf"), scans, MOTION, MODEL, association=CountingRole(), prior=PRIOR) == 3
+
+    class DictRole(Direct):
+        def begin(self, ctx, prior, first):
+            return prior, {"predicts": 0}
+
+    with pytest.raises(InputError, match="DictRole: begin\\(\\) must return its state as a RoleState"):
+        run(host.filter("kf"), scans, MOTION, MODEL, association=DictRole(), prior=PRIOR)
+
+
+def test_a_restart_needs_the_state_to_be_the_measurement(host):
+    from workbench.models import constant_velocity
+
+    position = linear_measurement(np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]]), np.eye(2))
+    prior = Gaussian(np.array([[0.0, 0.0, 1.0, 1.0]]), np.eye(4)[None])
+    scans = frames([[(0.0, 0.0, 0)]] + [[(500.0, 500.0, CLUTTER)]] * 3)
+    with pytest.raises(InputError, match="the state \\(4 components\\) must be the measured quantities \\(2\\)"):
+        run(host.filter("kf"), scans, constant_velocity(2, 0.5, 0.1), position,
+            association=NearestNeighbour(GATE_99, reinit_after=2), prior=prior)

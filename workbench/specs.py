@@ -326,6 +326,16 @@ class FilterSpec(_Configurable):
         :class:`~workbench.tracking.single.Direct` association, which updates with the scan whatever the
         prediction).  A spec derived with another ``predict``, ``update`` or ``estimate``
         (``dataclasses.replace``) must give its own ``step`` or ``step=None``.
+    gate_candidates : callable or None
+        Optional association hook: ``gate_candidates(state, scan, model, gate) -> index (B,)``, the row of ``scan``
+        (``z (B, M, m)``, ``valid (B, M)``) each batch item is to be updated with, chosen on the filter's own
+        predicted state ``state`` (-1 where no valid row lies inside the gate; ``gate`` a chi-square value on the
+        squared Mahalanobis distance, or ``None``: no gate).  The single-target
+        :class:`~workbench.tracking.NearestNeighbour` uses it where given (unless asked for
+        ``filter_candidates=False``), instead of the nearest candidate under the moment-matched ``N(x-, P-)`` of
+        ``estimate``: a filter whose prediction is not one Gaussian (the IMM: a mixture of its modes) gates on
+        its own.  The result is checked (shape, integer, valid rows) and refused by name.  ``None`` (the default):
+        the moment-matched gate.
     capabilities : frozenset of str
         Keys of :data:`CAPABILITIES`.
     params : mapping
@@ -375,6 +385,7 @@ class FilterSpec(_Configurable):
     take: Callable[[Any, np.ndarray], Any] | None = None
     join: Callable[[Sequence[Any]], Any] | None = None
     step: Callable[..., Any] | None = None
+    gate_candidates: Callable[..., Any] | None = None
 
     kind = "filter"
 

@@ -103,24 +103,23 @@ def nees_band(runs: int, n: int = 4, level: float = 0.95) -> tuple[float, float]
     return float(stats.chi2.ppf(a, n * runs) / runs), float(stats.chi2.ppf(1.0 - a, n * runs) / runs)
 
 
-#: How the IMM is gated in clutter: on its moment-matched mixture (the file's nearest neighbour) or on its modes'
-#: own predictions (:class:`workbench_filters.imm.ModeGatedNearestNeighbour`).
+#: How the IMM is gated in clutter: on its modes' own predictions (the file's nearest neighbour, which gates every
+#: IMM so: it declares ``FilterSpec.gate_candidates``) or on its moment-matched mixture
+#: (``NearestNeighbour(gate, filter_candidates=False)``).
 IMM_GATES = ("mixture", "modes")
 
 
 def association(scenario: Scenario, imm_gates: str = "mixture"):
     """The file's tracker: every scan's one detection (``direct``) or gated nearest neighbour; with
-    ``imm_gates="modes"`` (for an IMM only) the nearest neighbour gated on the IMM's modes."""
+    ``imm_gates="mixture"`` the nearest neighbour gated on a filter's moment-matched prediction (for an IMM its
+    mixture), with ``"modes"`` the file's own nearest neighbour (an IMM gated on its modes; any other filter the
+    same as ``"mixture"``)."""
     if imm_gates not in IMM_GATES:
         raise InputError(f"imm_gates must be one of {', '.join(IMM_GATES)}, got {imm_gates!r}")
     if scenario.tracker == "direct":
         return Direct()
     if scenario.tracker == "nearest-neighbour":
-        if imm_gates == "modes":
-            from workbench_filters.imm import ModeGatedNearestNeighbour
-
-            return ModeGatedNearestNeighbour(scenario.gate)
-        return NearestNeighbour(scenario.gate)
+        return NearestNeighbour(scenario.gate, filter_candidates=imm_gates == "modes")
     raise InputError(f"{scenario.path}: the manoeuvring study runs the direct or nearest-neighbour tracker, not "
                      f"{scenario.tracker!r}")
 
@@ -133,7 +132,8 @@ def evaluate(scenario: Scenario, runs: int, seed: int, steps: int | None = None,
     ``band``, ``lost`` (share of runs ending more than :data:`LOST_M` off) and, with a gated tracker, ``updated``
     (share of scans updated with a detection).  ``imm``: another IMM spec to run instead of the file's (tuning);
     ``imm_gates``: how the IMM (only) is gated in clutter (:data:`IMM_GATES`; the single-model filters keep the
-    file's nearest neighbour)."""
+    file's nearest neighbour).  The default ``"mixture"`` is the gate scripts/imm_tuning.py's recorded rule v2 ran
+    with; scripts/manoeuvring_study.py passes ``"modes"`` (the file's nearest neighbour) unless told otherwise."""
     host = host or load_host()
     states, scans, prior, turning = simulate(scenario, runs, seed, steps, host)
     model = host.sensor(scenario.sensor.plugin).configure(**scenario.sensor.params).measurement_model()

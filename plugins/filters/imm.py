@@ -14,9 +14,10 @@ With mode probabilities ``mu (B, r)``, mode means ``x (B, r, n)`` and covariance
     x_j, P_j  = the mode filter's update of N(x-_j, P-_j)
 
 and the estimate is the moment-matched mixture ``x = sum_j mu_j x_j``,
-``P = sum_j mu_j (P_j + (x_j - x)(x_j - x)^T)`` (after a predict with the predicted probabilities ``cbar``, so
-gating and association use the IMM's own combined prediction).  Mixing, likelihoods and combination are vectorised
-over the batch and the modes; the only Python loop is over the ``r`` modes' predict and update.
+``P = sum_j mu_j (P_j + (x_j - x)(x_j - x)^T)`` (after a predict with the predicted probabilities ``cbar``: the
+IMM's own combined prediction; the nearest-neighbour association gates on the modes themselves, see below).
+Mixing, likelihoods and combination are vectorised over the batch and the modes; the only Python loop is over the
+``r`` modes' predict and update.
 
 Mode filters: mixing goes through each mode filter's ``init(Gaussian)`` and ``estimate() -> Gaussian``, so any
 Gaussian filter serves (a :class:`~workbench.specs.FilterSpec` with the ``gaussian`` capability, or the name of an
@@ -46,10 +47,11 @@ tuning seeds lies inside its chi-square band first, by the scan-by-scan NEES sco
 the filter kit; ``scripts/imm_tuning.py``, rule v1).  Rule v2, which also requires no lost run in 2,500 cluttered
 tuning runs, admitted none of the candidates it reached, so these stay (docs/imm.md).  :func:`make_imm` builds any other.  See ``docs/imm.md``.
 
-Association in clutter: the time loop's :class:`~workbench.tracking.NearestNeighbour` gates an IMM on its combined
-(moment-matched) prediction; :class:`ModeGatedNearestNeighbour` gates it on its modes' own predictions (a detection
-inside any mode's gate; the nearest by the predicted mixture's likelihood), which keeps the runs the combined gate
-loses when the modes disagree (docs/imm.md, "Why two runs are lost in clutter").
+Association in clutter: every IMM declares ``FilterSpec.gate_candidates`` (:func:`gate_on_modes`), so the time
+loop's :class:`~workbench.tracking.NearestNeighbour` gates it on its modes' own predictions (a detection inside any
+mode's gate; the most likely under the predicted mixture), which keeps the runs a gate on the combined
+(moment-matched) prediction loses when the modes disagree (docs/imm.md, "Why two runs are lost in clutter");
+``NearestNeighbour(gate, filter_candidates=False)`` gates it on the combined prediction.
 
 Innovations (the ``innovations`` capability): ``update(state, scan, model, rng, innovations=True)`` returns
 ``(state, Innovations)`` (:class:`workbench.kalman_core.Innovations`) with, per item, the moments of the modes'
@@ -80,7 +82,8 @@ from workbench.tracking import NearestNeighbour
 from workbench.types import Gaussian, InputError, Scan
 
 __all__ = ["IMMState", "LOOP", "make_imm", "make_default_imm", "imm_mode_probabilities",
-           "IMM_PARAMETERS", "LIKELIHOODS", "ModeGatedNearestNeighbour", "bench"]
+           "IMM_PARAMETERS", "LIKELIHOODS", "ModeGatedNearestNeighbour", "gate_on_modes", "mode_gated_candidate",
+           "bench"]
 
 #: A mode given as this string is the motion model the time loop hands predict (the scenario's own).
 LOOP = "loop"
@@ -445,20 +448,32 @@ def make_imm(modes: Sequence[MotionModel | str], transition, mode_filter: Any = 
                f"{params.get('mode_filter', filters[0].name)} per mode")
     return FilterSpec(name=name, summary=summary, init=init, predict=predict, update=update, estimate=_estimate,
                       capabilities=frozenset(caps), params=params, diagnostics=diagnostics, parameters=parameters,
-                      build=build)
+                      build=build, gate_candidates=gate_on_modes)
 
 
 # -- association on the modes' own predictions ----------------------------------------------------------
 
 
-class ModeGatedNearestNeighbour(NearestNeighbour):
-    """Gated nearest-neighbour association for an IMM, on the modes' own predicted measurements.
+def gate_on_modes(state: IMMState, scan: Scan, model: MeasurementModel, gate: float | None) -> np.ndarray:
+    """Every IMM's ``FilterSpec.gate_candidates``: the candidate :func:`mode_gated_candidate` chooses per run on
+    the modes' own predictions, ``index (B,)`` (-1: none inside any mode's gate; ``gate=None``: no gate, the most
+    likely valid candidate under the predicted mixture)."""
+    if not isinstance(state, IMMState):
+        raise InputError(f"gating on an IMM's modes needs an IMM state, got {type(state).__name__}")
+    return mode_gated_candidate(scan, state, model, math.inf if gate is None else gate)[0]
 
-    :class:`~workbench.tracking.NearestNeighbour` gates on the IMM's moment-matched mixture ``N(x, P)``; where the
-    modes disagree (a turn the quiet mode does not follow), that single Gaussian can leave the target's detection
-    outside the gate although it lies well inside the gate of the mode that follows the target (docs/imm.md, "Why
-    two runs are lost in clutter").  Here, per run and scan ``k >= 1``, with the predicted mode probabilities
-    ``cbar_j`` and each mode's own prediction ``N(x_j, P_j)``::
+
+class ModeGatedNearestNeighbour(NearestNeighbour):
+    """Gated nearest-neighbour association for an IMM, on the modes' own predicted measurements: now what
+    :class:`~workbench.tracking.NearestNeighbour` does for every IMM (the IMM declares
+    ``FilterSpec.gate_candidates`` = :func:`gate_on_modes`); this class also requires a gate and refuses, by name,
+    a filter whose state is not an :class:`IMMState`.
+
+    ``NearestNeighbour(gate, filter_candidates=False)`` gates the IMM on its moment-matched mixture ``N(x, P)``
+    instead; where the modes disagree (a turn the quiet mode does not follow), that single Gaussian can leave the
+    target's detection outside the gate although it lies well inside the gate of the mode that follows the target
+    (docs/imm.md, "Why two runs are lost in clutter").  On the modes, per run and scan ``k >= 1``, with the predicted
+    mode probabilities ``cbar_j`` and each mode's own prediction ``N(x_j, P_j)``::
 
         z^_j = h(x_j),  S_j = H_j P_j H_j^T + R       (H_j: the model's H, or its Jacobian at x_j)
         d2_ij = (z_i - z^_j)^T S_j^-1 (z_i - z^_j)     (residuals wrapped by the model)
@@ -467,8 +482,7 @@ class ModeGatedNearestNeighbour(NearestNeighbour):
 
     Everything else (coasting, ``reinit_after``, the records) is the nearest-neighbour role's; ``nis`` records
     the chosen candidate's distance under the mixture's ``S`` (the role's ``innovation_cov``), as there.  Where
-    the scan carries each candidate's covariance, ``S_ij = H_j P_j H_j^T + R_i``.  A filter whose state is not
-    an :class:`IMMState` is refused by name.
+    the scan carries each candidate's covariance, ``S_ij = H_j P_j H_j^T + R_i``.
     """
 
     def __init__(self, gate: float, prior_index: np.ndarray | None = None, reinit_after: int | None = None):
@@ -476,42 +490,14 @@ class ModeGatedNearestNeighbour(NearestNeighbour):
             raise InputError("ModeGatedNearestNeighbour needs a gate (a chi-square value such as 13.8)")
         super().__init__(gate, prior_index, reinit_after)
 
+    def candidate_choice(self, ctx):
+        return gate_on_modes
+
     def associate(self, carry, scan, k, predicted):
-        if k == 0:
-            return super().associate(carry, scan, k, predicted)
-        state, ctx, rec = carry.state, carry.ctx, carry.records
-        if not isinstance(state, IMMState):
-            raise InputError(f"ModeGatedNearestNeighbour gates on an IMM's modes; filter {ctx.filter.name!r} keeps "
-                             f"no IMM state (use NearestNeighbour)")
-        index, d2 = mode_gated_candidate(scan, state, ctx.model, self.gate)
-        B = ctx.batch
-        rows = np.arange(B)
-        found = index >= 0
-        pick = np.maximum(index, 0)
-        step = None
-        # NIS as the nearest-neighbour role records it: the chosen candidate's distance under the mixture's S
-        S = carry.extra["S"]
-        if scan.cov is not None:
-            S = (S - ctx.model.R)[:, None] + scan.cov
-            S = S[rows, pick]
-        z = scan.z[rows, pick] if scan.z.shape[1] else np.zeros((B, ctx.model.dim))
-        nu = ctx.model.residual(z, carry.extra["z_hat"])
-        nis = np.einsum("bi,bi->b", nu, np.linalg.solve(np.where(found[:, None, None], S, np.eye(S.shape[-1])),
-                                                        nu[..., None])[..., 0])
-        if found.any():
-            cov = None if scan.cov is None else np.where(found[:, None, None], scan.cov[rows, pick],
-                                                         np.eye(z.shape[-1]))
-            density = None if scan.clutter_density is None else scan.clutter_density[rows, pick]
-            step = Scan.single(z, found, time=scan.time, cov=cov, clutter_density=density)
-            rec["chosen_z"][found, k] = z[found]
-            if scan.cov is not None:
-                rec["innovation_cov"][found, k] = S[found]
-        rec["chosen"][:, k] = index
-        rec["updated"][:, k] = found
-        rec["nis"][:, k] = np.where(found, nis, np.nan)
-        carry.extra["misses"] = np.where(found, 0, carry.extra["misses"] + 1)
-        carry.extra["scan"] = scan
-        return step, ctx.model
+        if k > 0 and not isinstance(carry.state, IMMState):
+            raise InputError(f"ModeGatedNearestNeighbour gates on an IMM's modes; filter {carry.ctx.filter.name!r} "
+                             f"keeps no IMM state (use NearestNeighbour)")
+        return super().associate(carry, scan, k, predicted)
 
 
 def mode_gated_candidate(scan: Scan, state: IMMState, model: MeasurementModel,

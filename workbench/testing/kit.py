@@ -27,7 +27,7 @@ stands for (:func:`check_step_matches_three_calls`).
 from __future__ import annotations
 
 import re
-from dataclasses import fields, is_dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -37,6 +37,7 @@ from ..models import MeasurementModel, constant_velocity, linear_measurement, ra
 from ..rng import generator
 from ..specs import FilterSpec
 from ..tracking import Direct, run
+from ..tracking.single import RoleState
 from ..trajectory import sample_motion
 from ..types import Gaussian, Scan, Scans, Truth, _validated
 from ._common import Check, Outcome, Outcomes, run_kit
@@ -508,21 +509,32 @@ PARTIAL_MASK = np.array([
 ], dtype=bool)
 
 
+@dataclass
+class _PredictedCov(RoleState):
+    """:class:`_RecordPredicted`'s state: ``predicted_cov (B, T, n, n)``, the covariance of the filter's estimate
+    of the predicted state before each scan."""
+
+    predicted_cov: np.ndarray
+
+
 class _RecordPredicted(Direct):
     """The ``Direct`` association, also recording the covariance of the filter's estimate of each predicted state
     (the :class:`~workbench.tracking.Track` keeps the predicted mean only); ``finish`` returns ``(track,
     predicted_cov (B, T, n, n))``."""
 
-    def started(self, carry, prior):
-        carry.extra["predicted_cov"] = np.empty_like(carry.cov)
+    state_class = _PredictedCov
+
+    def begin(self, ctx, prior, first):
+        prior, _ = super().begin(ctx, prior, first)
+        return prior, _PredictedCov(np.empty((ctx.batch, ctx.steps, prior.dim, prior.dim)))
 
     def predicted_mean(self, carry, k):
         est = carry.ctx.filter.estimate(carry.state)
-        carry.extra["predicted_cov"][:, k] = est.cov
+        carry.role.predicted_cov[:, k] = est.cov
         return est.mean
 
     def finish(self, carry):
-        return super().finish(carry), carry.extra["predicted_cov"]
+        return super().finish(carry), carry.role.predicted_cov
 
 
 def check_partially_measured_batch(spec: FilterSpec) -> str:
