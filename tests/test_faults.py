@@ -144,6 +144,17 @@ def test_a_filter_spec_missing_a_function_makes_its_plugin_broken():
     assert "kf" in host.filters
 
 
+def test_a_filter_spec_whose_optional_hook_is_not_a_function_makes_its_plugin_broken():
+    import dataclasses
+
+    kf = load_host().filter("kf")
+    bad = dataclasses.replace(kf, name="kf-bad-gate", gate_candidates=13.8)
+    host = load_host(extra_plugins=[("badgate", SimpleNamespace(workbench_filters=hookimpl(lambda: [bad])))])
+    info = next(p for p in host.plugins if p.name == "badgate")
+    assert info.status == "broken" and "optional 'gate_candidates' is neither a function nor None" in info.error
+    assert "kf" in host.filters and "kf-bad-gate" not in host.filters
+
+
 # -- 2. unbounded requests are refused before any allocation, naming the key and the memory --------------------
 
 

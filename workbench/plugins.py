@@ -429,6 +429,10 @@ REQUIRED_FUNCTIONS = {FilterSpec: ("init", "predict", "update", "estimate"), Sen
                       RecipeSpec: ("tasks",), BenchmarkSpec: ("run",)}
 
 
+#: The optional functions of a kind of component: ``None`` or a function (checked at load).
+OPTIONAL_FUNCTIONS = {FilterSpec: ("take", "join", "step", "gate_candidates", "diagnostics")}
+
+
 def _declaration_problem(spec) -> str:
     """What is wrong with a component's functions or parameter declarations, or ``""``.
 
@@ -438,6 +442,10 @@ def _declaration_problem(spec) -> str:
     for name in REQUIRED_FUNCTIONS.get(type(spec), ()):
         if not callable(getattr(spec, name, None)):
             return f"its {name!r} is not a function (got {type(getattr(spec, name, None)).__name__})"
+    for name in OPTIONAL_FUNCTIONS.get(type(spec), ()):
+        fn = getattr(spec, name, None)
+        if fn is not None and not callable(fn):
+            return f"its optional {name!r} is neither a function nor None (got {type(fn).__name__})"
     if isinstance(spec, FilterSpec):  # a misspelt capability would silently switch kit checks off
         unknown = sorted(set(spec.capabilities) - set(CAPABILITIES))
         if unknown:
