@@ -233,6 +233,52 @@ def test_parameter_tables_hold_names_types_and_descriptions_in_their_columns(sit
             f"{ident}: parameter {pname!r} shows {kind!r} as its type"
 
 
+def _documented_objects():
+    """``(dotted name, object)`` of every public function, class and method of the ``workbench`` package."""
+    import pkgutil
+
+    names = ["workbench"] + [m.name for m in pkgutil.walk_packages(workbench.__path__, "workbench.")]
+    for module_name in names:
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError:  # an optional backend (Taichi, Numba) missing here
+            continue
+        for name, value in vars(module).items():
+            if name.startswith("_") or getattr(value, "__module__", None) != module_name:
+                continue
+            yield f"{module_name}.{name}", value
+            if inspect.isclass(value):
+                for member, fn in vars(value).items():
+                    if not member.startswith("_") and callable(fn):
+                        yield f"{module_name}.{name}.{member}", fn
+
+
+_SECTION = re.compile(r"^(Parameters|Attributes|Returns|Other Parameters)\n-+\n(.*?)(?=\n\n[A-Z][A-Za-z ]+\n-+\n|\Z)",
+                      re.S | re.M)
+
+
+def test_every_numpydoc_item_keeps_its_description_out_of_the_type_column():
+    """Without a site build: in every public docstring, each item line of a Parameters, Attributes or Returns
+    section is ``name : type`` with a type, not a sentence (the renderer puts whatever follows `` : `` in the type
+    column, so ``path : the file to write`` shows the description as a type and leaves the description empty)."""
+    problems = []
+    for ident, obj in _documented_objects():
+        doc = inspect.getdoc(obj) or ""
+        for section in _SECTION.finditer(doc):
+            for line in section.group(2).splitlines():
+                if not line or line.startswith(" "):
+                    continue
+                item = re.match(r"^([\w*]+(?:, [\w*]+)*)\s*:\s*(.*)$", line)
+                if item is None:
+                    continue
+                kind = item.group(2).strip()
+                if " : " not in line and not line.rstrip().endswith(" :"):
+                    problems.append(f"{ident}: {line!r} (write 'name : type')")
+                elif kind.lower().startswith(("the ", "a ", "an ")) or kind.endswith("."):
+                    problems.append(f"{ident}: {line!r} (a sentence in the type column)")
+    assert not problems, "\n".join(problems)
+
+
 # ---- the Griffe extension (docs/griffe_roles.py) on a small package, without a site build ---------------------------
 
 ROLES_PACKAGE = {

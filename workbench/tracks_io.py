@@ -302,18 +302,23 @@ def write_track_log(path, log: TrackLog, times, *, motion: MotionModel | None = 
 
     Parameters
     ----------
-    path : the file to write
-    log : the tracker's log, rows ``(R,)``
+    path : str or os.PathLike
+        The file to write.
+    log : TrackLog
+        The tracker's log, rows ``(R,)``.
     times : array (T,)
         The time of each step (scan) in seconds, ``T = log.pings``.
-    motion : the tracker's motion model, for the names and units of the state (:func:`state_layout`)
-    names, units : the state components' names and units, overriding the motion model's layout
+    motion : MotionModel, optional
+        The tracker's motion model, for the names and units of the state (:func:`state_layout`).
+    names, units : sequence of str, optional
+        The state components' names and units, overriding the motion model's layout.
     cov : array (R, n, n), optional
         Each row's state covariance; by default the log's own (``TrackLog.cov``, where the tracker keeps it).
     existence : array (R,), optional
         Each row's probability of existence (or PHD weight); by default the log's own (``TrackLog.existence``,
         where the tracker has one): the ``existence`` column.
-    notes : free text lines for the header
+    notes : sequence of str, optional
+        Free text lines for the header.
     """
     n = log.mean.shape[1] if log.mean.ndim == 2 else 0
     names, units = state_layout(n, motion, names, units)

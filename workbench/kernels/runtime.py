@@ -84,13 +84,14 @@ def taichi_available_arches() -> tuple[str, ...]:
 def ensure_taichi(arch: str = "cpu") -> str:
     """Start Taichi on ``arch`` unless it already runs there; return the arch in use.
 
-    Parameters
-    ----------
-    arch : a name of :data:`ARCHES` (the backend policy's list).
-
     ``"auto"`` keeps whatever runtime is already up, else tries the GPUs and falls back to the CPU
     with a one-line notice.  Asking for a different arch than the running one restarts Taichi
     (``ti.init`` resets the runtime; kernels recompile on their next launch).
+
+    Parameters
+    ----------
+    arch : str
+        A name of :data:`ARCHES` (the backend policy's list).
     """
     if arch not in ARCHES:
         raise ValueError(f"unknown Taichi arch {arch!r}; expected one of {', '.join(ARCHES)}")
