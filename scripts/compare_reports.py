@@ -2,7 +2,7 @@
 """Compare the numbers of two report folders (``workbench report --out A`` and ``--out B``), timings aside.
 
 For every paper in both folders: every table of ``summary.json`` cell by cell, and every figure's data
-(``paperNNN/FIG.npz``) array by array.  Numbers must agree to ``--rtol`` (default 1e-9 relative, 1e-12 absolute);
+(``paperNNN/FIG.npz``) array by array; a table or figure of a shared paper that only one report has is a difference.  Numbers must agree to ``--rtol`` (default 1e-9 relative, 1e-12 absolute);
 strings exactly.  Columns and arrays that hold measured times (their name mentions seconds, time, "(s)", "(ms)",
 "us", "speed" or ends in "_s") are skipped, as are the criteria and cells holding a verdict word (the verdict format
 is the report's; the numbers behind it come from the same tables and figures), and text cells that quote measured
@@ -87,6 +87,11 @@ def compare_tables(pa: dict, pb: dict, rtol: float, out: list[str]) -> bool:
         out.append(f"  table {t['id']}: {'identical' if worst == 0 and ok else ('agrees' if ok else 'DIFFERS')}"
                    f" (max relative difference {worst:.2g}{f', {skipped} timing column(s) skipped' if skipped else ''})")
         good &= ok
+    ids = {t["id"] for t in pa["tables"]}
+    for t in pb["tables"]:
+        if t["id"] not in ids:
+            out.append(f"  table {t['id']}: missing in the first report")
+            good = False
     return good
 
 
@@ -113,6 +118,10 @@ def compare_figures(da: Path, db: Path, rtol: float, out: list[str]) -> bool:
         status = "identical" if ok and worst == 0 else ("agrees" if ok else "DIFFERS in " + ", ".join(bad[:6]))
         out.append(f"  figure {fa.stem}: {status} (max relative difference {worst:.2g})")
         good &= ok
+    for fb in sorted(db.glob("*.npz")):
+        if not (da / fb.name).exists():
+            out.append(f"  figure {fb.stem}: missing in the first report")
+            good = False
     return good
 
 

@@ -12,14 +12,18 @@ import numpy as np
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "compare_reports.py"
 
 
-def report(folder: Path, papers: dict[str, float]) -> Path:
-    """A report folder reduced to what the script reads: per paper one table and one figure scaled by ``value``."""
+def report(folder: Path, papers: dict[str, float], extra: str = "") -> Path:
+    """A report folder reduced to what the script reads: per paper one table and one figure scaled by ``value``
+    (and, where ``extra`` names one, a second table and figure of that id)."""
     summary = {"papers": []}
     for paper, value in papers.items():
         (folder / f"paper{paper}").mkdir(parents=True)
-        summary["papers"].append({"paper": paper, "tables": [
-            {"id": "t1", "columns": ["row", "RMSE (m)"], "rows": [["a", f"{value:.12g}"]]}]})
-        np.savez(folder / f"paper{paper}" / "fig1.npz", y=np.array([1.0, 2.0]) * value)
+        tables = [{"id": t, "columns": ["row", "RMSE (m)"], "rows": [["a", f"{value:.12g}"]]}
+                  for t in ("t1", extra) if t]
+        summary["papers"].append({"paper": paper, "tables": tables})
+        for name in ("fig1", extra):
+            if name:
+                np.savez(folder / f"paper{paper}" / f"{name}.npz", y=np.array([1.0, 2.0]) * value)
     (folder / "summary.json").write_text(json.dumps(summary))
     return folder
 
@@ -50,3 +54,14 @@ def test_numbers_that_differ_in_a_shared_paper_still_fail(tmp_path):
     assert code == 0 and text.strip().endswith("all numbers agree")
     code, text = compare(a, report(tmp_path / "d", {"002": 1.0}))
     assert code == 1 and "nothing compared" in text
+
+
+def test_a_table_or_figure_only_one_report_has_in_a_shared_paper_is_named(tmp_path):
+    a = report(tmp_path / "a", {"001": 2.0})
+    b = report(tmp_path / "b", {"001": 2.0}, extra="more")
+    for first, second, where in ((a, b, "first"), (b, a, "second")):
+        code, text = compare(first, second)
+        assert code == 1 and "SOME NUMBERS DIFFER (in the 1 paper(s) both reports have)" in text, text
+        assert f"table more: missing in the {where} report" in text
+        assert f"figure more: missing in the {where} report" in text
+        assert "table t1: identical" in text and "figure fig1: identical" in text

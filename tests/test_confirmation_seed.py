@@ -88,9 +88,9 @@ def test_full_report_judges_again_on_the_confirmation_seed_and_shows_agreement(t
     assert b.agrees is False and b.primary == expected[seed]
     assert b.ours == pytest.approx(5.0 + _draws(CONFIRMATION_SEED)[0])
     assert a.ours == pytest.approx(np.mean(5.0 + _draws(CONFIRMATION_SEED)))
-    page = (tmp_path / "index.html").read_text()
+    page = (tmp_path / "paper-cf.html").read_text()  # the paper's page: its scoreboard
     assert "confirmation" in page and "DIFFERS" in page and "agrees" in page
-    assert f"seed {CONFIRMATION_SEED}: 1 of 2 agree" in page
+    assert f"seed {CONFIRMATION_SEED}: 1 of 2 agree" in (tmp_path / "index.html").read_text()  # at a glance
     summary = json.loads((tmp_path / "summary.json").read_text())
     got = {c["id"]: c["confirmation"] for c in summary["papers"][0]["criteria"]}
     assert got["A"]["agrees"] is True and got["B"]["agrees"] is False

@@ -1,6 +1,7 @@
 """Report engine: outputs, figure data, caching and resuming after an interruption."""
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -24,11 +25,19 @@ def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host, monkey
     paper = report.papers[0]
     assert not paper.errors
     index = (tmp_path / "index.html").read_text()
-    for section in ("Paper demo", "Scoreboard: reproduced if", "table1", "fig1", "Provenance", "seed",
-                    "package numpy", "Published values and claims", "workbench report",
-                    "What differs from the paper and why", "A fixture."):
+    page = _page(tmp_path)
+    # the index: the at-a-glance table linking the paper's page, and the provenance
+    for section in ("At a glance", "Provenance", "seed", "package numpy", "workbench report",
+                    "<a href='paper-demo.html'>demo</a>"):
         assert section in index
-    assert "data:image/png;base64," in index
+    # the paper's page: scoreboard first, then what differs, figures, tables, published values
+    order = ["Paper demo", "Scoreboard: reproduced if", "What differs from the paper and why", "A fixture.",
+             "id='paperdemo-fig-fig1'", "id='paperdemo-table-table1'", "Published values and claims"]
+    assert [page.index(x) for x in order] == sorted(page.index(x) for x in order)
+    assert "Provenance" in page and "href='index.html#provenance'" in page  # the shared navigation
+    # figures are the files beside the pages, with their size; nothing embedded
+    assert "base64" not in index + page
+    assert "<img src='paperdemo/fig1.png' alt='fig1: MSE vs time' width='704' height='528'>" in page
     for ext in ("png", "svg", "npz", "csv"):
         assert (tmp_path / "paperdemo" / f"fig1.{ext}").stat().st_size > 0
     data = load_arrays(tmp_path / "paperdemo" / "fig1.npz")
@@ -37,7 +46,7 @@ def test_report_writes_index_figures_data_and_tables(tmp_path, demo_host, monkey
     np.testing.assert_allclose(data["mse"][0], data["mse"][1], rtol=1e-9)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["papers"][0]["tables"][0]["columns"][2].startswith("published")
-    assert "paperdemo/fig1.svg" in index  # linked beside the embedded PNG
+    assert "<a href='paperdemo/fig1.svg'>SVG</a>" in page  # linked beside the PNG
 
 
 def test_figure_formats_are_honoured_or_refused_by_name(tmp_path, demo_host, monkeypatch, capsys):
@@ -52,8 +61,8 @@ def test_figure_formats_are_honoured_or_refused_by_name(tmp_path, demo_host, mon
     assert [f["svg"] for f in report.papers[0].figures] == [None] * len(report.papers[0].figures)
     assert (tmp_path / "paperdemo" / "fig1.png").stat().st_size > 0
     assert not (tmp_path / "paperdemo" / "fig1.svg").exists()
-    index = (tmp_path / "index.html").read_text()
-    assert "data:image/png;base64," in index and "fig1.svg" not in index
+    page = _page(tmp_path)
+    assert "src='paperdemo/fig1.png'" in page and "fig1.svg" not in page
     # an explicit argument wins over the environment
     run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False, formats="png,svg")
     assert (tmp_path / "paperdemo" / "fig1.svg").is_file()
@@ -70,6 +79,11 @@ def test_figure_formats_are_honoured_or_refused_by_name(tmp_path, demo_host, mon
     assert err == ["workbench: error: WORKBENCH_REPORT_FORMATS='jpeg': figure formats are png and svg "
                    "(comma-separated), got 'jpeg'"]
     assert not (tmp_path / "y" / "paper000").exists()
+
+
+def _page(folder, paper="demo"):
+    """The text of a paper's page in a report folder."""
+    return (folder / f"paper-{paper}.html").read_text()
 
 
 def _criteria_by_id(summary, paper="demo"):
@@ -96,13 +110,21 @@ def test_quick_report_declares_nothing_met_and_shows_n_interval_and_verdict(tmp_
     assert crit["3"]["ours"] == pytest.approx(1.0) and crit["3"]["interval"] == pytest.approx([1.0, 1.0])
     assert crit["3"]["replication"] == [4, 4] and crit["3"]["published"] == {"KF": 4.0, "EKF": 4.0}
 
-    index = (tmp_path / "index.html").read_text()
+    index = _page(tmp_path)
     board = index[index.index("id='paperdemo-scoreboard'"):index.index("id='paperdemo-differs'")]
     assert board.count("indicative (quick run)") == 3 and board.count("quick-run numbers pass") == 3
     assert ">met</span>" not in board and board.count(">inconclusive</span>") == 3
     assert f"[{lo:.4g}, {hi:.4g}]" in board and "holds in 4 of 4" in board
-    assert "<span class='kv'>KF 4</span> · <span class='kv'>EKF 4</span>" in board
-    assert "{'KF'" not in index and "{&#x27;KF&#x27;" not in index  # never a Python dict repr
+    # ours and published: the same statistic. Criterion 2 publishes a mean MSE beside our mean MSE; criterion 3
+    # judges a ratio, while the paper gives per-filter MSEs: no published ratio, its numbers in their own column
+    head = re.findall(r"<th[^>]*>([^<]*)</th>", board.split("</thead>")[0])
+    assert head[3:6] == ["ours", "published", "n"] and head[8] == "the paper&#39;s own numbers or claim"
+    cells = [re.findall(r"<td[^>]*>(.*?)</td>", r) for r in re.findall(r"<tr class='[^']*'>(.*?)</tr>", board)]
+    rows = {c[0]: c for c in cells}
+    assert rows["2"][3:5] == [f"{two['ours']:.4g}", "4"] and rows["2"][8] == "n/a"
+    assert rows["3"][3:5] == ["1", "n/a"]
+    assert rows["3"][8] == "<span class='kv'>KF 4</span> · <span class='kv'>EKF 4</span>"
+    assert "{'KF'" not in index and "KF&#x27;" not in index and "KF&#39;" not in index  # never a dict repr
     published = index[index.index("id='paperdemo-published'"):]
     assert "<td>kf, ekf</td>" in published  # a tuple, joined readably
 
@@ -139,7 +161,7 @@ def test_scoreboard_moves_the_statistics_sentence_into_its_columns(tmp_path, dem
     # the demo paper's full report: the interval column names its method, the n column the runs needed, and the
     # criterion column no longer repeats them
     run_report(demo_host, tmp_path, papers=["demo"], size="full", seed=3, progress=False)
-    index = (tmp_path / "index.html").read_text()
+    index = _page(tmp_path)
     board = index[index.index("id='paperdemo-scoreboard'"):index.index("id='paperdemo-differs'")]
     crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
     assert "passes if" in crit["2"]["detail"] and "passes if" not in board  # summary.json keeps it whole
@@ -153,7 +175,7 @@ def test_full_report_gives_firm_verdicts(tmp_path, demo_host):
     assert {k: (c["verdict"], c["met"], c["indicative"]) for k, c in crit.items()} == {
         "1": ("met", True, False), "2": ("met", True, False), "3": ("met", True, False)}
     assert crit["2"]["n"] == 100
-    index = (tmp_path / "index.html").read_text()
+    index = _page(tmp_path)
     assert "indicative (quick run)" not in index and index.count(">met</span>") >= 3
 
 
@@ -175,6 +197,8 @@ def test_paper_into_an_existing_folder_keeps_the_other_papers(tmp_path, capsys):
     run_report(demo_host, tmp_path, papers=["other"], seed=5, progress=False, command="workbench report --paper other")
     (tmp_path / "paperbroken").mkdir()
     (tmp_path / "paperbroken" / "outcome.json").write_text("{not json")
+    (tmp_path / "paper-broken.html").write_text("a page of an earlier report")  # its paper is no longer shown
+    (tmp_path / "paper-notes.txt").write_text("not a page")
     report = run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
     # a damaged saved outcome is skipped with one warning line; the report goes on
     err = capsys.readouterr().err
@@ -190,15 +214,21 @@ def test_paper_into_an_existing_folder_keeps_the_other_papers(tmp_path, capsys):
     assert papers["other"]["figures"] == ["fig1"] and papers["other"]["tables"][0]["rows"][0][0] == "ekf"
     assert _criteria_by_id(summary, "other")["2"]["n"] == 20
     index = (tmp_path / "index.html").read_text()
-    for anchor in ("paperdemo", "paperother", "paperother-scoreboard", "paperother-fig-fig1",
-                   "paperother-table-table1"):
-        assert f"id='{anchor}'" in index and f"href='#{anchor}'" in index
-    section = index[index.index("<section id='paperother'>"):]
+    pages = {p: _page(tmp_path, p) for p in ("demo", "other")}
+    for paper, page in pages.items():
+        # each paper's page: its anchors, linked in its navigation; the other paper's page linked from every page
+        for anchor in (f"paper{paper}", f"paper{paper}-scoreboard", f"paper{paper}-fig-fig1",
+                       f"paper{paper}-table-table1"):
+            assert f"id='{anchor}'" in page and f"href='#{anchor}'" in page
+        assert f"href='paper-{paper}.html'" in index and f"href='paper-{paper}.html'" in pages[{"demo": "other",
+                                                                                             "other": "demo"}[paper]]
+    section = pages["other"][pages["other"].index("<section id='paperother'>"):]
     section = section[:section.index("</section>")]
     assert "Another paper" in section and "Other notes." in section and "workbench report --paper other" in section
-    assert section.count("data:image/png;base64,") == 1
+    assert section.count("<img src='paperother/fig1.png'") == 1
     assert "paperbroken" in index and "skipped the saved outcome" in index
-    assert "Paper broken" not in index
+    assert "Paper broken" not in index and not (tmp_path / "paper-broken.html").exists()
+    assert (tmp_path / "paper-notes.txt").read_text() == "not a page"
 
     # and re-running the other paper now keeps demo (its fresh outcome was saved in turn)
     again = run_report(demo_host, tmp_path, papers=["other"], seed=5, progress=False)
@@ -227,6 +257,7 @@ def test_index_and_summary_are_written_atomically(tmp_path, demo_host, monkeypat
 
     run_report(demo_host, tmp_path, papers=["demo"], seed=3, progress=False)
     before = (tmp_path / "index.html").read_text()
+    page_before = _page(tmp_path)
 
     def fail(src, dst):
         raise OSError("disk full")
@@ -234,7 +265,8 @@ def test_index_and_summary_are_written_atomically(tmp_path, demo_host, monkeypat
     monkeypatch.setattr(cache.os, "replace", fail)
     with pytest.raises(OSError, match="disk full"):
         run_report(demo_host, tmp_path, papers=["demo"], seed=4, progress=False)
-    assert (tmp_path / "index.html").read_text() == before  # the old page, whole
+    assert (tmp_path / "index.html").read_text() == before  # the old pages, whole
+    assert _page(tmp_path) == page_before
     assert json.loads((tmp_path / "paperdemo" / "outcome.json").read_text())["seed"] == 3
     assert not [p for p in tmp_path.rglob("*.tmp")]  # no temporary file left behind
 
@@ -369,7 +401,7 @@ def test_summary_is_strict_json_and_a_one_run_criterion_has_no_interval(tmp_path
     (crit,) = summary["papers"][0]["criteria"]
     assert crit["interval"] == [None, None] and crit["n"] == 1 and crit["ours"] == 2.0
     assert crit["verdict"] == "inconclusive" and crit["indicative"] is False  # a full run, still undecided
-    index = (tmp_path / "index.html").read_text()
+    index = _page(tmp_path)
     board = index.split("id='paperdemo-scoreboard'")[1].split("id='paperdemo-differs'")[0]
     assert ">inconclusive</span>" in board and "nan" not in board
 
@@ -414,17 +446,19 @@ def test_scoreboard_and_at_a_glance_show_not_judgeable_with_the_failed_precondit
     assert pre["values"]["rows"]["A"] == {"lost": 20, "runs": 20, "share": 1.0}
     assert crit["2"]["verdict"] == "met" and crit["2"]["preconditions"][0]["holds"] is True
     index = (tmp_path / "index.html").read_text()
-    board = index.split("id='paperdemo-scoreboard'")[1].split("id='paperdemo-differs'")[0]
+    page = _page(tmp_path)
+    board = page.split("id='paperdemo-scoreboard'")[1].split("id='paperdemo-differs'")[0]
     assert board.count(">not judgeable</span>") == 1 and board.count(">met</span>") == 1
     assert "row-not-judgeable" in board and "failed: judged rows track" in board and "numbers alone: met" in board
     assert "precondition fails: judged rows track (lost runs A 20/20 (100 %), C 0/20 (0 %)" in board
     assert "precondition holds: judged rows track (lost runs C 0/20 (0 %)" in board
-    glance = index.split("id='overview'")[1].split("<section")[0]
+    glance = index.split("id='overview'")[1].split("id='provenance'")[0]
     assert "<th class='num'>not judgeable</th>" in glance and "not judgeable: failed precondition" in glance
     assert "<span class='badge v-not-judgeable'>1</span>" in glance
     assert "<b>judged rows track</b> fails for 1" in glance
-    nav = index.split("<nav")[1].split("</nav>")[0]
-    assert "1 not judgeable" in nav
+    for text in (index, page):  # the shared navigation counts the verdicts on every page
+        nav = text.split("<nav")[1].split("</nav>")[0]
+        assert "1 not judgeable" in nav
 
 
 def test_declared_unknowns_and_the_verdicts_across_them_are_rendered(tmp_path, demo_host):
@@ -462,9 +496,30 @@ def test_declared_unknowns_and_the_verdicts_across_them_are_rendered(tmp_path, d
     assert [a["verdict"] for a in crit["1"]["across"]] == ["met", "met", "not met"]  # 50, 100, 200 against 150
     assert crit["1"]["where_it_holds"] == {"gain": "holds for gain in {0.5, 1}; not met at {2}"}
     assert crit["2"]["across"] == [] and crit["2"]["where_it_holds"] == {}
-    index = (tmp_path / "index.html").read_text()
+    index = _page(tmp_path)
     section = index.split("id='paperdemo-unknowns'")[1].split("id='paperdemo-differs'")[0]
     assert "the paper gives no value; 1 is the brief&#x27;s" in section and "0.5, 1, 2" in section
     assert "gain = 1 (primary)" in section and "holds for gain in {0.5, 1}; not met at {2}" in section
     assert section.count(">met</span>") == 3 and section.count(">not met</span>") == 1  # primary + two grid values
     assert ">2</td>" not in section  # criterion 2 does not hinge on the unknown: no row
+
+
+def test_pages_escape_what_they_show_and_link_each_paper(tmp_path, demo_host):
+    from workbench.report.engine import PaperOutcome, ReportOutcome
+    from workbench.report.html import write_index
+
+    title = "<script>alert(1)</script> & 'q'"
+    papers = [PaperOutcome("x1", title, "quick", (), "notes <i>", {"claim": "<b>"}),
+              PaperOutcome("x2", "second", "quick", (), "", {})]
+    write_index(ReportOutcome(tmp_path, papers, 0.0, "cmd <x>", 1, "quick"), demo_host)
+    index = (tmp_path / "index.html").read_text()
+    pages = {p: (tmp_path / f"paper-{p}.html").read_text() for p in ("x1", "x2")}
+    escaped = "&lt;script&gt;alert(1)&lt;/script&gt; &amp; &#39;q&#39;"
+    for text in (index, *pages.values()):
+        assert "<script>alert" not in text and escaped in text  # in the navigation of every page
+        assert "href='paper-x1.html'" in text or "href='#paperx1'" in text
+    assert "notes &lt;i&gt;" in pages["x1"] and "<td>&lt;b&gt;</td>" in pages["x1"] and "cmd &lt;x&gt;" in index
+    # each page's navigation: the other paper's page, the index's parts; its own parts in-page
+    assert "href='paper-x2.html'" in pages["x1"] and "href='#paperx1-scoreboard'" in pages["x1"]
+    assert "href='index.html#overview'" in pages["x2"] and "href='#paperx1-scoreboard'" not in pages["x2"]
+    assert sorted(p.name for p in tmp_path.glob("*.html")) == ["index.html", "paper-x1.html", "paper-x2.html"]

@@ -1,6 +1,8 @@
-"""The report looked at in a real browser: headless Chromium renders index.html; every figure image loads,
-every in-page link resolves, no table is wider than the page, the navigation stays in view, and
-screenshots of the top of the page and of a scoreboard are neither empty nor blank.
+"""The report looked at in a real browser: headless Chromium opens the index and each paper's page; every figure
+image loads, every in-page link resolves, every link of the navigation, followed by a click, lands on its target
+shown in the window with content in it, no table is wider than the page, the navigation stays in view, a link of the
+former one-page report reaches the paper's page, and screenshots of the index and of a scoreboard are neither empty
+nor blank.
 
 Chromium is driven over its DevTools protocol on a pipe (``--remote-debugging-pipe``: commands on fd 3,
 replies on fd 4, NUL-terminated JSON), so no client library is needed.  Without a Chromium binary the
@@ -95,18 +97,42 @@ class Browser:
     def page(self, method: str, **params):
         return self.call(method, self.session, **params)
 
-    def open(self, url: str, width: int, height: int) -> None:
+    def open(self, url: str, width: int, height: int, expect: str | None = None) -> None:
+        """Load ``url`` as a new document (through a blank page, so that a link to another part of the page being
+        shown loads it afresh) and wait until ``expect`` (default ``url``) is loaded."""
         self.page("Emulation.setDeviceMetricsOverride", width=width, height=height, deviceScaleFactor=1,
                   mobile=False)
         self.page("Page.enable")
+        if url != "about:blank":
+            self._load("about:blank", "about:blank")
+        self._load(url, expect or url)
+
+    def _load(self, url: str, expect: str) -> None:
         self.js("window.__previous_document = true")  # gone once the new document has replaced this one
         self.page("Page.navigate", url=url)
+        self.wait_for(expect, new_document=True)
+
+    def wait_for(self, url: str, new_document: bool) -> None:
+        """Wait until the window shows ``url``, loaded (in a new document where ``new_document``), and has drawn
+        twice since."""
         deadline = time.monotonic() + self.timeout
-        while self.js("(window.__previous_document ? 'old' : document.readyState) + ':' + location.href") \
-                != f"complete:{url}":
+        # a new document has lost the marker set on the one before; a jump within the page keeps it
+        want = f"{'new' if new_document else 'old'}complete:{url}"
+        while self.js("(window.__previous_document ? 'old' : 'new') + document.readyState + ':' + location.href") \
+                != want:
             if time.monotonic() > deadline:
-                raise TimeoutError(f"{url} did not finish loading")
+                raise TimeoutError(f"{url} did not finish loading (at {self.js('location.href')})")
             time.sleep(0.05)
+        self.js("new Promise(done => requestAnimationFrame(() => requestAnimationFrame(() => done(true))))")
+
+    def follow(self, index: int) -> str:
+        """Click the navigation's ``index``-th link, wait until its target is shown and return where it went."""
+        href, same = self.js(f"(() => {{ const a = document.querySelectorAll('nav a')[{index}]; "
+                             "return [a.href, a.href.split('#')[0] === location.href.split('#')[0]]; })()")
+        self.js("window.__previous_document = true")
+        self.js(f"document.querySelectorAll('nav a')[{index}].click()")
+        self.wait_for(href, new_document=not same)
+        return href
 
     def js(self, expression: str):
         res = self.page("Runtime.evaluate", expression=expression, returnByValue=True, awaitPromise=True)
@@ -141,33 +167,57 @@ CHECKS = r"""
   const ms = getComputedStyle(main);
   const contentRight = main.getBoundingClientRect().right - parseFloat(ms.paddingRight);
   const imgs = [...document.images].map(i => ({alt: i.alt.slice(0, 40), complete: i.complete,
-                                               w: i.naturalWidth, shown: i.getBoundingClientRect().width}));
-  const links = [...document.querySelectorAll('a[href^="#"]')].map(a => {
-    const id = decodeURIComponent(a.getAttribute('href').slice(1));
-    return {href: a.getAttribute('href'), ok: document.getElementById(id) !== null, inNav: !!a.closest('nav')};
-  });
+                                               w: i.naturalWidth, shown: i.getBoundingClientRect().width,
+                                               attrW: i.getAttribute('width'), attrH: i.getAttribute('height'),
+                                               src: i.getAttribute('src')}));
+  const here = location.href.split('#')[0];
+  const links = [...document.querySelectorAll('a[href]')].filter(a => a.href.split('#')[0] === here && a.hash)
+    .map(a => {
+      const id = decodeURIComponent(a.hash.slice(1));
+      return {href: a.getAttribute('href'), ok: document.getElementById(id) !== null, inNav: !!a.closest('nav')};
+    });
+  const nav = [...document.querySelectorAll('nav a')].map(a => a.getAttribute('href'));
   const tables = [...document.querySelectorAll('main table')].filter(t => !t.closest('table table, .nested'))
     .map(t => ({first: t.querySelector('th') ? t.querySelector('th').textContent : '',
                 width: t.getBoundingClientRect().width, right: t.getBoundingClientRect().right,
                 scroll: t.scrollWidth, box: t.parentElement.clientWidth}));
-  const nav = document.getElementById('nav');
+  const navEl = document.getElementById('nav');
   window.scrollTo(0, document.documentElement.scrollHeight);
-  const navAfterScroll = nav.getBoundingClientRect().top;
+  const navAfterScroll = navEl.getBoundingClientRect().top;
   window.scrollTo(0, 0);
-  return {imgs, links, tables, contentRight, navPosition: getComputedStyle(nav).position, navAfterScroll,
+  return {imgs, links, nav, tables, contentRight, navPosition: getComputedStyle(navEl).position, navAfterScroll,
           pageScroll: document.documentElement.scrollWidth, pageClient: document.documentElement.clientWidth,
           scrollHeight: document.documentElement.scrollHeight};
 })()
 """
 
+# Where a followed link landed: its target (the element its #id names, or the page's heading) as the window shows it.
+TARGET = r"""
+(() => {
+  const id = decodeURIComponent(location.hash.slice(1));
+  const el = id ? document.getElementById(id) : document.querySelector('main h1');
+  if (!el) return {found: false, id};
+  const r = el.getBoundingClientRect(), st = getComputedStyle(el);
+  const img = el.querySelector('img');
+  const text = el.innerText.trim();
+  return {found: true, id, tag: el.tagName.toLowerCase(), top: r.top, bottom: r.bottom, width: r.width,
+          height: r.height, vh: innerHeight, chars: text.length, text: text.slice(0, 60),
+          shown: st.visibility === 'visible' && st.display !== 'none',
+          img: img ? img.complete && img.naturalWidth > 0 && img.getBoundingClientRect().height > 0 : null};
+})()
+"""
+
+# The navigation marks the part being read: scrolled to the scoreboard, then sent to the table (near the page's end)
 NAV_AFTER_SCROLL = r"""
 new Promise(done => {
-  document.getElementById('paperdemo-table-table1').scrollIntoView();
-  setTimeout(() => requestAnimationFrame(() => {
-    const here = [...document.querySelectorAll('nav a.here')].map(a => a.getAttribute('href'));
-    window.scrollTo(0, 0);
-    done(here);
-  }), 100);
+  const marked = () => [...document.querySelectorAll('nav a.here')].map(a => a.getAttribute('href'));
+  const later = f => setTimeout(() => requestAnimationFrame(f), 100);
+  document.getElementById('paperdemo-scoreboard').scrollIntoView();
+  later(() => {
+    const first = marked();
+    location.hash = '#paperdemo-table-table1';
+    later(() => { const second = marked(); window.scrollTo(0, 0); done([first, second]); });
+  });
 })
 """
 
@@ -180,8 +230,9 @@ SCOREBOARD = r"""
   const align = [...table.querySelectorAll('tbody tr:nth-child(2) td')].map(c => getComputedStyle(c).textAlign);
   const badge = getComputedStyle(table.querySelector('.badge')).backgroundColor;
   const a = h.getBoundingClientRect(), b = table.getBoundingClientRect();
-  return {head, rows, align, badge, clip: {x: Math.floor(b.left) - 8, y: Math.floor(a.top + window.scrollY) - 8,
-          width: Math.ceil(b.width) + 16, height: Math.ceil(b.bottom - a.top) + 16}};
+  return {head, rows, align, badge, top: a.top, clip: {x: Math.floor(b.left) - 8,
+          y: Math.floor(a.top + window.scrollY) - 8, width: Math.ceil(b.width) + 16,
+          height: Math.ceil(b.bottom - a.top) + 16}};
 })()
 """
 
@@ -210,46 +261,89 @@ def chromium(request):
     return binary
 
 
+def _follow_every_nav_link(browser: Browser, url: str) -> dict[str, dict]:
+    """Click each link of the navigation of ``url`` (from wherever the last in-page link left the window; back on
+    ``url`` after a link to another page) and record where it landed."""
+    browser.open(url, 1280, 900)
+    count = browser.js("document.querySelectorAll('nav a').length")
+    landed = {}
+    for i in range(count):
+        if browser.js("location.href.split('#')[0]") != url:
+            browser.open(url, 1280, 900)
+        href = browser.follow(i)
+        landed[href] = browser.js(TARGET)
+    return landed
+
+
+@pytest.mark.slow
 def test_report_in_headless_chromium(tmp_path, demo_host, chromium):
     out = tmp_path / "report"
     run_report(demo_host, out, papers=["demo"], seed=3, progress=False, command="workbench report --paper demo")
-    url = (out / "index.html").resolve().as_uri()
+    index = (out / "index.html").resolve().as_uri()
+    paper = (out / "paper-demo.html").resolve().as_uri()
     browser = Browser(chromium, tmp_path / "profile")
     try:
         results = {}
-        for width, height in ((1280, 900), (1000, 800)):
-            browser.open(url, width, height)
-            results[width] = browser.js(CHECKS)
-        browser.open(url, 1280, 900)
+        for name, url in (("index", index), ("paper", paper)):
+            for width, height in ((1280, 900), (1000, 800)):
+                browser.open(url, width, height)
+                results[name, width] = browser.js(CHECKS)
+        landed = {name: _follow_every_nav_link(browser, url) for name, url in (("index", index), ("paper", paper))}
+        # a link of the former one-page report opens that part on the paper's page
+        browser.open(index + "#paperdemo-scoreboard", 1280, 900, expect=paper + "#paperdemo-scoreboard")
+        redirected = browser.js(TARGET)
+        board = browser.js(SCOREBOARD)
+        at_board = browser.screenshot(tmp_path / "at-scoreboard.png")
+        browser.open(paper, 1280, 900)
         here = browser.js(NAV_AFTER_SCROLL)
-        top = browser.screenshot(tmp_path / "top.png")
         board = browser.js(SCOREBOARD)
         scoreboard = browser.screenshot(tmp_path / "scoreboard.png", board["clip"])
+        browser.open(index, 1280, 900)
+        top = browser.screenshot(tmp_path / "top.png")
     finally:
         browser.close()
-    print(f"screenshots: {top} {scoreboard}")
+    print(f"screenshots: {top} {scoreboard} {at_board}")
 
-    for width, r in results.items():
-        # every figure image decoded and is shown
-        assert r["imgs"] and all(i["complete"] and i["w"] > 0 and i["shown"] > 0 for i in r["imgs"]), r["imgs"]
-        # every in-page link resolves to an element id; the side navigation links each part of the paper
+    for (name, width), r in results.items():
+        if name == "paper":
+            # every figure image is a file beside the page, decoded and shown at the size its attributes give
+            assert r["imgs"] and all(i["complete"] and i["w"] > 0 and i["shown"] > 0 and i["attrW"] == str(i["w"])
+                                     and i["attrH"] and not i["src"].startswith("data:") for i in r["imgs"]), r["imgs"]
+        else:
+            assert r["imgs"] == []
+        # every in-page link resolves to an element id
         assert [x for x in r["links"] if not x["ok"]] == []
-        nav = {x["href"] for x in r["links"] if x["inNav"]}
-        assert {"#paperdemo", "#paperdemo-scoreboard", "#paperdemo-differs", "#paperdemo-table-table1",
-                "#paperdemo-fig-fig1", "#provenance"} <= nav
         # no table is wider than the content column, none needs scrolling, and the page never scrolls sideways
         for t in r["tables"]:
-            assert t["right"] <= r["contentRight"] + 1 and t["scroll"] <= t["box"] + 1, (width, t)
-        assert r["pageScroll"] <= r["pageClient"], width
+            assert t["right"] <= r["contentRight"] + 1 and t["scroll"] <= t["box"] + 1, (name, width, t)
+        assert r["pageScroll"] <= r["pageClient"], (name, width)
         # the navigation stays in view when the page is scrolled to the bottom
         assert r["navPosition"] in ("fixed", "sticky") and abs(r["navAfterScroll"]) < 1, r
-        assert r["scrollHeight"] > 900
+    assert results["paper", 1280]["scrollHeight"] > 900
+    # the shared navigation: the index's parts and every paper on each page; on a paper's page, each of its parts
+    nav = {name: results[name, 1280]["nav"] for name in ("index", "paper")}
+    assert {"#overview", "#provenance", "paper-demo.html"} <= set(nav["index"])
+    assert {"index.html#overview", "index.html#provenance", "#paperdemo", "#paperdemo-scoreboard",
+            "#paperdemo-differs", "#paperdemo-fig-fig1", "#paperdemo-table-table1", "#paperdemo-published",
+            "#paperdemo-tasks"} <= set(nav["paper"])
+    # every link of the navigation, clicked, lands on its target: shown in the window, with content
+    for name, pages in landed.items():
+        assert len(pages) == len(set(nav[name])), (name, sorted(pages))
+        for href, t in pages.items():
+            assert t["found"] and t["shown"] and t["width"] > 0 and t["height"] > 0, (name, href, t)
+            assert -1 <= t["top"] < t["vh"] - 20 and t["chars"] > 0, (name, href, t)
+            assert t["img"] in (None, True), (name, href, t)  # a figure's image is loaded and drawn
+    assert landed["paper"][paper + "#paperdemo-fig-fig1"]["img"] is True
+    assert landed["index"][paper]["text"].startswith("Paper demo")
+    assert landed["paper"][paper + "#paperdemo-scoreboard"]["text"] == "Scoreboard: reproduced if"
+    assert redirected["found"] and redirected["id"] == "paperdemo-scoreboard" and 0 <= redirected["top"] < 100
     # reading a table, the navigation marks where the reader is
-    assert here == ["#paperdemo-table-table1"]
+    assert here == [["#paperdemo-scoreboard"], ["#paperdemo-table-table1"]]
 
-    # the scoreboard: verdicts, ours beside published, n, interval and threshold, as a reader sees them
+    # the scoreboard: verdicts, ours beside published (the same statistic), n, interval and threshold
     head = board["head"]
-    assert head[:8] == ["id", "criterion", "verdict", "ours", "published", "n", "95 % interval", "threshold"]
+    assert head[:9] == ["id", "criterion", "verdict", "ours", "published", "n", "95 % interval", "threshold",
+                        "the paper's own numbers or claim"]
     by_id = {row[0]: dict(zip(head, row)) for row in board["rows"]}
     assert set(by_id) == {"1", "2", "3"}
     assert all("indicative (quick run)" in row["verdict"] for row in by_id.values())
@@ -260,16 +354,19 @@ def test_report_in_headless_chromium(tmp_path, demo_host, chromium):
     assert by_id["2"]["n"].split("\n") == ["20", "needs ≥ 10"]  # the runs behind ours, and the runs needed
     assert by_id["2"]["published"] == "4" and by_id["2"]["threshold"] == "<= 10"
     assert by_id["2"]["95 % interval"].split("\n")[1] == "percentile bootstrap, 2000 resamples"
-    assert by_id["3"]["published"] == "KF 4 · EKF 4"
+    # criterion 3 judges a ratio (ours 1); the paper gives the two MSEs, not the ratio: they stand apart
+    assert (by_id["3"]["ours"], by_id["3"]["published"]) == ("1", "n/a")
+    assert by_id["3"]["the paper's own numbers or claim"] == "KF 4 · EKF 4"
     assert by_id["3"]["paper's protocol, replicated"] == "holds in 4 of 4"
     # text columns read from the left, numbers from the right
     align = dict(zip(head, board["align"]))
     assert align["criterion"] in ("left", "start") and align["n"] == "right" and align["ours"] == "right"
+    assert align["published"] == "right"
     assert board["badge"] == "rgb(255, 241, 201)"  # the inconclusive colour
 
-    for png in (top, scoreboard):
+    for png in (top, scoreboard, at_board):
         pixels = _png_pixels(png)
         assert png.stat().st_size > 2000 and pixels.shape[0] > 100 and pixels.shape[1] > 300
         colours = np.unique(pixels.reshape(-1, 3), axis=0)
         assert len(colours) > 20, f"{png.name} is (nearly) one colour"
-    assert _png_pixels(top).shape[:2] == (900, 1280)
+    assert _png_pixels(top).shape[:2] == (900, 1280) and _png_pixels(at_board).shape[:2] == (900, 1280)

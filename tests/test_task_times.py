@@ -161,7 +161,7 @@ def test_full_report_writes_the_time_table_into_its_metadata_and_page(tmp_path):
                                                               "table t1": {"make and csv"}}
     assert all(i["seconds"] == pytest.approx(sum(i["parts"].values())) for i in items.values())
     # the page: the time table, collapsed, in the paper's section, one row per task with its share
-    page = (tmp_path / "index.html").read_text()
+    page = (tmp_path / "paper-tt.html").read_text()  # the paper's own page of the report
     block = re.search(r"<details id='papertt-tasks'>(.*?)</details>", page, re.S)
     assert block is not None and "Time per task: 5 tasks (4 computed, 1 reused)" in block.group(1)
     assert "<td>figure f1</td>" in block.group(1) and "<td>table t1</td>" in block.group(1)

@@ -2,7 +2,9 @@
 
 Output folder layout::
 
-    OUT/index.html                 figures embedded, tables (ours beside published), provenance
+    OUT/index.html                 at a glance (one row per paper, its verdicts counted, a link to its page), provenance
+    OUT/paper-NNN.html             the paper's page: scoreboard first, unknowns, what differs, figures (the PNG files
+                                   below, linked), tables (ours beside published), published values, time table
     OUT/summary.json               machine-readable: criteria, tables, task timings, errors
     OUT/paperNNN/FIG.png|.svg      each figure (the formats: :data:`FIGURE_FORMATS`, or ``formats``, or the
                                    environment variable ``WORKBENCH_REPORT_FORMATS``, e.g. ``png``)
@@ -38,7 +40,7 @@ The time table: every task the report runs (on the reported seed, at the declare
 confirmation seed) records its seconds and, where the task declares it, its number of runs;
 :func:`task_time_table` turns them into a table per paper (task, runs, seconds, share of the paper's task compute,
 computed / cached / reused / failed), written into ``outcome.json`` and ``summary.json`` (``task_times``) and shown,
-collapsed, in the paper's section of ``index.html``; the ``report`` benchmark prints the report's top tasks by share.
+collapsed, on the paper's page (``paper-NNN.html``); the ``report`` benchmark prints the report's top tasks by share.
 """
 
 from __future__ import annotations
@@ -188,7 +190,7 @@ def task_time_table(entries: Iterable[Mapping]) -> dict:
             "rows": [rows[i] for i in order]}
 
 
-#: The formats every figure is saved in by default: PNG (embedded in ``index.html``) and SVG (linked from it).
+#: The formats every figure is saved in by default: PNG (shown on the paper's page) and SVG (linked from it).
 FIGURE_FORMATS = ("png", "svg")
 #: The environment variable that chooses the formats where the caller does not (``png`` or ``png,svg``): the test
 #: suite saves PNG only, drawing each figure once instead of twice.

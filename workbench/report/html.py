@@ -1,16 +1,25 @@
-"""Write the report's ``index.html`` (self-contained: figures embedded) and ``summary.json``.
+"""Write the report's pages (``index.html`` and one page per paper) and ``summary.json``.
 
-The page has a fixed side navigation (each paper, and under it its scoreboard, tables and figures, then
-the provenance) and, per paper, a scoreboard first: each criterion's verdict, ours beside published, the
-number of runs, the 95 % interval and the threshold.  Published values are shown as readable text or small
-tables, never as Python reprs; a table's column is right-aligned when all its values are numbers and
-left-aligned otherwise.  Both files show every paper of the report folder (see
-:func:`workbench.report.engine.run_report`) and are written atomically.
+``index.html`` holds the at-a-glance table (one row per paper: its verdicts counted, the criteria that could not be
+judged, the confirmation seed's agreement, a link to its page) and the provenance.  Each paper has its own page,
+``paper-NNN.html`` (:func:`page_name`), beside the index: its scoreboard first (each criterion's verdict, ours beside
+published as the same statistic, the number of runs, the 95 % interval and the threshold), then its declared
+unknowns, what differs from the paper, its figures, tables, published values and time table.  Every page has the same
+side navigation (the index, each paper, the parts of the paper being read, the provenance).  Figures are the PNG files
+the report wrote (``paperNNN/FIG.png``), linked beside the pages with their width and height, never embedded.  The
+anchors of the former one-page report (``index.html#paperNNN-scoreboard``) still work: the index sends them on to the
+paper's page.
+
+The markup lives in Jinja2 templates (``workbench/report/templates``, autoescaped); the Python helpers here compute
+what goes in the cells.  Published values are shown as readable text or small tables, never as Python reprs; a
+table's column is right-aligned when all its values are numbers and left-aligned otherwise.  The pages and the
+summary show every paper of the report folder (see :func:`workbench.report.engine.run_report`); each file is
+written atomically, the paper pages before the index, and a paper page left from a paper no longer in the folder is
+removed.
 """
 
 from __future__ import annotations
 
-import base64
 import html
 import json
 import math
@@ -20,132 +29,40 @@ import re
 import struct
 from dataclasses import replace
 from datetime import datetime, timezone
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping
+from urllib.parse import quote
 
 import numpy as np
+from jinja2 import Environment, FileSystemLoader, StrictUndefined
+from markupsafe import Markup
 
 from ..criteria import VERDICTS, where_it_holds
 from ..plugins import PluginHost
 from .cache import distribution_versions, write_text_atomic
 
-__all__ = ["write_index", "write_summary", "format_value", "human_value", "is_numeric_like"]
+__all__ = ["write_index", "write_summary", "format_value", "human_value", "is_numeric_like", "page_name"]
 
-_STYLE = """
-:root{--nav:16.5rem;--ink:#1d2329;--muted:#5b6570;--line:#d5dae0;--head:#eef1f4;--link:#1a4f8b}
-*{box-sizing:border-box}
-html{scroll-padding-top:.8rem}
-body{margin:0;font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;color:var(--ink);
-  line-height:1.45;background:#fff}
-a{color:var(--link)}
-nav#nav{position:fixed;top:0;left:0;bottom:0;width:var(--nav);overflow-y:auto;background:#f4f6f8;
-  border-right:1px solid var(--line);padding:1rem .7rem 2rem;font-size:.84rem}
-nav#nav .brand{font-weight:700;font-size:1rem;margin:0 .3rem .6rem}
-nav#nav .brand a{color:var(--ink);text-decoration:none}
-nav#nav ul{list-style:none;margin:0;padding:0}
-nav#nav li{margin:0}
-nav#nav a{display:block;padding:.12rem .35rem;border-radius:4px;text-decoration:none;white-space:nowrap;
-  overflow:hidden;text-overflow:ellipsis}
-nav#nav a:hover{background:#e1e7ee}
-nav#nav a.here{background:#dbe5f1;color:#0b2f57;font-weight:600}
-nav#nav .paper>a{font-weight:650;margin-top:.55rem;color:var(--ink)}
-nav#nav .paper>a small{font-weight:400;color:var(--muted)}
-nav#nav .sub{padding-left:.7rem;border-left:2px solid var(--line);margin:.1rem 0 .2rem .45rem}
-nav#nav .group{color:var(--muted);font-size:.74rem;text-transform:uppercase;letter-spacing:.04em;
-  padding:.3rem .35rem 0}
-nav#nav .tally{display:block;padding:0 .35rem .15rem}
-.pill{display:inline-block;border-radius:3px;padding:0 .3rem;margin:0 .2rem .1rem 0;font-size:.7rem;
-  font-weight:600;white-space:nowrap;border:1px solid transparent}
-main{margin-left:var(--nav);padding:1.4rem 2rem 4rem;max-width:calc(var(--nav) + 72rem)}
-h1{font-size:1.7rem;margin:.2rem 0 .4rem}
-h2{font-size:1.35rem;margin:2.6rem 0 .3rem;padding-top:.6rem;border-top:3px solid var(--ink)}
-h3{font-size:1.08rem;margin:1.6rem 0 .4rem}
-.meta{color:var(--muted);font-size:.9rem;margin:.2rem 0 .8rem}
-.callout{border-left:4px solid #c99a06;background:#fff8e1;padding:.5rem .8rem;margin:.8rem 0;font-size:.92rem}
-.callout.bad{border-color:#b42318;background:#fdecea}
-.err{color:#a00}
-.tablewrap{max-width:100%;overflow-x:auto}
-table{border-collapse:collapse;margin:.4rem 0 1rem;font-size:.86rem;max-width:100%}
-th,td{border:1px solid var(--line);padding:.28rem .55rem;text-align:left;vertical-align:top;
-  overflow-wrap:break-word}
-.kv{white-space:nowrap}
-th{background:var(--head);font-weight:600}
-th.num,td.num{text-align:right;font-variant-numeric:tabular-nums}
-td.num{white-space:nowrap;overflow-wrap:normal}
-table.dense{font-size:.78rem}
-table.dense th,table.dense td{padding:.2rem .35rem}
-table.nested{margin:0;font-size:1em}
-table.nested th,table.nested td{padding:.1rem .4rem;border-color:#e3e6ea}
-table.nested th{background:#f6f7f9;font-weight:500}
-table.scoreboard{width:100%}
-table.scoreboard td.statement{min-width:14rem}
-table.scoreboard td.na{color:var(--muted);font-size:.8rem;font-style:italic}
-table.scoreboard .detail{color:var(--muted);font-size:.82rem;margin-top:.15rem}
-table.scoreboard td.num .detail{white-space:normal;text-align:right}
-.badge{display:inline-block;border-radius:999px;padding:.05rem .55rem;font-weight:650;font-size:.8rem;
-  white-space:nowrap;border:1px solid transparent}
-.v-met{background:#dcf2e1;color:#17612b;border-color:#8fcf9f}
-.v-not-met{background:#fbe1e0;color:#9b1c1c;border-color:#eba7a3}
-.v-inconclusive{background:#fff1c9;color:#6e4e00;border-color:#e9cf79}
-.v-not-attainable{background:#e7e8ee;color:#464a5c;border-color:#c3c6d2}
-.v-not-judgeable{background:#f3e6f5;color:#6a2a73;border-color:#cfa6d6}
-tr.row-met>td:first-child{box-shadow:inset 4px 0 #2e8b4a}
-tr.row-not-met>td:first-child{box-shadow:inset 4px 0 #c0392b}
-tr.row-inconclusive>td:first-child{box-shadow:inset 4px 0 #d4a20a}
-tr.row-not-attainable>td:first-child{box-shadow:inset 4px 0 #7c8196}
-tr.row-not-judgeable>td:first-child{box-shadow:inset 4px 0 #8e44ad}
-table.scoreboard .pre{font-size:.8rem;margin-top:.2rem}
-table.scoreboard .pre.fail{color:#6a2a73;font-weight:600}
-table.scoreboard .pre.ok{color:var(--muted)}
-.ind{display:inline-block;margin-top:.2rem;font-size:.74rem;color:#6e4e00;border:1px dashed #d4a20a;
-  border-radius:4px;padding:0 .3rem;white-space:nowrap}
-.would{font-size:.76rem;color:var(--muted);margin-top:.15rem}
-.tally .badge{margin-right:.25rem}
-.notes{white-space:pre-wrap;font-family:ui-monospace,SFMono-Regular,Menlo,monospace;font-size:.8rem;
-  background:#f7f8fa;border:1px solid var(--line);border-radius:4px;padding:.6rem .8rem;margin:.3rem 0 .6rem;
-  max-height:28rem;overflow-y:auto}
-figure{margin:1rem 0 2rem}
-figure img{max-width:100%;height:auto;display:block;border:1px solid #eceff2}
-figcaption{font-size:.88rem;color:#3b4450;margin-top:.3rem}
-code{background:#f1f3f5;padding:.05em .3em;border-radius:3px}
-details{margin:.5rem 0}
-summary{cursor:pointer;color:var(--link)}
-@media (max-width:1200px){
-  :root{--nav:13rem}
-  main{padding:1.2rem 1.2rem 3rem}
-  .ind{white-space:normal}
-}
-@media (max-width:900px){
-  nav#nav{position:static;width:auto;border-right:0;border-bottom:1px solid var(--line)}
-  main{margin-left:0;padding:1rem}
-}
-"""
+TEMPLATES = Path(__file__).resolve().parent / "templates"
 
-# Highlights, in the side navigation, the part of the page being read (the page works without it).
-_SCRIPT = """
-(() => {
-  const nav = document.getElementById('nav');
-  const targets = [...nav.querySelectorAll('a[href^="#"]')]
-    .map(a => [a, document.getElementById(a.getAttribute('href').slice(1))]).filter(([a, el]) => el && el.id !== 'top');
-  let pending = false;
-  const update = () => {
-    pending = false;
-    // the last part whose top has reached the top of the window (any part in view at the very bottom)
-    const bottom = innerHeight + scrollY >= document.documentElement.scrollHeight - 2;
-    const line = bottom ? innerHeight - 40 : 100;
-    let here = null;
-    for (const [a, el] of targets) if (el.getBoundingClientRect().top <= line) here = a;
-    nav.querySelectorAll('a.here').forEach(x => { if (x !== here) x.classList.remove('here'); });
-    if (!here || here.classList.contains('here')) return;
-    here.classList.add('here');
-    if (here.offsetTop < nav.scrollTop || here.offsetTop > nav.scrollTop + nav.clientHeight - 30)
-      nav.scrollTop = here.offsetTop - nav.clientHeight / 3;
-  };
-  const onScroll = () => { if (!pending) { pending = true; requestAnimationFrame(update); } };
-  addEventListener('scroll', onScroll, {passive: true});
-  update();
-})();
-"""
+
+@lru_cache(maxsize=1)
+def _env() -> Environment:
+    return Environment(loader=FileSystemLoader(TEMPLATES), autoescape=True, undefined=StrictUndefined,
+                       trim_blocks=True, lstrip_blocks=True)
+
+
+@lru_cache(maxsize=1)
+def _assets() -> tuple[Markup, Markup]:
+    """The pages' style sheet and navigation script, inlined in every page (the pages work without the script)."""
+    return (Markup((TEMPLATES / "style.css").read_text(encoding="utf-8")),
+            Markup((TEMPLATES / "nav.js").read_text(encoding="utf-8")))
+
+
+def _render(template: str, /, **context) -> str:
+    return _env().get_template(template).render(**context)
+
 
 _CLASS = {"met": "v-met", "not met": "v-not-met", "inconclusive": "v-inconclusive",
           "not attainable": "v-not-attainable", "not judgeable": "v-not-judgeable"}
@@ -252,17 +169,17 @@ class _Span(str):
         return obj
 
 
-def _table(columns, rows, *, cls: str = "", row_classes=None, html_cells=None, numeric=None) -> str:
-    """A table; ``html_cells[i][j]`` (when given and not None) is used as is instead of ``rows[i][j]``.
+def _table(columns, rows, *, cls: str = "", row_classes=None, html_cells=None, numeric=None) -> Markup:
+    """A table (rendered by ``templates/table.html``); ``html_cells[i][j]`` (when given and not None) is used as is
+    instead of ``rows[i][j]``.
 
     A :class:`_Span` html cell spans its number of columns.
     """
     numeric = numeric if numeric is not None else _numeric_columns(rows, len(columns))
-    num = lambda j: " class='num'" if j < len(numeric) and numeric[j] else ""  # noqa: E731
-    head = "".join(f"<th{num(j)}>{_esc(c)}</th>" for j, c in enumerate(columns))
+    num = lambda j: j < len(numeric) and bool(numeric[j])  # noqa: E731
+    head = [(str(c), num(j)) for j, c in enumerate(columns)]
     body = []
     for i, row in enumerate(rows):
-        rcls = f" class='{row_classes[i]}'" if row_classes else ""
         cells, skip = [], 0
         for j, v in enumerate(row):
             if skip:
@@ -270,16 +187,14 @@ def _table(columns, rows, *, cls: str = "", row_classes=None, html_cells=None, n
                 continue
             given = html_cells[i][j] if html_cells is not None else None
             if isinstance(given, _Span):
-                cells.append(f"<td colspan='{given.n}' class='na'>{given}</td>")
+                cells.append((Markup(str(given)), False, given.n))
                 skip = given.n - 1
                 continue
-            cells.append(f"<td{num(j)}>{given if given is not None else human_value(v)}</td>")
-        body.append(f"<tr{rcls}>{''.join(cells)}</tr>")
+            cells.append((Markup(given if given is not None else human_value(v)), num(j), 0))
+        body.append((row_classes[i] if row_classes else "", cells))
     if len(columns) >= 9:
         cls = f"{cls} dense".strip()
-    c = f" class='{cls}'" if cls else ""
-    return (f"<div class='tablewrap'><table{c}><thead><tr>{head}</tr></thead>"
-            f"<tbody>{''.join(body)}</tbody></table></div>")
+    return _env().get_template("table.html").module.table(head, body, cls)
 
 
 def _slug(text: str) -> str:
@@ -302,10 +217,21 @@ def _png_size(data: bytes) -> tuple[int, int] | None:
 
 
 def _rel(path, out: Path) -> str:
+    """``path`` as a link from a page in ``out`` (relative, forward slashes, URL-quoted)."""
+    path, out = Path(path), Path(out)
     try:
-        return Path(path).relative_to(out).as_posix()
+        rel = path.relative_to(out).as_posix()
     except ValueError:
-        return str(path)
+        try:
+            rel = Path(os.path.relpath(path.resolve(), out.resolve())).as_posix()
+        except ValueError:  # e.g. another drive: no relative link can be written
+            return path.resolve().as_uri()
+    return quote(rel)
+
+
+def page_name(paper) -> str:
+    """The file name of a paper's page in the report folder, e.g. ``paper-003.html``."""
+    return f"paper-{_slug(paper)}.html"
 
 
 def _docs_page(paper: str) -> Path | None:
@@ -341,13 +267,41 @@ def scoreboard_detail(c) -> tuple[str, str | None, int | None]:
 
 # -- sections ------------------------------------------------------------------------------------------------
 
-def _scoreboard(p) -> str:
+def published_number(v: Any) -> float | int | None:
+    """The published value of the statistic a criterion judges, when the record gives one: a number.
+
+    :class:`workbench.criteria.Criterion` declares ``published`` as the paper's value beside ours, so a number there
+    is the same statistic as ``ours``, in its units.  Anything else (text such as ``"78 %"`` or a claim in words,
+    a mapping of the paper's raw numbers) is not a value of that statistic: :func:`paper_claim` gives it its own
+    column.  Nothing is converted or inferred from the text.
+    """
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    return v
+
+
+def paper_claim(v: Any) -> Any:
+    """The paper's own numbers or claim behind a criterion, when ``published`` is not a number (else ``None``)."""
+    if published_number(v) is not None or _blank(v):
+        return None
+    if isinstance(v, (Mapping, list, tuple, np.ndarray)) and len(v) == 0:
+        return None
+    return v
+
+
+def _scoreboard(p) -> Markup:
     crit = list(p.criteria)
     if not crit:
-        return "<p class='meta'>This recipe declares no criteria.</p>"
+        return Markup("<p class='meta'>This recipe declares no criteria.</p>")
     with_rep = any(c.replication is not None for c in crit)
     with_conf = any(c.confirmation is not None for c in crit)
+    with_claim = any(paper_claim(c.published) is not None for c in crit)
+    # ours and published: the same statistic; the paper's numbers of another quantity (or its words) apart
     columns = ["id", "criterion", "verdict", "ours", "published", "n", "95 % interval", "threshold"]
+    if with_claim:
+        columns.append("the paper's own numbers or claim")
     if with_rep:
         columns.append("paper's protocol, replicated")
     if with_conf:
@@ -373,7 +327,7 @@ def _scoreboard(p) -> str:
             f"<div class='pre {'ok' if p.holds else 'fail'}'>precondition {'holds' if p.holds else 'fails'}: "
             f"{_esc(p.name)}{f' ({_esc(p.detail)})' if p.detail else ''}</div>"
             for p in c.preconditions)
-        row = [c.id, c.text, c.verdict, c.ours, c.published, c.n, interval, c.threshold or None]
+        row = [c.id, c.text, c.verdict, c.ours, published_number(c.published), c.n, interval, c.threshold or None]
         n_cell = None
         if min_n is not None and c.n is not None:
             n_cell = f"{_esc(format_value(c.n))}<div class='detail'>needs &ge; {_esc(min_n)}</div>"
@@ -382,6 +336,9 @@ def _scoreboard(p) -> str:
             interval_cell += f"<div class='detail'>{_esc(method)}</div>"
         cell = [None, statement, verdict, None, None, n_cell, interval_cell,
                 _esc(c.threshold) if c.threshold else "n/a"]
+        if with_claim:
+            row.append(paper_claim(c.published))
+            cell.append(None)
         if with_rep:
             row.append(None if c.replication is None else f"{c.replication[0]}/{c.replication[1]}")
             cell.append("n/a" if c.replication is None else
@@ -397,12 +354,14 @@ def _scoreboard(p) -> str:
         cells.append(cell)
         classes.append("row-" + _CLASS.get(c.verdict, "")[2:])
     numeric = _numeric_columns(rows, len(columns))
-    numeric[0] = numeric[1] = numeric[2] = False
-    numeric[6] = True  # the interval reads as numbers
-    if with_rep:
-        numeric[8] = False
-    if with_conf:
-        numeric[-1] = False
+    for j, name in enumerate(columns):
+        if name in ("id", "criterion", "verdict", "the paper's own numbers or claim", "paper's protocol, replicated",
+                    "confirmation"):
+            numeric[j] = False
+        elif name == "95 % interval":
+            numeric[j] = True  # the interval reads as numbers
+        elif name == "published":
+            numeric[j] = True  # numbers only (or n/a)
     return _table(columns, rows, cls="scoreboard", row_classes=classes, html_cells=cells, numeric=numeric)
 
 
@@ -467,24 +426,21 @@ def _verdict_at(record) -> str:
     return cell
 
 
-def _unknowns(p) -> str:
+def _unknowns(p) -> Markup:
     """The declared unknowns of a paper (name, unit, primary, grid, why) and, per criterion that hinges on one,
     its verdict at the primary values beside its verdict at every grid value and where it holds."""
     unknowns = list(getattr(p, "unknowns", None) or ())
     if not unknowns:
-        return ""
-    parts = [f"<h3 id='{_anchor(p.paper, 'unknowns')}'>Declared unknowns: values the paper withholds</h3>",
-             "<p class='meta'>Values the paper does not give, which this reproduction had to choose. The scoreboard's "
-             "verdicts use the primary value; the criteria that hinge on an unknown are judged again at every grid "
-             "value below.</p>"]
-    parts.append(_table(["unknown", "unit", "primary", "grid", "why (and where the primary came from)"],
-                        [(u.name, u.unit or "-", format_value(u.primary), ", ".join(format_value(v) for v in u.grid),
-                          u.why) for u in unknowns],
-                        numeric=[False, False, True, False, False]))
+        return Markup("")
+    declared = _table(["unknown", "unit", "primary", "grid", "why (and where the primary came from)"],
+                      [(u.name, u.unit or "-", format_value(u.primary), ", ".join(format_value(v) for v in u.grid),
+                        u.why) for u in unknowns],
+                      numeric=[False, False, True, False, False])
+    blocks = []
     for u in unknowns:
         crit = [c for c in p.criteria if any(a.unknown == u.name for a in c.across)]
         if not crit:
-            parts.append(f"<p class='meta'>No criterion of this report was judged across {_esc(u.name)}.</p>")
+            blocks.append({"name": u.name, "table": None})
             continue
         columns = ["id", "verdict at the primary values",
                    *(f"{u.name} = {format_value(v)}" + (" (primary)" if v == u.primary else "") for v in u.grid),
@@ -500,11 +456,10 @@ def _unknowns(p) -> str:
             rows.append([c.id, c.verdict, *(at[v].verdict if v in at else None for v in u.grid), line])
             cells.append([None, _badge(c.verdict), *(_verdict_at(at[v]) if v in at else "n/a: not judged"
                                                      for v in u.grid), f"<b>{_esc(line)}</b>"])
-        parts.append(f"<p class='meta'>Verdicts across {_esc(u.name)} ({_esc(u.unit or 'no unit')})"
-                     + (f": {_esc(shared)}" if shared else "") + ".</p>")
-        parts.append(_table(columns, rows, cls="scoreboard", html_cells=cells,
-                            numeric=[False] * len(columns)))
-    return "".join(parts)
+        blocks.append({"name": u.name, "unit": u.unit or "no unit", "shared": shared,
+                       "table": _table(columns, rows, cls="scoreboard", html_cells=cells,
+                                       numeric=[False] * len(columns))})
+    return Markup(_render("unknowns.html", anchor=_anchor(p.paper, "unknowns"), declared=declared, blocks=blocks))
 
 
 def _not_judgeable_cell(criteria) -> tuple[str | None, str]:
@@ -528,89 +483,65 @@ def _nav_tally(criteria) -> str:
     return "".join(parts) if parts else "<span class='pill'>no criteria</span>"
 
 
-def _differs(p, out: Path) -> str:
-    parts = [f"<h3 id='{_anchor(p.paper, 'differs')}'>What differs from the paper and why</h3>"]
-    if p.notes:
-        parts.append("<p class='meta'>The choices this reproduction made where the paper is silent or where our "
-                     "set-up differs from the paper's:</p>")
-        parts.append(f"<div class='notes'>{_esc(p.notes.strip())}</div>")
-    else:
-        parts.append("<p class='meta'>The recipe records no choices of its own.</p>")
+def _differs(p, out: Path) -> Markup:
+    """The paper's "what differs" part: the recipe's notes and a link to the repository's docs page, when there."""
+    context = {"anchor": _anchor(p.paper, "differs"), "notes": (p.notes or "").strip(), "link": None, "path": None,
+               "name": None}
     page = _docs_page(p.paper)
     if page is not None:
+        context["name"] = page.name
         try:
-            link = os.path.relpath(page, Path(out).resolve()).replace(os.sep, "/")
-            parts.append(f"<p>The full discussion: <a href='{_esc(link)}'>docs/{_esc(page.name)}</a>.</p>")
+            context["link"] = quote(os.path.relpath(page, Path(out).resolve()).replace(os.sep, "/"))
         except ValueError:  # e.g. another drive: no relative link can be written
-            parts.append(f"<p>The full discussion: <code>{_esc(page)}</code>.</p>")
-    return "".join(parts)
+            context["path"] = str(page)
+    return Markup(_render("differs.html", **context))
 
 
-def _figure(p, f, out: Path) -> str:
-    fid = _anchor(p.paper, "fig", f["id"])
+def _figure(p, f, out: Path) -> dict:
+    """A figure of the paper's page: its PNG file linked beside the page (with its width and height), the caption and
+    links to the SVG and the data behind it."""
     links = []
     for label, key in (("SVG", "svg"), ("data NPZ", "data")):
         if f.get(key) is not None:
-            links.append(f"<a href='{_esc(_rel(f[key], out))}'>{label}</a>")
+            links.append((label, _rel(f[key], out)))
     if f.get("data") is not None:
-        links.append(f"<a href='{_esc(_rel(Path(f['data']).with_suffix('.csv'), out))}'>data CSV</a>")
-    caption = (f"<figcaption><b>{_esc(f['id'])}</b>: {_esc(f['caption'])} "
-               f"[{', '.join(links)}]</figcaption>")
+        links.append(("data CSV", _rel(Path(f["data"]).with_suffix(".csv"), out)))
+    fig = {"anchor": _anchor(p.paper, "fig", f["id"]), "name": f["id"], "caption": f["caption"], "links": links,
+           "src": None, "width": None, "height": None, "error": None}
     try:
-        data = Path(f["png"]).read_bytes()
+        with open(f["png"], "rb") as fh:
+            size = _png_size(fh.read(24))
     except (OSError, TypeError) as exc:
-        return (f"<figure id='{fid}'><p class='err'>Figure image missing ({_esc(type(exc).__name__)}: "
-                f"{_esc(f['png'])}).</p>{caption}</figure>")
-    size = _png_size(data)
-    dims = f" width='{size[0]}' height='{size[1]}'" if size else ""
-    png = base64.b64encode(data).decode()
-    return (f"<figure id='{fid}'><img alt='{_esc(f['id'])}: {_esc(f['caption'])}'{dims} "
-            f"src='data:image/png;base64,{png}'>{caption}</figure>")
+        fig["error"] = f"{type(exc).__name__}: {f['png']}"
+        return fig
+    fig["src"] = _rel(f["png"], out)
+    if size:
+        fig["width"], fig["height"] = size
+    return fig
 
 
-def _paper_section(p, out: Path) -> str:
-    parts = [f"<section id='{_anchor(p.paper)}'>",
-             f"<h2>Paper {_esc(p.paper)}: {_esc(p.title)}</h2>"]
-    meta = [f"size <b>{_esc(p.size)}</b>"]
-    if p.seed is not None:
-        meta.append(f"seed {_esc(p.seed)}")
-    meta.append(f"filters {_esc(', '.join(p.filters) or '-')}")
-    meta.append(f"{p.seconds:.1f} s")
-    if p.finished:
-        meta.append(f"finished {_esc(p.finished)}")
-    parts.append(f"<p class='meta'>{' · '.join(meta)}</p>")
-    if p.saved:
-        parts.append("<p class='callout'>Kept from an earlier run into this folder (not re-run this time)"
-                     + (f": <code>{_esc(p.command)}</code>" if p.command else "") + ".</p>")
-    for err in p.errors:
-        parts.append(f"<p class='err'>Not done: {_esc(err)}</p>")
-    parts.append(f"<h3 id='{_anchor(p.paper, 'scoreboard')}'>Scoreboard: reproduced if</h3>")
-    if any(c.indicative for c in p.criteria):
-        parts.append("<p class='callout'>Quick run: every verdict below is an <b>indication</b> from a small "
-                     "sample. None is declared <i>met</i>; run <code>workbench report --full</code> to decide.</p>")
-    parts.append(_scoreboard(p))
-    parts.append(_unknowns(p))
-    parts.append(_differs(p, out))
-    for t in p.tables:
-        parts.append(f"<h3 id='{_anchor(p.paper, 'table', t['id'])}'>{_esc(t['id'])}: {_esc(t['caption'])}</h3>")
-        parts.append(_table(t["columns"], t["rows"]))
-        if t.get("csv") is not None:
-            parts.append(f"<p class='meta'><a href='{_esc(_rel(t['csv'], out))}'>CSV</a></p>")
-    if p.figures:
-        parts.append(f"<h3 id='{_anchor(p.paper, 'figures')}'>Figures</h3>")
-    for f in p.figures:
-        parts.append(_figure(p, f, out))
+def _paper_page(p, out: Path, nav: dict) -> str:
+    """The paper's page: scoreboard first, then unknowns, what differs, figures, tables, published values and the
+    time table."""
+    tables = [{"anchor": _anchor(p.paper, "table", t["id"]), "name": t["id"], "caption": t["caption"],
+               "html": _table(t["columns"], t["rows"]),
+               "csv": _rel(t["csv"], out) if t.get("csv") is not None else None} for t in p.tables]
+    published = None
     if p.published:
-        parts.append(f"<h3 id='{_anchor(p.paper, 'published')}'>Published values and claims</h3>")
         items = list(p.published.items())
         numeric = [False, _numeric_columns([[v] for _, v in items], 1)[0]]
-        parts.append(_table(["item", "published"], items, numeric=numeric))
-    parts.append(_time_table(p))
-    parts.append("</section>")
-    return "\n".join(parts)
+        published = _table(["item", "published"], items, numeric=numeric)
+    style, script = _assets()
+    return _render("paper.html", style=style, script=script, nav=nav, p=p, anchor=_anchor(p.paper),
+                   filters=", ".join(p.filters) or "-", seconds=f"{p.seconds:.1f}",
+                   indicative=any(c.indicative for c in p.criteria), criteria=bool(p.criteria),
+                   claims=any(paper_claim(c.published) is not None for c in p.criteria),
+                   scoreboard=_scoreboard(p), unknowns=_unknowns(p), differs=_differs(p, out),
+                   figures=[_figure(p, f, out) for f in p.figures], tables=tables, published=published,
+                   tasks=_time_table(p))
 
 
-def _time_table(p) -> str:
+def _time_table(p) -> Markup:
     """The paper's time table, collapsed: each task (reported seed, unknowns' grid points, confirmation seed) with
     its runs, seconds, share of the paper's task compute and whether it was computed, cached, reused or failed."""
     from .engine import paper_time_table
@@ -624,42 +555,50 @@ def _time_table(p) -> str:
             f"{'; outside the tasks: ' + other if other else ''}")
     rows = [(r["task"], "-" if r["runs"] is None else r["runs"], round(r["seconds"], 2),
              f"{r['share_percent']:.2f} %", r["status"], errors.get(r["task"], "")) for r in table["rows"]]
-    return (f"<details id='{_anchor(p.paper, 'tasks')}'><summary>{_esc(head)}</summary>"
-            "<p class='meta'>Share: of the seconds the paper's tasks spent (a cached task, or one the confirmation "
-            "seed reuses because it does not depend on the seed, counts 0 s); the shares sum to 100 %.</p>"
-            + _table(["task", "runs", "seconds", "share of the paper's compute", "status", "error"], rows,
-                     numeric=[False, True, True, True, False, False])
-            + (_table(["figure or table (outside the tasks)", "seconds", "parts"],
-                      [(i["what"], round(i["seconds"], 2),
-                        ", ".join(f"{k} {v:.2f} s" for k, v in i["parts"].items())) for i in table["items"]],
-                      numeric=[False, True, False]) if table["items"] else "")
-            + "</details>")
+    tasks = _table(["task", "runs", "seconds", "share of the paper's compute", "status", "error"], rows,
+                   numeric=[False, True, True, True, False, False])
+    items = (_table(["figure or table (outside the tasks)", "seconds", "parts"],
+                    [(i["what"], round(i["seconds"], 2),
+                      ", ".join(f"{k} {v:.2f} s" for k, v in i["parts"].items())) for i in table["items"]],
+                    numeric=[False, True, False]) if table["items"] else "")
+    return Markup(_render("tasks.html", anchor=_anchor(p.paper, "tasks"), head=head, tasks=tasks, items=items))
 
 
-def _nav(papers) -> str:
-    items = ["<nav id='nav' aria-label='Contents'><div class='brand'><a href='#top'>workbench report</a></div><ul>"]
-    items.append("<li><a href='#overview'>At a glance</a></li>")
+def _nav(papers, here=None) -> dict:
+    """The side navigation of a page: the index's parts, every paper (with its verdicts counted) and, for the paper
+    whose page it is (``here``), each part of that page as an in-page link."""
+    on_index = here is None
+    home = "#top" if on_index else "index.html"
+    entries = []
     for p in papers:
-        sub = [f"<li><a href='#{_anchor(p.paper, 'scoreboard')}'>Scoreboard</a>"
-               f"<span class='tally'>{_nav_tally(p.criteria)}</span></li>",
-               f"<li><a href='#{_anchor(p.paper, 'differs')}'>What differs</a></li>"]
-        if p.tables:
-            sub.append("<li class='group'>Tables</li>")
-            sub += [f"<li><a href='#{_anchor(p.paper, 'table', t['id'])}' title='{_esc(t['caption'])}'>"
-                    f"{_esc(t['id'])}</a></li>" for t in p.tables]
-        if p.figures:
-            sub.append("<li class='group'>Figures</li>")
-            sub += [f"<li><a href='#{_anchor(p.paper, 'fig', f['id'])}' title='{_esc(f['caption'])}'>"
-                    f"{_esc(f['id'])}</a></li>" for f in p.figures]
-        if p.published:
-            sub.append(f"<li><a href='#{_anchor(p.paper, 'published')}'>Published values</a></li>")
-        items.append(f"<li class='paper'><a href='#{_anchor(p.paper)}' title='{_esc(p.title)}'>Paper "
-                     f"{_esc(p.paper)} <small>{_esc(p.title)}</small></a><ul class='sub'>{''.join(sub)}</ul></li>")
-    items.append("<li class='paper'><a href='#provenance'>Provenance</a></li></ul></nav>")
-    return "".join(items)
+        current = here is not None and p.paper == here.paper
+        page = "" if current else page_name(p.paper)
+        items = []
+        if current:
+            items.append({"href": f"{page}#{_anchor(p.paper, 'scoreboard')}", "text": "Scoreboard"})
+            if getattr(p, "unknowns", None):
+                items.append({"href": f"{page}#{_anchor(p.paper, 'unknowns')}", "text": "Declared unknowns"})
+            items.append({"href": f"{page}#{_anchor(p.paper, 'differs')}", "text": "What differs"})
+            if p.figures:
+                items.append({"group": "Figures"})
+                items += [{"href": f"{page}#{_anchor(p.paper, 'fig', f['id'])}", "title": f["caption"],
+                           "text": f["id"]} for f in p.figures]
+            if p.tables:
+                items.append({"group": "Tables"})
+                items += [{"href": f"{page}#{_anchor(p.paper, 'table', t['id'])}", "title": t["caption"],
+                           "text": t["id"]} for t in p.tables]
+            if p.published:
+                items.append({"href": f"{page}#{_anchor(p.paper, 'published')}", "text": "Published values"})
+            items.append({"href": f"{page}#{_anchor(p.paper, 'tasks')}", "text": "Time per task"})
+        items = [{"group": None, "title": None, "href": None, "text": None, **x} for x in items]
+        entries.append({"paper": p.paper, "title": p.title, "current": current, "parts": items,
+                        "href": f"#{_anchor(p.paper)}" if current else page_name(p.paper),
+                        "tally": Markup(_nav_tally(p.criteria))})
+    return {"home": home, "overview": "#overview" if on_index else "index.html#overview",
+            "provenance": "#provenance" if on_index else "index.html#provenance", "papers": entries}
 
 
-def _overview(papers) -> str:
+def _overview(papers) -> Markup:
     rows, cells = [], []
     for p in papers:
         counts = _tally(p.criteria)
@@ -669,7 +608,9 @@ def _overview(papers) -> str:
         # the page's content column beside the navigation)
         rows.append([p.paper, p.title, p.size, *(counts[v] for v in _ORDER), f"{why or 'n/a'}; confirmation seed: {conf}",
                      len(p.errors)])
-        cells.append([f"<a href='#{_anchor(p.paper)}'>{_esc(p.paper)}</a>", None, None,
+        cells.append([f"<a href='{_esc(page_name(p.paper))}'>{_esc(p.paper)}</a>",
+                      f"<a href='{_esc(page_name(p.paper))}#{_anchor(p.paper, 'scoreboard')}'>{_esc(p.title)}</a>",
+                      None,
                       *(f"<span class='badge {_CLASS[v]}'>{counts[v]}</span>" if counts[v] else "0" for v in _ORDER),
                       f"{why_html}<div class='detail'>confirmation seed: {conf_html}</div>", None])
     columns = ["paper", "title", "size", *_ORDER, "not judgeable: failed precondition; confirmation seed",
@@ -704,34 +645,29 @@ def _papers(report) -> list:
     return list(getattr(report, "all_papers", report.papers))
 
 
+_PAGE = re.compile(r"^paper-[A-Za-z0-9_-]+\.html$")
+
+
 def write_index(report, host: PluginHost) -> None:
-    """Write ``report.out/index.html`` (atomically) for every paper of the report folder."""
+    """Write the report's pages (atomically): one page per paper of the report folder (:func:`page_name`), then
+    ``report.out/index.html``; a paper page of a paper no longer in the folder is removed."""
     papers = _papers(report)
     out = Path(report.out)
-    parts = ["<!doctype html><html lang='en'><head><meta charset='utf-8'>"
-             "<meta name='viewport' content='width=device-width, initial-scale=1'><title>workbench report</title>"
-             f"<style>{_STYLE}</style></head><body>",
-             _nav(papers),
-             "<main id='top'>",
-             "<h1>workbench report</h1>",
-             "<p>Each paper: a scoreboard of the brief's 'reproduced if' criteria judged on our numbers (the "
-             "number of runs, the 95 % interval and a verdict among <i>met</i>, <i>not met</i>, "
-             "<i>inconclusive</i>, <i>not attainable</i> and <i>not judgeable</i>, the last where a precondition "
-             "of the criterion fails, named with its numbers), what differs from the paper, then our tables and "
-             "figures regenerated from saved raw numbers with the published values beside ours.</p>"]
-    for line in getattr(report, "warnings", []):
-        parts.append(f"<p class='callout bad'>{_esc(line)}</p>")
-    if any(c.indicative for p in papers for c in p.criteria):
-        parts.append("<p class='callout'><b>Quick run:</b> the verdicts are indicative only and none is declared "
-                     "<i>met</i>; <code>workbench report --full</code> gives firm verdicts.</p>")
-    parts.append("<h2 id='overview'>At a glance</h2>")
-    parts.append(_overview(papers))
+    written = set()
     for p in papers:
-        parts.append(_paper_section(p, out))
-    parts.append("<h2 id='provenance'>Provenance</h2>")
-    parts.append(_table(["what", "value"], _provenance(report, host), numeric=[False, False]))
-    parts.append(f"</main><script>{_SCRIPT}</script></body></html>")
-    write_text_atomic(out / "index.html", "\n".join(parts))
+        name = page_name(p.paper)
+        write_text_atomic(out / name, _paper_page(p, out, _nav(papers, here=p)))
+        written.add(name)
+    style, script = _assets()
+    write_text_atomic(out / "index.html", _render(
+        "index.html", style=style, script=script, nav=_nav(papers),
+        warnings=list(getattr(report, "warnings", [])),
+        quick=any(c.indicative for p in papers for c in p.criteria), overview=_overview(papers),
+        provenance=_table(["what", "value"], _provenance(report, host), numeric=[False, False]),
+        pages={_anchor(p.paper): page_name(p.paper) for p in papers}))
+    for stale in out.glob("paper-*.html"):
+        if _PAGE.match(stale.name) and stale.name not in written:
+            stale.unlink(missing_ok=True)
 
 
 def _criterion_summary(c) -> dict:

@@ -460,7 +460,7 @@ def test_the_quick_report_still_renders_the_papers_numbers(report, tmp_path):
                            tables=tables, criteria=[c.as_indicative() for c in recipe.criteria(results)],
                            unknowns=list(recipe.unknowns))
     write_index(ReportOutcome(tmp_path, [outcome], 0.0, "test", 1, "quick"), HOST)
-    page = (tmp_path / "index.html").read_text()
+    page = (tmp_path / "paper-001.html").read_text() + (tmp_path / "index.html").read_text()
     assert "78 %" in page and "84 %" in page and "&gt;= 90 % of runs" in page
     assert "Declared unknowns" in page and "clutter per ping = 62.5" in page and "M-of-N confirmation = 2 of 4" in page
     assert "off (quick run)" in page and "the cap on it" in page
