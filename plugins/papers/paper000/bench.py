@@ -8,8 +8,9 @@ benchmark, not a test).
 - the memory of one method-C update (kernel sum, amplitude-aware floor, normalising, resampling) with N = 10^5
   particles and M = 10^3 detections, against the ``(B, N, M)`` float64 array a naive evaluation holds (target: at
   most 5 % of it: the weights stay ``O(B N + M)``; :func:`weights_memory`);
-- the whole paper-000 report at the benchmark's size (full: the paper's protocol at three reference RCS values, its
-  replications and the N sweep; target: under 3 minutes on 2 cores), in this process into a temporary folder without
+- the whole paper-000 report at the benchmark's size (full: the paper's protocol at the primary values, the judged
+  rows across the declared unknowns' grid, the calibration on a tuning seed, the replications and the N sweep;
+  target: under 3 minutes on 2 cores), in this process into a temporary folder without
   a cache, with the machine's load average before and after (:func:`report_time`).
 
 The method-C weight kernel itself (throughput per backend and precision, its limit and its targets) is the ``tbd-pf``

@@ -19,12 +19,13 @@ import numpy as np
 from scipy.special import logsumexp
 
 from workbench.models import MeasurementModel, MotionModel
+from workbench.models.measurement import linear_measurement
 from workbench.sensing.radar import radial_velocity
 from workbench.specs import FilterSpec
 from workbench.tracking import Gated, run
 from workbench.types import Gaussian, InputError, Scan, Scans
 
-__all__ = ["weighted_mean_measurement", "pseudo_measurement_covariance", "whitened_model", "measurement_error",
+__all__ = ["weighted_mean_measurement", "weighted_mean_position", "position_model", "pseudo_measurement_covariance", "whitened_model", "measurement_error",
            "estimation_error", "lost_track", "moment_matched_scale", "GatedRun", "run_gated"]
 
 
@@ -70,6 +71,38 @@ def weighted_mean_measurement(scan: Scan, predicted: np.ndarray, model: Measurem
     # z_bar = sum_m w~_m [p_m; vr_m]     (11)
     z_bar = np.einsum("bm,bmk->bk", w, scan.z)
     return Scan.single(z_bar, present, time=scan.time)
+
+
+def weighted_mean_position(scan: Scan, predicted: np.ndarray, model: MeasurementModel, sigma_g: float = 500.0,
+                           sigma_vr: float = 15.0) -> Scan:
+    """The paper's weighted-mean *coordinate* of methods A and B (eqs 9-11 as the paper writes them).
+
+    The weights are eq 10's: ``w_m = P_D(snr_m) exp(-r_m^2 / (2 sigma_g^2)) exp(-(vr_m - vr_hat)^2 /
+    (2 sigma_vr^2))``, so the Doppler enters only the weights; the pseudo-measurement (eq 11) is the weighted mean
+    of the gated detections' *positions*, ``z_bar = sum_m w~_m p_m``, a 3-D coordinate (no Doppler row; the
+    4-vector ``[p; v_r]`` of :func:`weighted_mean_measurement` is the brief's earlier reading).  An item without
+    detections comes back with no valid row (the filter then predicts only).
+
+    Shapes
+    ------
+    scan.z : (B, M, 4), scan.snr : (B, M) in dB; predicted : (B, 6); returns a Scan (B, 1, 3)
+    """
+    full = weighted_mean_measurement(scan, predicted, model, sigma_g, sigma_vr)
+    return Scan.single(full.z[:, 0, :3], full.valid[:, 0], time=full.time)
+
+
+def position_model(model: MeasurementModel) -> MeasurementModel:
+    """The measurement model of the weighted-mean coordinate: ``h(s) = [x, y, z]`` (linear) with the fixed noise
+    ``R_bar = diag(s_x^2, s_y^2, s_z^2)`` from the position components of the sensor's stated pseudo-measurement
+    accuracy (``model.std[:3]``: the lband-radar's declared ``pseudo_sigma_pos``, the brief's 300 m [U])."""
+    if model.dim < 3 or any(model.angular[:3]):
+        raise InputError(f"position_model: {model.name!r} has no Cartesian position in its first three components")
+    std = tuple(float(v) for v in model.stated_std[:3])
+    n = 6
+    H = np.zeros((3, n))
+    H[:, :3] = np.eye(3)
+    return linear_measurement(H, np.diag(np.square(std)), name=f"{model.name}-position", frame="cartesian-3d",
+                              std=std)
 
 
 def pseudo_measurement_covariance(scan: Scan, predicted: np.ndarray, model: MeasurementModel,

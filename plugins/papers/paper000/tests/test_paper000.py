@@ -15,11 +15,11 @@ from workbench.sensing.radar import (db, detection_probability, exponential_powe
                                      radar_snr)
 from workbench.specs import RecipeOptions, TaskContext
 from workbench.testing.bootstrap import loop_statistics, same_numbers
-from workbench.types import Gaussian, Scan
+from workbench.types import Gaussian, InputError, Scan
 from workbench_papers.paper000 import methods, recipe, scenario, tuning
 from workbench_papers.paper000.pipeline import (estimation_error, lost_track, measurement_error, moment_matched_scale,
-                                                pseudo_measurement_covariance, weighted_mean_measurement,
-                                                whitened_model)
+                                                position_model, pseudo_measurement_covariance,
+                                                weighted_mean_measurement, weighted_mean_position, whitened_model)
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +63,36 @@ def test_scans_carry_the_clutter_intensity_and_share_draws_across_the_rcs(host):
     assert not np.array_equal(other.snr[..., 0], a.snr[..., 0])  # independent runs
 
 
+def test_a_lower_clutter_rate_thins_the_same_draws(host):
+    truth = scenario.scenario_truth(4)
+    full = scenario.simulate_scans(host, truth, 5, 5.0, -20.0)
+    rates = {r: scenario.simulate_scans(host, truth, 5, 5.0, -20.0, clutter_rate=r) for r in (50.0, 200.0, 1000.0)}
+    # the target's detections are untouched, the clutter a nested subset of the full rate's (common random numbers)
+    np.testing.assert_array_equal(rates[50.0].valid[..., 0], full.valid[..., 0])
+    np.testing.assert_array_equal(rates[1000.0].valid, full.valid)
+    clutter = lambda s: s.valid & (s.origin < 0)  # noqa: E731
+    assert not np.any(clutter(rates[50.0]) & ~clutter(rates[200.0]))
+    assert not np.any(clutter(rates[200.0]) & ~clutter(full))
+    # thinning keeps rate / 1000 of the candidates: a Poisson count with that mean (4 runs x 300 scans)
+    kept = clutter(rates[200.0]).sum() / clutter(full).sum()
+    n = clutter(full).sum()
+    assert abs(kept - 0.2) < 4 * np.sqrt(0.2 * 0.8 / n)
+    # every detection carries the intensity of its own rate (the clutter model's, scaled by the rate)
+    lam = 1000 * np.exp(-from_db(5.0) / 2) / 1e12 / 600.0
+    np.testing.assert_allclose(rates[50.0].clutter_density[rates[50.0].valid], lam * 0.05, rtol=1e-12)
+    with pytest.raises(InputError, match="thinning"):
+        scenario.simulate_scans(host, truth, 5, 5.0, -20.0, clutter_rate=2000.0)
+
+
+def test_declared_unknowns_hold_their_primaries_and_grids():
+    rcs, rate = scenario.REFERENCE_RCS, scenario.CLUTTER_RATE
+    assert rcs.primary == scenario.PRIMARY_RCS == -20.0 and min(rcs.grid) == -20.0 and max(rcs.grid) == -10.0
+    assert rate.primary == 1000.0 and min(rate.grid) == 50.0
+    points = recipe.grid_points()
+    assert points[0] == (-20.0, 1000.0) and len(set(points)) == len(points)
+    assert {(-15.0, 50.0), (-20.0, 50.0), (-10.0, 1000.0)} <= set(points)
+
+
 def test_tracking_model_declares_the_clutter_law(host, model):
     s = np.array([5.5, 8.0, 14.0])
     np.testing.assert_allclose(model.detection.clutter_log_snr_density(s), exponential_power_log_density(s, 2.0, 5.0))
@@ -90,6 +120,47 @@ def test_weighted_mean_measurement_eqs_9_to_11(model):
     two = weighted_mean_measurement(Scan(z2, np.ones((1, 2), bool), snr=np.full((1, 2), 9.0)), pred[:1], model)
     r = np.exp(-0.5 * (1000 / 500) ** 2 - 0.5 * (30 / 15) ** 2)
     np.testing.assert_allclose(two.z[0, 0, 0], 1e4 + 1000 * r / (1 + r))
+
+
+def test_weighted_mean_coordinate_is_the_papers_eq_11(model):
+    """The paper's z_bar: a weighted mean of the gated positions, weights from position AND Doppler (eq 10), no
+    Doppler row; against a hand-written loop over the detections."""
+    from scipy.stats import ncx2
+
+    rng = np.random.default_rng(7)
+    pred = np.array([[2.5e4, 3e3, 2e3, -180.0, 20.0, 0.0], [4e4, -1e3, 3e3, 150.0, 0.0, -5.0]])
+    z = np.empty((2, 4, 4))
+    z[..., :3] = pred[:, None, :3] + rng.normal(0.0, 600.0, (2, 4, 3))
+    # Dopplers within 20 m/s of the predicted radial velocity, so that every valid detection has a say
+    vr_pred = np.einsum("bi,bi->b", pred[:, :3], pred[:, 3:]) / np.linalg.norm(pred[:, :3], axis=1)
+    z[..., 3] = vr_pred[:, None] + rng.uniform(-20.0, 20.0, (2, 4))
+    snr = rng.uniform(5.0, 15.0, (2, 4))
+    valid = np.array([[True, True, False, True], [False, False, False, False]])
+    out = weighted_mean_position(Scan(z, valid, snr=snr), pred, model, 500.0, 15.0)
+    assert out.z.shape == (2, 1, 3) and out.valid[:, 0].tolist() == [True, False]
+    # by hand: P_D = Marcum Q1(sqrt(2 SNR), sqrt(-2 ln Pfa)) (Swerling 0, Pfa = 1e-6), the two Gaussian kernels
+    p, v = pred[0, :3], pred[0, 3:]
+    vr_hat = p @ v / np.linalg.norm(p)
+    num, den = np.zeros(3), 0.0
+    for m in range(4):
+        if not valid[0, m]:
+            continue
+        pd = ncx2.sf(-2 * np.log(1e-6), 2, 2 * 10 ** (snr[0, m] / 10))
+        w = pd * np.exp(-np.sum((z[0, m, :3] - p) ** 2) / (2 * 500.0**2)) * np.exp(-(z[0, m, 3] - vr_hat) ** 2
+                                                                                 / (2 * 15.0**2))
+        num, den = num + w * z[0, m, :3], den + w
+    np.testing.assert_allclose(out.z[0, 0], num / den, rtol=1e-6)
+    # the Doppler moves the weights, not a coordinate: a detection's Doppler off the prediction pulls z_bar less
+    far = z.copy()
+    far[0, 0, 3] = vr_hat + 60.0
+    moved = weighted_mean_position(Scan(far, valid, snr=snr), pred, model, 500.0, 15.0)
+    d0 = np.linalg.norm(out.z[0, 0] - z[0, 0, :3])
+    assert d0 > 1.0 and np.linalg.norm(moved.z[0, 0] - z[0, 0, :3]) > d0 + 1.0
+    # its model: h(s) = p, the fixed R_bar of the sensor's stated position accuracy (300 m)
+    pos = position_model(model)
+    np.testing.assert_allclose(pos.R, np.diag([300.0**2] * 3))
+    np.testing.assert_allclose(pos.h(pred), pred[:, :3])
+    assert pos.dim == 3 and pos.frame == "cartesian-3d"
 
 
 def test_pseudo_measurement_covariance_is_the_pda_like_r_bar(model):
@@ -131,8 +202,17 @@ def test_pseudo_measurement_forms_follow_the_row_and_the_capabilities(host, mode
     pred = np.array([[3e4, 0.0, 2e3, -200.0, 0.0, 0.0]] * 2)
     z = np.array([[[3e4 + 200, 0.0, 2e3, -195.0], [3e4 - 500, 300.0, 2e3, 50.0]]] * 2)
     gated = Scan(z, np.array([[True, True], [True, False]]), snr=np.array([[9.0, 6.0], [14.0, 0.0]]))
-    # the paper's form: z_bar alone, the filter keeps the model's fixed R (the brief's R_bar), no clutter term
-    paper = methods.pseudo_measurement(gated, pred, model=model, filt=host.filter("ekf"), form="paper")
+    # the paper's form: the weighted-mean coordinate with its own position model; the EKF update is the textbook one
+    # with H = [I 0] and R_bar = 300^2 I
+    step = methods.pseudo_measurement(gated, pred, model=model, filt=host.filter("ekf"), form="position")
+    assert isinstance(step, tuple) and step[0].z.shape == (2, 1, 3) and step[1].dim == 3
+    prior = Gaussian(pred, np.broadcast_to(np.eye(6) * 1e4, (2, 6, 6)).copy())
+    upd = host.filter("ekf").update(prior, step[0], step[1], None)
+    H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    K = 1e4 * H.T @ np.linalg.inv(1e4 * np.eye(3) + 300.0**2 * np.eye(3))
+    np.testing.assert_allclose(upd.mean[0], pred[0] + K @ (step[0].z[0, 0] - pred[0, :3]), rtol=1e-9)
+    # the 4-vector reading: z_bar alone, the filter keeps the model's fixed R (the brief's R_bar), no clutter term
+    paper = methods.pseudo_measurement(gated, pred, model=model, filt=host.filter("ekf"), form="vector")
     assert paper.cov is None and paper.clutter_density is None
     np.testing.assert_allclose(model.R, np.diag([300.0**2] * 3 + [10.0**2]))
     ekf = host.filter("ekf").update(Gaussian(pred, np.broadcast_to(np.eye(6) * 1e4, (2, 6, 6)).copy()), paper, model,
@@ -201,7 +281,11 @@ def test_method_rows(host):
     for m in methods.METHODS:
         spec = host.filter(m.filter)  # every row resolves to an installed, configured filter
         assert (m.pseudo == "") == ("multi_measurement" in spec.capabilities)
-        assert methods.method_for(m.filter) is m
+        assert m in methods.rows_for(m.filter) and methods.method_of(m.key) is m
+    # the judged row comes first among the rows of its filter; the 4-vector reading is an ablation of the same filter
+    assert [r.key for r in methods.rows_for("ekf")] == ["A", "A-4v"] and methods.method_for("ekf").key == "A"
+    assert {m.key: m.pseudo for m in methods.METHODS if m.role in "AB"} == {"A": "position", "B": "position"}
+    assert all("(paper)" not in m.label for m in methods.METHODS)
     extra = methods.method_for("ukf", host.filter("ukf").capabilities)
     assert extra.role == "extra" and extra.pseudo == "pda"
     with pytest.raises(ValueError):
@@ -215,18 +299,24 @@ def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
     rcp = host.recipe("000")
     full = RecipeOptions("full", rcp.sizes["full"], 0, rcp.default_filters + ("ukf",))
     tasks = {t.key: t for t in rcp.tasks(full)}
-    assert set(tasks) == {"scenario", "table@-20dBsm", "sweep@-20dBsm", "table@-18.5dBsm", "table@-17dBsm",
-                          "replicate@-20dBsm", "timing@-20dBsm"}
+    grid = {f"grid@{r:g}dBsm" + ("" if c == 1000.0 else f"@{c:g}perscan") for r, c in recipe.grid_points()[1:]}
+    assert set(tasks) == {"scenario", "table@-20dBsm", "sweep@-20dBsm", "replicate@-20dBsm", "timing@-20dBsm",
+                          "calibration"} | grid
+    cal = tasks["calibration"]
+    assert not cal.seeded and cal.params["seed"] in tuning.TUNING_SEEDS and cal.params["seed"] != 0
+    assert [tuple(p) for p in cal.params["points"]] == list(recipe.grid_points())
+    assert tasks["grid@-15dBsm@50perscan"].params["rate"] == 50.0
+    assert {c[3] for c in tasks["grid@-10dBsm"].params["combos"]} == {"A", "B", "C"}
     timing = tasks["timing@-20dBsm"].params
     assert (timing["runs"], timing["repeats"], timing["filter"]) == (20, recipe.TIMING_REPEATS, "tbd-pf")
     combos = {tuple(c) for c in tasks["table@-20dBsm"].params["combos"]}
-    assert ("ukf", 600, 1000.0) in combos and ("tbd-pf", 600, 2500.0) in combos
-    assert all((m.filter, 600, 1000.0) in combos for m in methods.METHODS)
+    assert ("ukf", 600, 1000.0, "ukf") in combos and ("tbd-pf", 600, 2500.0, "C") in combos
+    assert all((m.filter, 600, 1000.0, m.key) in combos for m in methods.METHODS)
     sweep = {c[1] for c in tasks["sweep@-20dBsm"].params["combos"] if c[2] == 1000.0}
     assert sweep == {50, 100, 200, 300, 400, 500, 800, 1000}  # 600 comes from the table task
     rep = tasks["replicate@-20dBsm"].params
     assert rep["stream"] == "replicate" and rep["runs"] == 80
-    assert {c[0] for c in rep["combos"]} == {m.filter for m in methods.METHODS if m.role in "ABC"}
+    assert {c[3] for c in rep["combos"]} == {"A", "B", "C"}
     assert rcp.sizes["full"]["runs"] == 20
     quick = {t.key for t in rcp.tasks(RecipeOptions("quick", rcp.sizes["quick"], 0, ("tbd-pf",)))}
     assert quick == {"scenario", "table@-20dBsm", "sweep@-20dBsm"}
@@ -235,8 +325,8 @@ def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
 @pytest.fixture(scope="module")
 def results(host):
     rcp = host.recipe("000")
-    values = {"runs": 2, "path_particles": [100, 600], "sweep_particles": [100, 600], "sensitivity": [-17.0],
-              "replicated_runs": 2, "timing_repeats": 2}
+    values = {"runs": 2, "path_particles": [100, 600], "sweep_particles": [100, 600], "unknowns": False,
+              "calibration_runs": 0, "replicated_runs": 2, "timing_repeats": 2}
     options = RecipeOptions(size="test", values=values, seed=1, filters=rcp.default_filters)
     return {t.key: {k: np.asarray(v) for k, v in t.run(TaskContext(t.params, seed=1, host=host)).items()}
             for t in rcp.tasks(options)}
@@ -274,10 +364,9 @@ def test_report_figures_hold_the_scenario_and_the_runs(host, results):
     assert figs["fig13"]["methods"].tolist() == [m.key for m in methods.METHODS]
     np.testing.assert_allclose(figs["fig13"]["e_error"][2], c600["error"].mean(axis=0))
     f14 = figs["fig14"]
-    assert f14["rcs_dbsm"].tolist() == [-20.0, -17.0] and set(f14["methods"]) == {"A", "B", "C", "A+", "B+"}
-    c17 = recipe._get(results, "C", 600, 1000.0, rcs=-17.0)
+    assert f14["rcs_dbsm"].tolist() == [-20.0] and set(f14["methods"]) == {"A", "B", "C", "A+", "B+"}
     j = f14["methods"].tolist().index("C")
-    assert f14["whole_mean"][j, 1] == pytest.approx(c17["error"][:, 1:].mean())
+    assert f14["whole_mean"][j, 0] == pytest.approx(c600["error"][:, 1:].mean())
     assert f14["lost"][j, 0] == int(c600["lost"].sum())
     from matplotlib.figure import Figure
 
@@ -292,7 +381,7 @@ def test_report_figures_hold_the_scenario_and_the_runs(host, results):
 def test_report_table3_shows_mean_median_not_lost_and_lost(host, results):
     rcp = host.recipe("000")
     tables = {t.id: t.make(results) for t in rcp.tables}
-    assert {"table2", "table3", "table3_all_runs", "table3_rcs-18.5", "table3_rcs-17", "table_clutter",
+    assert {"table2", "table3", "table3_all_runs", "table_unknowns", "table_calibration", "table_clutter",
             "table_tuning"} == set(tables)
     t3 = tables["table3"]
     rows = {r[0]: dict(zip(t3.columns, r)) for r in t3.rows}
@@ -310,9 +399,11 @@ def test_report_table3_shows_mean_median_not_lost_and_lost(host, results):
     assert rows[methods.METHODS[5].label]["paper whole (m)"] == ""  # no published value for an ablation
     # the pooled table: the paper's protocol and the replications, 2 + 2 runs
     assert {r[2] for r in tables["table3_all_runs"].rows} == {4}
-    # the sensitivity tables: run (-17) or saying it was not run at this size (-18.5)
-    assert len(tables["table3_rcs-17"].rows) == len(methods.METHODS)
-    assert tables["table3_rcs-18.5"].rows[0][0].startswith("not run at this size")
+    # the grid and the calibration say they were not run at this size (the primary point is the table's)
+    assert [r[2] for r in tables["table_unknowns"].rows if "not run" in str(r[2])] and \
+        len(tables["table_unknowns"].rows) == 3 + len(recipe.grid_points()) - 1
+    assert tables["table_calibration"].rows[0][0].startswith("not run at this size")
+    assert tables["table_calibration"].rows[-1][6] == tuning.CALIBRATION_RULE
     # the tuning table shows the values the filters really use, each one of its step's candidates
     tun = {r[0]: r for r in tables["table_tuning"].rows}
     used = float(tun[tuning.STEPS[0].name][4])
@@ -324,8 +415,8 @@ def test_report_table3_shows_mean_median_not_lost_and_lost(host, results):
 def test_criteria_records_carry_n_interval_and_verdict(host, results):
     crit = host.recipe("000").criteria(results)
     ids = [c.id for c in crit]
-    assert ids[:6] == ["1", "2", "3", "4", "5", "6"]
-    assert {"1@-17dBsm", "2@-17dBsm", "3@-17dBsm", "5@-17dBsm", "6@-17dBsm"} <= set(ids)
+    assert ids == ["1", "2", "3", "4", "5", "6"]  # no grid, no calibration at this size: no across, no 1@calibrated
+    assert all(not c.across for c in crit)
     for c in crit:
         assert isinstance(c, Criterion)
         assert c.verdict in ("met", "not met", "inconclusive", "not attainable", "not judgeable")
@@ -510,3 +601,70 @@ def test_tuning_rule_scores_lost_runs_first():
     assert 0 not in tuning.TUNING_SEEDS  # the report's seed never serves the search
     for step in tuning.STEPS:
         assert step.method in {m.key for m in methods.METHODS} and len(step.candidates) >= 2
+
+
+def test_calibration_rule_on_a_small_synthetic_table():
+    """|ln(A / 236)| + |ln(B / 214)|, lowest wins, ties to the primary, then to the first listed (the rule as
+    written in tuning.CALIBRATION_RULE and docs/paper000.md)."""
+    cands = [(-20.0, 1000.0), (-15.0, 1000.0), (-10.0, 1000.0), (-15.0, 50.0)]
+    a = np.array([20_000.0, 300.0, 120.0, 250.0])
+    b = np.array([25_000.0, 260.0, 100.0, 200.0])
+    scores = tuning.calibration_scores(a, b)
+    want = [abs(np.log(x / 236.0)) + abs(np.log(y / 214.0)) for x, y in zip(a, b)]
+    np.testing.assert_allclose(scores, want, rtol=1e-12)
+    assert tuning.calibrate(cands, a, b, cands[0]) == 3  # 0.057 + 0.068: the closest to Table 3
+    # a factor 2 above and a factor 2 below score alike (log ratios): a tie, which goes to the first listed ...
+    tie_a, tie_b = np.array([9e3, 472.0, 118.0, 9e3]), np.array([9e3, 214.0, 214.0, 9e3])
+    assert tuning.calibrate(cands, tie_a, tie_b, cands[0]) == 1
+    # ... or to the primary where it is among the tied
+    assert tuning.calibrate(cands, tie_a, tie_b, cands[2]) == 2
+    # a candidate without a finite positive error never wins; none at all is refused
+    assert tuning.calibrate(cands, [np.nan, 0.0, 500.0, 900.0], [214.0, 214.0, 300.0, 214.0], cands[0]) == 2
+    with pytest.raises(ValueError, match="finite"):
+        tuning.calibrate(cands, [np.nan] * 4, [1.0] * 4, cands[0])
+
+
+def test_criteria_across_the_unknowns_and_at_the_calibrated_values():
+    """Criteria 1-3 judged at every grid point (not judgeable where A and B lose their tracks, met where the three
+    rows track in the paper's order) and again at the point the calibration chose."""
+    rng = np.random.default_rng(3)
+    k = np.arange(300)
+    shape = np.where(k <= 100, 2.0, 1.0)
+
+    def tracking(level, runs):
+        return level * shape * (1 + 0.05 * rng.standard_normal((runs, 1)))
+
+    def diverging(runs):
+        return 150.0 * k * (1 + 0.05 * rng.standard_normal((runs, 1)))
+
+    # the primary: A and B lose every run
+    res = _fake_results({"A": diverging(100), "B": diverging(100), "C": tracking(100.0, 100)}, 100)
+    tracks_at = {(-15.0, 50.0), (-10.0, 1000.0), (-12.5, 1000.0), (-20.0, 50.0)}
+    for rcs, rate in recipe.grid_points()[1:]:
+        task = {"rcs": np.array(rcs), "rate": np.array(rate), "stream": np.array(""), "runs": np.array(20)}
+        good = (rcs, rate) in tracks_at
+        for key, e in (("A", tracking(300.0, 20) if good else diverging(20)),
+                       ("B", tracking(200.0, 20) if good else diverging(20)), ("C", tracking(100.0, 20))):
+            task[f"{key}__N600__R1000__error"] = e
+            task[f"{key}__N600__R1000__lost"] = lost_track(e)
+            task[f"{key}__N600__R1000__seconds"] = np.array(1.0)
+        res[f"grid@{rcs:g}dBsm" + ("" if rate == 1000.0 else f"@{rate:g}perscan")] = task
+    points = recipe.grid_points()
+    whole = {(-15.0, 50.0): (230.0, 220.0)}
+    res["calibration"] = {"points": np.array(points), "seed": np.array(101), "runs": np.array(3),
+                          "A__whole": np.array([[whole.get(p, (5e3, 5e3))[0]] * 3 for p in points]),
+                          "B__whole": np.array([[whole.get(p, (5e3, 5e3))[1]] * 3 for p in points]),
+                          "A__lost": np.zeros((len(points), 3), bool), "B__lost": np.zeros((len(points), 3), bool)}
+    crit = {c.id: c for c in recipe.criteria(res)}
+    assert crit["1"].verdict == "not judgeable"
+    rcs = {r.value: r.verdict for r in crit["1"].across if r.unknown == "reference RCS"}
+    assert rcs == {-20.0: "not judgeable", -17.5: "not judgeable", -15.0: "not judgeable", -12.5: "met",
+                   -10.0: "met"}
+    rate = {r.value: r.verdict for r in crit["1"].across if r.unknown == "clutter rate"}
+    assert rate == {50.0: "met", 200.0: "not judgeable", 1000.0: "not judgeable"}
+    assert {r.unknown for r in crit["2"].across} == {"reference RCS", "clutter rate"} and not crit["4"].across
+    # the calibration chose (-15 dBsm, 50 per scan); criteria 1-3 judged there on the report's runs
+    assert recipe.calibration(res)["point"] == (-15.0, 50.0)
+    for cid in ("1", "2", "3"):
+        c = crit[f"{cid}@calibrated"]
+        assert c.verdict == "met" and c.n == 20 and "-15 dBsm, clutter rate 50" in c.text
