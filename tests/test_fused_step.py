@@ -193,3 +193,41 @@ def test_an_empty_scan_in_the_step_leaves_the_prediction():
     after, est, pred = spec.step(state, motion, Scan.empty(3, 2), model, b, predicted=True)
     np.testing.assert_array_equal(after.cloud.particles, moved.cloud.particles)
     np.testing.assert_array_equal(est.mean, pred.mean)
+
+
+def _served_turn(spec):
+    """``spec`` declaring that it serves the coordinated turn with the rate in the state, seen in range and bearing:
+    the kit then draws its truths from that model (5-D, nonlinear) and weighs them in range and bearing."""
+    return dataclasses.replace(spec, motion_models=("ct-rate",),
+                               capabilities=spec.capabilities | {"range_bearing_input"})
+
+
+@needs_numba
+@pytest.mark.parametrize("configure", [{}, {"threshold": 2.0}])
+def test_the_sir_step_with_the_coordinated_turn_takes_the_fused_pass_and_equals_its_three_calls(configure,
+                                                                                                monkeypatch):
+    from workbench.kernels import motion_numba
+
+    calls = []
+    real = motion_numba.ct_rate_propagate_range_bearing
+    monkeypatch.setattr(motion_numba, "ct_rate_propagate_range_bearing", lambda *a: calls.append(1) or real(*a))
+    spec = _served_turn(HOST.filter("sir").configure(particles=300, **configure))
+    assert "bit for bit" in check_step_matches_three_calls(spec)
+    assert len(calls) == 4  # the steps with a measurement (the kit's third scan is empty)
+
+
+@needs_numba
+def test_the_kit_check_fails_a_fused_turn_pass_that_is_not_the_two_calls(monkeypatch):
+    from workbench.kernels import motion_numba
+
+    real = motion_numba.ct_rate_propagate_range_bearing
+
+    def off_by_an_ulp(*args):  # the log-weights one ulp up: a pass that is not predict + likelihood bit for bit
+        out = real(*args)
+        log_w = args[-2]
+        log_w[...] = np.nextafter(log_w, np.inf)
+        return out
+
+    monkeypatch.setattr(motion_numba, "ct_rate_propagate_range_bearing", off_by_an_ulp)
+    with pytest.raises(AssertionError, match="step's state differs from predict"):
+        check_step_matches_three_calls(_served_turn(HOST.filter("sir").configure(particles=300)))

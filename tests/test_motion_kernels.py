@@ -193,3 +193,141 @@ def test_the_particle_filter_runs_the_declared_loop_only_where_the_policy_runs_n
     e = np.random.default_rng(2).standard_normal((1, 64, G.shape[1]))
     np.testing.assert_allclose(moved, x + 1.0 + e @ G.T, rtol=1e-12, atol=1e-12)
     assert len(calls) == 1
+
+
+# -- the fused pass (propagation and range-bearing log-weights) and the compiled normals ---------------------------
+
+
+@needs_numba
+def test_the_series_bound_of_the_compiled_f_is_continuous_and_the_twins():
+    # the compiled f sums the series below |omega T| = SERIES_BOUND and calls libm's sin and cos from there on; at,
+    # just below and just above that bound and far beyond it (both signs, in one tile) it stays the twin's to 1e-12,
+    # and the propagation's vectorised series with its fix-up beyond the bound is f's bit for bit
+    from workbench import particle_core as core
+    from workbench.kernels.motion_numba import SERIES_BOUND
+    from workbench.types import Particles
+
+    model = coordinated_turn_rate(T, 0.5, 0.01)
+    edge = SERIES_BOUND / T
+    rates = np.array([edge, -edge, edge * (1 - 1e-12), -edge * (1 - 1e-12), edge * (1 + 1e-12), 0.2, -0.9, 3.0,
+                      -5.0])
+    x = np.column_stack([np.full(9, 1e3), np.full(9, -2e3), np.full(9, 30.0), np.full(9, -20.0), rates])
+    with using("cpu"):
+        np.testing.assert_allclose(model.f(x), model.f_numpy(x), rtol=1e-12, atol=1e-12)
+        cloud = core.component_major(1, 9, 5)
+        cloud[0] = x
+        state = core.ParticleState(Particles.trusted(cloud, np.zeros((1, 9))))
+        a, b = np.random.default_rng(3), np.random.default_rng(3)
+        got = core.predict(state, model, a, backend="numba").cloud.particles
+        ref = core.predict(state, model, b, backend="numpy").cloud.particles
+    np.testing.assert_array_equal(got, ref)
+
+
+def _weighed(model, rng, B=3, N=700):
+    """A ct-rate cloud ``(B, N, 5)`` (every rate of RATES, one NaN particle), previous log-weights, two measured
+    items and one without, for the fused pass."""
+    from workbench import particle_core as core
+    from workbench.types import Particles
+
+    x = _cloud(rng, B, N)
+    x[2, 5, 0] = np.nan
+    prev = rng.normal(size=(B, N)) - np.log(N)
+    state = core.ParticleState(Particles.trusted(x, prev))
+    z = np.array([[2.5e3, 0.4], [1.0e3, -3.1], [3.0e3, 3.14]])
+    return state, z, np.array([True, False, True])
+
+
+@needs_numba
+@pytest.mark.parametrize("stream", ["pcg64 in registers", "numba's generator"])
+def test_the_fused_pass_equals_predict_and_the_likelihood_bit_for_bit(stream, monkeypatch):
+    from workbench import particle_core as core
+    from workbench.kernels import motion_numba
+    from workbench.models import range_bearing
+
+    # 2,100 normals: below PCG_MIN_DRAWS Numba's Generator draws them; lowered, the PCG64 state steps in registers
+    monkeypatch.setattr(motion_numba, "PCG_MIN_DRAWS", 0 if stream == "pcg64 in registers" else 10**9)
+    calls = []
+    real = motion_numba.ct_rate_propagate_range_bearing
+    monkeypatch.setattr(motion_numba, "ct_rate_propagate_range_bearing", lambda *a: calls.append(1) or real(*a))
+    model, sensor = coordinated_turn_rate(T, [0.5, 2.0], 0.01), range_bearing(5.0, 0.01)
+    state, z, present = _weighed(model, np.random.default_rng(7))  # N = 700: not a multiple of the tile
+    before = state.cloud.particles.copy()
+    a, b = np.random.default_rng(11), np.random.default_rng(11)
+    with using("cpu"):
+        moved, log_w, top = core.predict_log_weights(state, model, a, z, present, sensor, "numba")
+        two = core.predict(state, model, b, backend="numba").cloud.particles
+        weights = core.weighted_log_likelihood(z, two, sensor, state.cloud.log_weights, "numba")
+    assert calls == [1]
+    np.testing.assert_array_equal(moved, two)
+    assert a.random() == b.random()  # the same draws in the same order
+    np.testing.assert_array_equal(log_w[present], weights[present])
+    np.testing.assert_array_equal(log_w[~present], state.cloud.log_weights[~present])
+    assert top[0] == np.max(weights[0]) and np.isnan(top[2]) and top[1] == -np.inf
+    np.testing.assert_array_equal(state.cloud.particles, before)
+    # and against plain references: the model's NumPy f plus NumPy's draws, the NumPy likelihood
+    G = core.noise_columns(model)
+    e = np.random.default_rng(11).standard_normal(before.shape[:2] + (G.shape[1],))
+    np.testing.assert_allclose(moved, model.f_numpy(before) + e @ G.T, rtol=1e-12, atol=1e-9)
+    ref = core.log_likelihood(z, moved, sensor) + state.cloud.log_weights
+    np.testing.assert_allclose(log_w[0], ref[0], rtol=1e-12, atol=1e-9)
+
+
+@needs_numba
+def test_the_fused_pass_is_taken_only_where_the_model_declares_it():
+    from workbench import particle_core as core
+    from workbench.models import range_bearing
+
+    model, sensor = coordinated_turn_rate(T, 0.5, 0.01), range_bearing(5.0, 0.01)
+    state, z, present = _weighed(model, np.random.default_rng(8), 3, 64)
+    assert model.fused_particle_propagator("range-bearing") is not None
+    assert model.fused_particle_propagator("cartesian-2d") is None
+
+    class Drift(CoordinatedTurnRate):  # its own f: no compiled pass, the two calls follow that f
+        def f(self, x, t=None, dt=None):
+            return np.asarray(x, dtype=float) + 1.0
+
+    drift = Drift(model.name, model.F, model.Q, model.Q_sqrt, model.dt)
+    with using("cpu"):
+        assert core.predict_log_weights(state, model, np.random.default_rng(0), z, present, sensor, "numba") \
+            is not None
+        assert core.predict_log_weights(state, model, np.random.default_rng(0), z, present, sensor, "numpy") is None
+        assert drift.fused_particle_propagator("range-bearing") is None
+        assert core.predict_log_weights(state, drift, np.random.default_rng(0), z, present, sensor, "numba") is None
+    with using("cuda"):  # no Taichi version: the two NumPy calls off the CPU
+        assert core.predict_log_weights(state, model, np.random.default_rng(0), z, present, sensor, "auto") is None
+
+
+@needs_numba
+@pytest.mark.parametrize("bits", ["pcg64", "pcg64 holding a 32-bit half", "philox"])
+def test_the_compiled_draws_are_numpys_on_every_bit_generator(bits):
+    # PCG64 is stepped in registers (motion_numba.pcg64_stream: 1.2e5 normals, above PCG_MIN_DRAWS), any other bit
+    # generator through Numba's Generator; they reach the ziggurat's wedges and tail; the generator is left where
+    # NumPy leaves it
+    from workbench import particle_core as core
+    from workbench.types import Particles
+
+    def make():
+        if bits == "philox":
+            return np.random.Generator(np.random.Philox(21))
+        rng = np.random.default_rng(21)
+        if bits != "pcg64":
+            rng.integers(0, 2**32, size=3, dtype=np.uint32)  # an odd count: one 32-bit half waits in the state
+            assert rng.bit_generator.state["has_uint32"] == 1
+        return rng
+
+    model = coordinated_turn_rate(T, 0.5, 0.01)
+    from workbench.kernels.motion_numba import PCG_MIN_DRAWS
+
+    x = _cloud(np.random.default_rng(9), 1, 40_000)
+    assert 3 * 40_000 >= PCG_MIN_DRAWS
+    state = core.ParticleState(Particles.trusted(x, np.zeros((1, 40_000))))
+    a, b, c = make(), make(), make()
+    with using("cpu"):
+        got = core.predict(state, model, a, backend="numba").cloud.particles
+        np.testing.assert_array_equal(got, core.predict(state, model, c, backend="numpy").cloud.particles)
+    e = b.standard_normal((1, 40_000, 3))
+    np.testing.assert_allclose(got, model.f_numpy(x) + e @ core.noise_columns(model).T, rtol=1e-12, atol=1e-9)
+    # the waiting 32-bit half first (next_uint64 never touches it), then the stream itself
+    np.testing.assert_array_equal(a.integers(0, 2**32, size=5, dtype=np.uint32),
+                                  b.integers(0, 2**32, size=5, dtype=np.uint32))
+    np.testing.assert_array_equal(a.random(8), b.random(8))

@@ -22,8 +22,9 @@ time, skipping zero entries, instead of calling BLAS on ``(N, 4) x (4, 4)`` shap
 particles is accepted.
 
 Fused: :func:`predict_log_weights` is :func:`predict` and :func:`weighted_log_likelihood` in one compiled pass (a
-linear model, the planar range-bearing measurement), the two calls' numbers bit for bit; the bootstrap filter's
-fused step (``FilterSpec.step``) is built on it.
+linear model, or a nonlinear one that declares the pass,
+:meth:`~workbench.models.MotionModel.fused_particle_propagator`; the planar range-bearing measurement), the two
+calls' numbers bit for bit; the bootstrap filter's fused step (``FilterSpec.step``) is built on it.
 
 Backends.  :func:`predict`, :func:`weighted_log_likelihood`, :func:`reweight` and :func:`estimate` take a
 ``backend`` that the kernel policy resolves (:func:`workbench.kernels.backend.resolve`): ``"numba"`` runs the
@@ -373,9 +374,12 @@ def predict_log_weights(state: ParticleState, motion: MotionModel, rng: np.rando
                         scratch: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """:func:`predict` and :func:`weighted_log_likelihood` in one compiled pass, or ``None`` where that pass does not
     apply (then call the two): it needs the compiled backend, a :attr:`~workbench.models.MotionModel.linear` motion
-    model, the planar range-bearing measurement model (declared by its frame, as :func:`weighted_log_likelihood`
+    model or one that declares the fused pass for the frame
+    (:meth:`~workbench.models.MotionModel.fused_particle_propagator`, e.g. the coordinated turn with the rate in the
+    state), the planar range-bearing measurement model (declared by its frame, as :func:`weighted_log_likelihood`
     requires) and a ``numpy.random.Generator`` (or no noise).  The same draws, particles and log-weights as the two
-    calls bit for bit (:func:`~workbench.kernels.particle_numba.propagate_range_bearing`).
+    calls bit for bit (:func:`~workbench.kernels.particle_numba.propagate_range_bearing` for a linear model,
+    :func:`~workbench.kernels.motion_numba.ct_rate_propagate_range_bearing` for the turn).
 
     Returns the moved particles ``(B, N, n)`` (component-major; ``scratch``: in this thread's work array, valid
     until the next call, for a caller that resamples them into a new array at once), the log-weights ``(B, N)``
@@ -386,22 +390,29 @@ def predict_log_weights(state: ParticleState, motion: MotionModel, rng: np.rando
     """
     x = state.cloud.particles
     B, N, n = x.shape
-    if not compiled(backend) or not motion.linear:
+    if not compiled(backend):
         return None
     sensor = _plane_range_bearing(model, n)
     if sensor is None:
         return None
-    matrix, k = _propagation(motion)
+    if motion.linear:
+        matrix, k = _propagation(motion)
+        run = _kernels().propagate_range_bearing
+    else:
+        # the model's declared compiled pass (MotionModel.fused_particle_propagator), else the two calls
+        run = motion.fused_particle_propagator("range-bearing")
+        if run is None:
+            return None
+        g = noise_columns(motion)
+        matrix, k = np.ascontiguousarray(np.hstack([np.eye(n), g]), dtype=float), g.shape[1]
     if k and type(rng) is not np.random.Generator:
         return None
     out = (_scratch("predicted", n * B * N) if scratch else np.empty(n * B * N)).reshape(n, B, N)
     log_w = np.empty((B, N))
     top = np.full(B, -np.inf)
-    _kernels().propagate_range_bearing(out.reshape(n, B * N), _rows(x).reshape(n, B * N), rng, k,
-                                       *_plan_arrays(matrix.tobytes(), *matrix.shape),
-                                       np.ascontiguousarray(present, dtype=bool), np.ascontiguousarray(z, dtype=float),
-                                       sensor, _inverse_cholesky(model.R),
-                                       np.ascontiguousarray(state.cloud.log_weights, dtype=float), log_w, top)
+    run(out.reshape(n, B * N), _rows(x).reshape(n, B * N), rng, k, *_plan_arrays(matrix.tobytes(), *matrix.shape),
+        np.ascontiguousarray(present, dtype=bool), np.ascontiguousarray(z, dtype=float), sensor,
+        _inverse_cholesky(model.R), np.ascontiguousarray(state.cloud.log_weights, dtype=float), log_w, top)
     return out.transpose(1, 2, 0), log_w, top
 
 

@@ -4,8 +4,8 @@ State: :class:`workbench.particle_core.ParticleState` with particles ``(B, N, n)
 log-weights ``(B, N)``.
 
 Predict: ``x_i <- F x_i + Q_sqrt e_i`` (the motion model is the proposal); for a motion model that overrides ``f``,
-``x_i <- f(x_i) + Q_sqrt e_i`` with the same draws, in NumPy whatever the backend
-(:func:`workbench.particle_core.predict`).
+``x_i <- f(x_i) + Q_sqrt e_i`` with the same draws, through the model's compiled propagation where it declares one
+and the backend runs Numba, else in NumPy (:func:`workbench.particle_core.predict`).
 Update:  ``log w_i <- log w_i + log N(z; h(x_i), R)`` with the residual wrapped for angular
 components (``R``: the detection's own covariance where the scan carries one); normalise with logsumexp;
 resample systematically where ``N_eff < threshold * N`` (``threshold > 1``, e.g. ``inf``, resamples at
@@ -14,8 +14,9 @@ diagnostics).  The shared pieces (state, proposal, likelihood, reweighting, esti
 :mod:`workbench.particle_core`.
 
 Step: :func:`step`, the filter's ``FilterSpec.step``, is predict, update and estimate in one call (the time loop
-uses it), the three calls' numbers bit for bit; with the compiled backend, a linear motion model and the planar
-range-bearing measurement it propagates and weighs the particles in one pass.
+uses it), the three calls' numbers bit for bit; with the compiled backend, a linear motion model (or one that declares
+the fused pass, as the coordinated turn with the rate in the state does) and the planar range-bearing measurement it
+propagates and weighs the particles in one pass.
 
 Backend: ``backend="auto"`` (the default) runs the compiled steps of :mod:`workbench.kernels.particle_numba` where
 the kernel policy picks Numba (the CPU with Numba installed), else the NumPy code they are held to; ``"numba"`` or
@@ -91,8 +92,10 @@ def step(state: ParticleState, motion: MotionModel, scan: Scan, model: Measureme
     :func:`~workbench.particle_core.predict`, :func:`update` and :func:`~workbench.particle_core.estimate` called one
     after the other, bit for bit, with the same draws in the same order.
 
-    Where the compiled backend runs, the motion model is linear and the measurement model the planar range-bearing
-    one without a per-detection covariance, the propagation, the likelihood and the rows' max are one pass
+    Where the compiled backend runs, the motion model is linear or declares the fused pass
+    (:meth:`~workbench.models.MotionModel.fused_particle_propagator`: the coordinated turn with the rate in the
+    state) and the measurement model is the planar range-bearing one without a per-detection covariance, the
+    propagation, the likelihood and the rows' max are one pass
     (:func:`~workbench.particle_core.predict_log_weights`), and with resampling at every update (``threshold > 1``)
     the predicted particles, which never outlive the step, live in a reused work array; normalising, resampling
     and the estimate are the three-call path's own code.  Otherwise it is the three calls."""

@@ -7,19 +7,32 @@ The model is :class:`workbench.models.CoordinatedTurnRate`, state ``[x, y, vx, v
 elsewhere (no Numba, or a GPU arch: there is no Taichi version).
 
 The formulas are the twin's, one state per iteration: with ``u = omega T``, ``sin u / u``, ``(1 - cos u) / u``
-and their ``u``-derivatives from their closed forms, or, where ``|u| < small``, from the Taylor coefficients the
-twin evaluates (passed in, so that both use one table).  The twin evaluates both forms for every state (four
-series of 25 coefficients, blended by ``np.where``: about a hundred passes over the batch); these loops make one
-pass and take one form per state.  In the series band they sum only the terms that can reach 1e-20 there, by
-Horner's rule in ``u^2`` (each series has powers of one parity), and take ``sin u = u (sin u / u)`` and
-``cos u = 1 - u ((1 - cos u) / u)`` from the same series (no libm call there).  The two differ by round-off, far
-less than 1e-12.
+and their ``u``-derivatives from their closed forms, or, near ``u = 0``, from the Taylor coefficients the twin
+evaluates (passed in, so that both use one table).  The twin evaluates both forms for every state (four series of
+25 coefficients, blended by ``np.where`` at ``|u| = 0.1``: about a hundred passes over the batch); these loops
+make one pass and take one form per state.  The Jacobian takes the series where ``|u| < small`` (the twin's band),
+summing only the terms that can reach 1e-20 there, by Horner's rule in ``u^2`` (each series has powers of one
+parity).  ``f`` takes them wherever ``|u| <`` :data:`SERIES_BOUND` (``pi / 4``: ten terms each, written out, so
+that the particle filter's tile loop has no branch and vectorises; libm's ``sin`` and ``cos`` beyond, for the
+few particles there), with ``sin u = u (sin u / u)`` and ``cos u = 1 - u ((1 - cos u) / u)`` from the same
+series.  The two forms differ by round-off, far less than 1e-12.
 
 :func:`ct_rate_propagate` is the particle filter's propagation through the model, ``f`` plus the process noise
 drawn inside the loop, in one pass (the model declares it: :meth:`CoordinatedTurnRate.particle_propagator`); its
 twin is the NumPy path of :func:`workbench.particle_core.predict` (the model's ``f``, NumPy's draws, the noise added
 by :func:`~workbench.particle_core.combine_columns`), which it equals bit for bit where that ``f`` is
 :func:`ct_rate_f` (the same formula, one inline function) and to ``f``'s round-off against ``f_numpy``.
+:func:`ct_rate_propagate_range_bearing` adds the planar range-bearing log-weights and their rows' max, tile by
+tile while the moved particles are in L1 (:meth:`CoordinatedTurnRate.fused_particle_propagator`, used by
+:func:`workbench.particle_core.predict_log_weights` and the bootstrap filter's fused step), the two calls' numbers
+bit for bit.
+
+Normals: NumPy's own (``Generator.standard_normal``: the ziggurat on the bit generator's 64-bit words), the same
+numbers in the same order and the generator left where NumPy leaves it.  For PCG64 (every ``wb.generator``) the
+state is read once per call (:func:`pcg64_stream`) and stepped in registers (:func:`_pcg_normal`: one 128-bit
+multiply-add per word, the first box of the ziggurat without branches); any other bit generator is drawn through
+Numba's ``Generator``, which calls it through a pointer with its state in memory (about three times the time per
+normal on the machine of ``docs/benchmarks.md``).
 
 Serial loops (no ``prange``): a UKF step calls ``f`` on ``B (2n + 1)`` sigma points, a particle filter on ``B N``
 particles, each a few microseconds to a millisecond of work here, and the callers' own compiled loops already
@@ -28,11 +41,160 @@ processes).  The input may be any 2-D float64 view (a particle cloud stored comp
 """
 
 import math
+import threading
+from contextlib import contextmanager
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 
-__all__ = ["ct_rate_f", "ct_rate_jacobian", "ct_rate_propagate"]
+from .particle_numba import _weigh_tile
+
+__all__ = ["ct_rate_f", "ct_rate_jacobian", "ct_rate_propagate", "ct_rate_propagate_range_bearing", "pcg64_stream"]
+
+
+# -- NumPy's normals on PCG64, the state in registers -------------------------------------------------------------
+
+#: PCG64's 128-bit LCG multiplier (NumPy's ``pcg64.h``: ``PCG_DEFAULT_MULTIPLIER_HIGH``, ``_LOW``).
+PCG_MULTIPLIER = (2549297995355413924 << 64) | 4865540595714422341
+_U64 = (1 << 64) - 1
+#: The kernels' ``pcg`` where the generator is not PCG64 (empty; writable, so that both cases are one signature).
+_NO_STREAM = np.zeros(0, dtype=np.uint64)
+
+
+@intrinsic
+def _pcg_step(typingctx, hi, lo, inc_hi, inc_lo):
+    """PCG64's state step ``s <- s PCG_MULTIPLIER + inc (mod 2^128)`` on the halves ``(hi, lo)`` of ``s`` and
+    ``(inc_hi, inc_lo)`` of ``inc``: one 128-bit multiply-add in LLVM, returned as ``(hi, lo)``."""
+    sig = types.UniTuple(types.uint64, 2)(types.uint64, types.uint64, types.uint64, types.uint64)
+
+    def codegen(context, builder, signature, args):
+        wide, half = ir.IntType(128), ir.IntType(64)
+
+        def join(h, l):
+            return builder.or_(builder.shl(builder.zext(h, wide), ir.Constant(wide, 64)), builder.zext(l, wide))
+
+        s = builder.add(builder.mul(join(args[0], args[1]), ir.Constant(wide, PCG_MULTIPLIER)),
+                        join(args[2], args[3]))
+        hi = builder.trunc(builder.lshr(s, ir.Constant(wide, 64)), half)
+        return context.make_tuple(builder, signature.return_type, (hi, builder.trunc(s, half)))
+
+    return sig, codegen
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _pcg_next64(hi, lo, inc_hi, inc_lo):
+    """PCG64's ``next_uint64``: step, then the XSL-RR output of the new state; returns ``(value, hi, lo)``."""
+    hi, lo = _pcg_step(hi, lo, inc_hi, inc_lo)
+    v = hi ^ lo
+    rot = hi >> numba.uint64(58)
+    return (v >> rot) | (v << ((numba.uint64(64) - rot) & numba.uint64(63))), hi, lo
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _pcg_next_double(hi, lo, inc_hi, inc_lo):
+    """NumPy's ``next_double`` on PCG64: the top 53 bits of ``next_uint64`` over ``2^53``; ``(value, hi, lo)``."""
+    v, hi, lo = _pcg_next64(hi, lo, inc_hi, inc_lo)
+    return np.int64(v >> numba.uint64(11)) * (1.0 / 9007199254740992.0), hi, lo
+
+
+#: ``+1`` and ``-1``: the ziggurat's sign bit as a factor (a product with ``-1`` is the exact negation, and a
+#: branch on a random bit would be mispredicted half the time).
+_SIGNS = np.array([1.0, -1.0])
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _pcg_normal(hi, lo, inc_hi, inc_lo):
+    """NumPy's ``random_standard_normal`` (its ziggurat, with the tables Numba copies from it) on PCG64 whose state
+    ``(hi, lo)`` the caller keeps in locals: ``(value, hi, lo)``, the number ``Generator.standard_normal`` gives
+    and the state it leaves.  Numba's ``Generator`` runs the same algorithm, calling the bit generator through a
+    pointer and keeping its state in memory; here the 99.3 % of draws that take the first box are straight-line
+    code (no branch on the sign) and the rest go to :func:`_pcg_normal_rest`, out of line."""
+    r, hi, lo = _pcg_next64(hi, lo, inc_hi, inc_lo)
+    idx = np.intp(r & numba.uint64(0xFF))
+    r >>= numba.uint64(8)
+    rabs = (r >> numba.uint64(1)) & numba.uint64(0x000FFFFFFFFFFFFF)
+    x = (np.int64(rabs) * wi_double[idx]) * _SIGNS[np.intp(r & numba.uint64(1))]
+    if rabs < ki_double[idx]:
+        return x, hi, lo
+    return _pcg_normal_rest(idx, rabs, x, hi, lo, inc_hi, inc_lo)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _pcg_normal_rest(idx, rabs, x, hi, lo, inc_hi, inc_lo):
+    """The rest of :func:`_pcg_normal` for a draw outside the first box (``idx``, ``rabs``, ``x`` its numbers):
+    NumPy's tail (``idx = 0``) or wedge test, then, if rejected, fresh draws until one is accepted."""
+    while True:
+        if idx == 0:
+            while True:
+                u, hi, lo = _pcg_next_double(hi, lo, inc_hi, inc_lo)
+                xx = -ziggurat_nor_inv_r * np.log1p(-u)
+                u, hi, lo = _pcg_next_double(hi, lo, inc_hi, inc_lo)
+                yy = -np.log1p(-u)
+                if yy + yy > xx * xx:
+                    if (rabs >> numba.uint64(8)) & numba.uint64(1):
+                        return -(ziggurat_nor_r + xx), hi, lo
+                    return ziggurat_nor_r + xx, hi, lo
+        else:
+            u, hi, lo = _pcg_next_double(hi, lo, inc_hi, inc_lo)
+            if (fi_double[idx - 1] - fi_double[idx]) * u + fi_double[idx] < np.exp(-0.5 * x * x):
+                return x, hi, lo
+        r, hi, lo = _pcg_next64(hi, lo, inc_hi, inc_lo)
+        idx = np.intp(r & numba.uint64(0xFF))
+        r >>= numba.uint64(8)
+        rabs = (r >> numba.uint64(1)) & numba.uint64(0x000FFFFFFFFFFFFF)
+        x = (np.int64(rabs) * wi_double[idx]) * _SIGNS[np.intp(r & numba.uint64(1))]
+        if rabs < ki_double[idx]:
+            return x, hi, lo
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _draw_tile(rng, pcg, e, m, k):
+    """``e[:k, :m]``: the next ``m k`` normals of the stream, ``e[j, t]`` the ``j``-th of particle ``t`` (the
+    numbers of ``rng.standard_normal((m, k))``, transposed: stored by noise column, so that each is contiguous),
+    from the PCG64 state ``pcg`` ``[state_hi, state_lo, inc_hi, inc_lo]`` (advanced in place) where it holds four
+    words, else from Numba's ``Generator`` ``rng``."""
+    if pcg.shape[0] == 4:
+        hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
+        for t in range(m):
+            for j in range(k):
+                e[j, t], hi, lo = _pcg_normal(hi, lo, inc_hi, inc_lo)
+        pcg[0], pcg[1] = hi, lo
+    else:
+        for t in range(m):
+            for j in range(k):
+                e[j, t] = rng.standard_normal()
+
+
+_PCG_LOCK = threading.Lock()
+#: Normals per call from which :func:`pcg64_stream` hands out the PCG64 state: reading and writing it back costs
+#: some ten microseconds (Python's view of the state), which the cheaper draws repay from a few thousand normals
+#: on.  Either way the numbers are the same.
+PCG_MIN_DRAWS = 8192
+
+
+@contextmanager
+def pcg64_stream(rng, draws: int):
+    """The PCG64 state of the ``numpy.random.Generator`` ``rng`` as the kernels' ``pcg`` words ``[state_hi,
+    state_lo, inc_hi, inc_lo]`` (uint64), written back to ``rng`` on leaving (the generator then stands where
+    ``rng.standard_normal`` would leave it after the same draws), its lock held meanwhile; an empty array (the
+    kernels draw through Numba's ``Generator``) for any other bit generator and for fewer than
+    :data:`PCG_MIN_DRAWS` ``draws``.  ``has_uint32`` / ``uinteger``, which ``next_uint64`` never touches, are
+    kept."""
+    bits = getattr(rng, "bit_generator", None)
+    if type(bits) is not np.random.PCG64 or draws < PCG_MIN_DRAWS:
+        yield _NO_STREAM
+        return
+    with getattr(bits, "lock", _PCG_LOCK):
+        state = bits.state
+        s, inc = int(state["state"]["state"]), int(state["state"]["inc"])
+        words = np.array([s >> 64, s & _U64, inc >> 64, inc & _U64], dtype=np.uint64)
+        yield words
+        state["state"]["state"] = (int(words[0]) << 64) | int(words[1])
+        bits.state = state
 
 
 @numba.njit(inline="always", error_model="numpy")
@@ -71,43 +233,133 @@ def _series(coef, terms, parity, u, u2):
     return out * u if parity == 1 else out
 
 
+#: ``|u|`` below which :func:`ct_rate_f` and the propagation take ``sin u / u`` and ``(1 - cos u) / u`` from
+#: their series (:data:`SERIES_TERMS` terms each; the first term left out is below 1e-19 there), a polynomial
+#: without branches that the propagation's tile loop vectorises; libm's ``sin`` and ``cos`` beyond (turns of more
+#: than 45 degrees in one step).
+SERIES_BOUND = math.pi / 4
+#: Terms of each series summed below :data:`SERIES_BOUND` (the model's tables hold twelve).
+SERIES_TERMS = 10
+
+
 @numba.njit(inline="always", error_model="numpy")
-def _turn(px, py, vx, vy, w, T, small, sinc, cosc, n_s, p_s, n_c, p_c):
-    """``f`` of one state ``[px, py, vx, vy, w]`` over ``T``: the five components (the one formula of
-    :func:`ct_rate_f` and :func:`ct_rate_propagate`, so both give the same numbers)."""
-    u = w * T
-    if abs(u) < small:
-        u2 = u * u
-        sa, ca = _series(sinc, n_s, p_s, u, u2), _series(cosc, n_c, p_c, u, u2)
-        s, c = u * sa, 1.0 - u * ca  # sin u and cos u from the same series (within an ulp or two of libm's)
-    else:
-        s, c = math.sin(u), math.cos(u)
-        sa, ca = s / u, (1.0 - c) / u
+def _coefficients(sinc, cosc):
+    """The non-zero coefficients of the two series as tuples of :data:`SERIES_TERMS`: ``sinc``'s even powers
+    ``u^0 .. u^18`` and ``cosc``'s odd powers ``u^1 .. u^19``."""
+    return ((sinc[0], sinc[2], sinc[4], sinc[6], sinc[8], sinc[10], sinc[12], sinc[14], sinc[16], sinc[18]),
+            (cosc[1], cosc[3], cosc[5], cosc[7], cosc[9], cosc[11], cosc[13], cosc[15], cosc[17], cosc[19]))
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _series_terms(u, sp, cp):
+    """``(sin u / u, (1 - cos u) / u)`` from the series ``sp``, ``cp`` (:func:`_coefficients`) by Horner's rule in
+    ``u^2``, written out (straight-line code, which vectorises)."""
+    u2 = u * u
+    sa = ((((((((sp[9] * u2 + sp[8]) * u2 + sp[7]) * u2 + sp[6]) * u2 + sp[5]) * u2 + sp[4]) * u2 + sp[3]) * u2
+           + sp[2]) * u2 + sp[1]) * u2 + sp[0]
+    ca = ((((((((cp[9] * u2 + cp[8]) * u2 + cp[7]) * u2 + cp[6]) * u2 + cp[5]) * u2 + cp[4]) * u2 + cp[3]) * u2
+           + cp[2]) * u2 + cp[1]) * u2 + cp[0]
+    return sa, ca * u
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _move(px, py, vx, vy, w, T, sa, ca, s, c):
+    """``f`` of one state from ``sa = sin u / u``, ``ca = (1 - cos u) / u``, ``s = sin u``, ``c = cos u``."""
     a, b = T * sa, T * ca
     return px + a * vx - b * vy, py + b * vx + a * vy, c * vx - s * vy, s * vx + c * vy, w
 
 
+@numba.njit(inline="always", error_model="numpy")
+def _series_move(px, py, vx, vy, w, T, sp, cp):
+    """``f`` of one state by the series (for ``|omega T| <`` :data:`SERIES_BOUND`)."""
+    u = w * T
+    sa, ca = _series_terms(u, sp, cp)
+    return _move(px, py, vx, vy, w, T, sa, ca, u * sa, 1.0 - u * ca)  # sin u, cos u within an ulp or two of libm's
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _closed_move(px, py, vx, vy, w, T):
+    """``f`` of one state by libm's ``sin`` and ``cos`` (for ``|omega T| >=`` :data:`SERIES_BOUND`)."""
+    u = w * T
+    s, c = math.sin(u), math.cos(u)
+    return _move(px, py, vx, vy, w, T, s / u, (1.0 - c) / u, s, c)
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _turn(px, py, vx, vy, w, T, sp, cp):
+    """``f`` of one state ``[px, py, vx, vy, w]`` over ``T``: the five components (the formula of
+    :func:`ct_rate_f` and :func:`ct_rate_propagate`, so both give the same numbers)."""
+    if abs(w * T) < SERIES_BOUND:
+        return _series_move(px, py, vx, vy, w, T, sp, cp)
+    return _closed_move(px, py, vx, vy, w, T)
+
+
 @numba.njit(cache=True, error_model="numpy")
-def ct_rate_f(x, T, small, sinc, cosc, out):
+def ct_rate_f(x, T, sinc, cosc, out):
     """``out[i] = f(x[i])`` for states ``x (K, 5)`` over the step ``T`` (s); ``sinc``, ``cosc``: the Taylor
-    coefficients of ``sin u / u`` and ``(1 - cos u) / u`` used where ``|u| < small``."""
-    n_s, p_s = _plan(sinc, small)
-    n_c, p_c = _plan(cosc, small)
+    coefficients of ``sin u / u`` and ``(1 - cos u) / u`` (the model's tables, at least 20 powers), used where
+    ``|u| <`` :data:`SERIES_BOUND`."""
+    sp, cp = _coefficients(sinc, cosc)
     for i in range(x.shape[0]):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4] = _turn(x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4],
-                                                                      T, small, sinc, cosc, n_s, p_s, n_c, p_c)
+                                                                      T, sp, cp)
 
 
 #: Particles per tile of :func:`ct_rate_propagate` (the tile's moved states and normals stay in L1).
 TILE = 512
 
 
-@numba.njit(cache=True, error_model="numpy")
-def ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, small, sinc, cosc):
+@numba.njit(inline="always", error_model="numpy")
+def _propagate_tile(out, x, rng, pcg, k, src, coef, ptr, lo, m, e, fx, T, sp, cp):
+    """The particles ``lo : lo + m`` of :func:`ct_rate_propagate`: their ``k`` normals each drawn into ``e``
+    (:func:`_draw_tile`), their ``f`` into ``fx`` (tile-sized work arrays), then ``out[:, lo : lo + m]`` from the
+    plan, row by row.  ``f`` is :func:`_turn`'s: the series for every particle in one loop without branches (it
+    vectorises), then libm's form for the particles at or beyond :data:`SERIES_BOUND`, if any."""
+    _draw_tile(rng, pcg, e, m, k)
+    beyond = 0
+    for t in range(m):
+        i = lo + t
+        px, py, vx, vy, w = x[0, i], x[1, i], x[2, i], x[3, i], x[4, i]
+        fx[0, t], fx[1, t], fx[2, t], fx[3, t], fx[4, t] = _series_move(px, py, vx, vy, w, T, sp, cp)
+        beyond += abs(w * T) >= SERIES_BOUND
+    if beyond:
+        for t in range(m):
+            i = lo + t
+            px, py, vx, vy, w = x[0, i], x[1, i], x[2, i], x[3, i], x[4, i]
+            if abs(w * T) >= SERIES_BOUND:
+                fx[0, t], fx[1, t], fx[2, t], fx[3, t], fx[4, t] = _closed_move(px, py, vx, vy, w, T)
+    for r in range(5):
+        o = out[r, lo:lo + m]
+        if ptr[r] == ptr[r + 1]:
+            o[:] = 0.0
+            continue
+        for q in range(ptr[r], ptr[r + 1]):
+            j = src[q]
+            c = coef[q]
+            if j < 5:
+                s = fx[j, :m]
+                if q == ptr[r]:
+                    for t in range(m):
+                        o[t] = c * s[t]
+                else:
+                    for t in range(m):
+                        o[t] += c * s[t]
+            else:
+                s = e[j - 5, :m]
+                if q == ptr[r]:
+                    for t in range(m):
+                        o[t] = c * s[t]
+                else:
+                    for t in range(m):
+                        o[t] += c * s[t]
+
+
+def ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, sinc, cosc):
     """``out_i = f(x_i) + G e_i`` for the particles ``x (5, L)`` stored component-major, in one pass: the particle
     filter's propagation through the coordinated turn (:func:`workbench.particle_core.predict`), ``e`` drawn here
     from the ``numpy.random.Generator`` ``rng`` in the order of ``rng.standard_normal((L, k))`` (the same numbers,
-    the generator left where NumPy leaves it), one tile at a time.
+    the generator left where NumPy leaves it; on PCG64 by :func:`_pcg_normal` through :func:`pcg64_stream`), one
+    tile at a time.
 
     ``src, coef, ptr``: the plan of ``[I | G]`` (:func:`workbench.particle_core._plan_arrays`): row ``i`` of ``out``
     is ``sum_t coef[t] s_{src[t]}`` over its terms ``t`` in order, ``s_j`` being component ``j`` of ``f(x)`` for
@@ -118,44 +370,72 @@ def ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, small, sinc, cosc):
 
     Shapes: ``out, x (5, L)``; ``k`` noise columns; ``src, coef (T,)``, ``ptr (6,)``.
     """
-    n_s, p_s = _plan(sinc, small)
-    n_c, p_c = _plan(cosc, small)
+    with pcg64_stream(rng, k * out.shape[1]) as pcg:
+        _ct_rate_propagate(out, x, rng, pcg, k, src, coef, ptr, T, sinc, cosc)
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _ct_rate_propagate(out, x, rng, pcg, k, src, coef, ptr, T, sinc, cosc):
+    """:func:`ct_rate_propagate` with the stream's words ``pcg`` (:func:`pcg64_stream`)."""
+    sp, cp = _coefficients(sinc, cosc)
     L = out.shape[1]
-    e = np.empty((TILE, max(k, 1)))
+    e = np.empty((max(k, 1), TILE))
     fx = np.empty((5, TILE))
     for lo in range(0, L, TILE):
-        m = min(lo + TILE, L) - lo
-        for t in range(m):
-            for j in range(k):
-                e[t, j] = rng.standard_normal()
-        for t in range(m):
-            i = lo + t
-            fx[0, t], fx[1, t], fx[2, t], fx[3, t], fx[4, t] = _turn(x[0, i], x[1, i], x[2, i], x[3, i], x[4, i], T,
-                                                                     small, sinc, cosc, n_s, p_s, n_c, p_c)
-        for r in range(5):
-            o = out[r, lo:lo + m]
-            if ptr[r] == ptr[r + 1]:
-                o[:] = 0.0
-                continue
-            for q in range(ptr[r], ptr[r + 1]):
-                j = src[q]
-                c = coef[q]
-                if j < 5:
-                    s = fx[j, :m]
-                    if q == ptr[r]:
-                        for t in range(m):
-                            o[t] = c * s[t]
-                    else:
-                        for t in range(m):
-                            o[t] += c * s[t]
-                else:
-                    s = e[:m, j - 5]
-                    if q == ptr[r]:
-                        for t in range(m):
-                            o[t] = c * s[t]
-                    else:
-                        for t in range(m):
-                            o[t] += c * s[t]
+        _propagate_tile(out, x, rng, pcg, k, src, coef, ptr, lo, min(lo + TILE, L) - lo, e, fx, T, sp, cp)
+    return out
+
+
+def ct_rate_propagate_range_bearing(out, x, rng, k, src, coef, ptr, T, sinc, cosc, present, z, sensor, linv, prev,
+                                    log_w, top):
+    """:func:`ct_rate_propagate` and, for the items with ``present``, the planar range-bearing log-weights and
+    their rows' max in one pass, one tile of particles at a time: a tile's particles are moved through the turn
+    (its normals drawn from ``rng`` in the order of ``rng.standard_normal((B, N, k))``), then weighed while they
+    are in L1 by :func:`workbench.kernels.particle_numba._weigh_tile`, the code of
+    :func:`~workbench.kernels.particle_numba.range_bearing_log_weights`.  So the particles are
+    :func:`ct_rate_propagate`'s and the log-weights that function's on them, bit for bit: the linear models' fused
+    pass (:func:`~workbench.kernels.particle_numba.propagate_range_bearing`) with the turn in place of ``F``.
+    ``top[b]`` is ``np.max(log_w[b])`` (NaN where a log-weight is NaN).  Items without ``present``: moved,
+    ``log_w = prev``, ``top`` not written.
+
+    Shapes: ``out, x (5, L)`` component rows with ``L = B N`` (``out`` not sharing memory with ``x``); ``k`` noise
+    columns; the plan ``src, coef, ptr`` of :func:`ct_rate_propagate`; ``present (B,)``; ``z (B, 2)``;
+    ``sensor (2,)``; ``linv (2, 2)``; ``prev, log_w (B, N)``; ``top (B,)``.
+    """
+    with pcg64_stream(rng, k * out.shape[1]) as pcg:
+        _ct_rate_propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, T, sinc, cosc, present, z, sensor,
+                                         linv, prev, log_w, top)
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _ct_rate_propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, T, sinc, cosc, present, z, sensor, linv,
+                                     prev, log_w, top):
+    """:func:`ct_rate_propagate_range_bearing` with the stream's words ``pcg`` (:func:`pcg64_stream`)."""
+    sp, cp = _coefficients(sinc, cosc)
+    B, N = log_w.shape
+    e = np.empty((max(k, 1), TILE))
+    fx = np.empty((5, TILE))
+    for b in range(B):
+        weigh = present[b]
+        zr, zb = z[b, 0], z[b, 1]
+        m = -np.inf
+        nan = False
+        wb, ob = prev[b], log_w[b]
+        for lo in range(b * N, (b + 1) * N, TILE):
+            hi = min(lo + TILE, (b + 1) * N)
+            _propagate_tile(out, x, rng, pcg, k, src, coef, ptr, lo, hi - lo, e, fx, T, sp, cp)
+            a, c = lo - b * N, hi - b * N
+            if weigh:
+                v = _weigh_tile(out[0, lo:hi], out[1, lo:hi], zr, zb, sensor, linv, wb[a:c], ob[a:c])
+                nan |= v != v
+                m = v if v > m else m
+            else:
+                for t in range(c - a):
+                    ob[a + t] = wb[a + t]
+        if weigh:
+            top[b] = np.nan if nan else m
     return out
 
 

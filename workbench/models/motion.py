@@ -179,6 +179,21 @@ class MotionModel:
         sums) as the twin."""
         return None
 
+    def fused_particle_propagator(self, frame: str) -> Callable | None:
+        """The compiled propagation of :meth:`particle_propagator` fused with the log-likelihood of a measurement
+        model of ``frame``, or ``None`` (the default: the particle filter propagates, then weighs).
+
+        The frame taken is ``"range-bearing"`` (the planar range-bearing model,
+        :func:`workbench.particle_core.predict_log_weights`): the model may return
+        ``run(out, x, rng, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top)``, which moves the
+        particles as :meth:`particle_propagator`'s ``run`` does and, for the items with ``present (B,)``, writes
+        ``log_w = prev + log N(z; h(out), R)`` (up to its constant; ``linv = chol(R)^-1``, the sensor at
+        ``sensor``) and ``top = max(log_w, axis=1)``, all in one pass; the items without ``present`` get
+        ``log_w = prev``.  :func:`workbench.particle_core.predict_log_weights` calls it only where the backend
+        policy runs Numba, and holds it to the two calls (:func:`~workbench.particle_core.predict`, then
+        :func:`~workbench.particle_core.weighted_log_likelihood`) bit for bit."""
+        return None
+
     def jacobian(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
         """``df/dx`` at states ``x (..., n)`` -> ``(..., n, n)``: ``F`` everywhere for a linear model.
 
@@ -594,7 +609,7 @@ class CoordinatedTurnRate(MotionModel):
             return self.f_numpy(x, t, dt)
         flat = x.reshape(-1, 5)
         out = np.empty_like(flat, order="K")  # the input's memory order: a component-major cloud stays one
-        kernels.ct_rate_f(flat, self._step(t, dt)[1], _TURN_SMALL, _SINC, _COSC, out)
+        kernels.ct_rate_f(flat, self._step(t, dt)[1], _SINC, _COSC, out)
         return out.reshape(x.shape)
 
     def jacobian(self, x: np.ndarray, t: float | None = None, dt: float | None = None) -> np.ndarray:
@@ -618,7 +633,23 @@ class CoordinatedTurnRate(MotionModel):
         T = float(self.dt)
 
         def run(out, x, rng, k, src, coef, ptr):
-            return motion_numba.ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, _TURN_SMALL, _SINC, _COSC)
+            return motion_numba.ct_rate_propagate(out, x, rng, k, src, coef, ptr, T, _SINC, _COSC)
+
+        return run
+
+    def fused_particle_propagator(self, frame: str) -> Callable | None:
+        """:func:`workbench.kernels.motion_numba.ct_rate_propagate_range_bearing` over the bound step for the
+        planar range-bearing frame (see :meth:`MotionModel.fused_particle_propagator`), ``None`` for any other
+        frame and where :meth:`particle_propagator` gives none (a subclass with its own :meth:`f`)."""
+        if frame != "range-bearing" or self.particle_propagator() is None:
+            return None
+        from ..kernels import motion_numba
+
+        T = float(self.dt)
+
+        def run(out, x, rng, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top):
+            return motion_numba.ct_rate_propagate_range_bearing(out, x, rng, k, src, coef, ptr, T, _SINC, _COSC,
+                                                                present, z, sensor, linv, prev, log_w, top)
 
         return run
 
