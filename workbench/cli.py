@@ -46,6 +46,11 @@ class PluginFailure(RuntimeError):
     """A plugin failed to load, or raised where it should not have; the message names it."""
 
 
+#: ``workbench report``'s default number of worker processes is the usable cores, at most this many (each worker
+#: holds its own plugin host and its tasks' arrays).
+DEFAULT_JOBS_CAP = 8
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -121,6 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="send the tasks to this Dask distributed scheduler (pip install -e '.[dask]')")
     rep.add_argument("--workers", type=_positive_int, default=None, metavar="N",
                      help="start a local Dask cluster of N worker processes for the tasks")
+    rep.add_argument("--jobs", type=_positive_int, default=None, metavar="N",
+                     help="run the tasks on N local worker processes, bit-identical to one (default: the usable "
+                          f"cores, at most {DEFAULT_JOBS_CAP}; --jobs 1 runs them one after another in this process)")
 
     run = sub.add_parser("run", help="run one scenario file: a results file and its plots")
     run.add_argument("scenario", help="scenario TOML file")
@@ -275,6 +283,21 @@ def cmd_report(args) -> int:
             raise InputError(str(exc)) from None
     command = "workbench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     executor = None
+    if args.jobs is not None and (args.scheduler or args.workers):
+        raise InputError(f"--jobs {args.jobs} and --{'scheduler' if args.scheduler else 'workers'}: the tasks run "
+                         "either on local worker processes (--jobs) or on Dask (--workers, --scheduler), not both")
+    if not (args.scheduler or args.workers):
+        from .report.engine import LocalProcesses, WorkerHostMismatch, usable_cores
+
+        jobs = args.jobs if args.jobs is not None else min(usable_cores(), DEFAULT_JOBS_CAP)
+        if jobs > 1:
+            executor = LocalProcesses(host, jobs, block=args.block)
+            try:
+                executor.check_host()  # refused now, before any paper runs
+            except WorkerHostMismatch as exc:
+                if args.jobs is not None:  # asked for by name: refused by name
+                    raise InputError(f"--jobs {args.jobs}: {exc}") from None
+                executor = None  # the default on a host built in this process only: its tasks run here
     if args.scheduler or args.workers:
         from .report.engine import dask_executor
 

@@ -74,7 +74,7 @@ from .cache import (CacheEntryUnreadable, TaskCache, code_version, components_di
 __all__ = ["resolve_filters", "resolve_trackers", "tracker_request", "tracker_papers", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
            "dask_executor", "component_failure", "component_errors", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
-           "report_lock", "recording_host", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats",
+           "report_lock", "recording_host", "LocalProcesses", "WorkerHostMismatch", "usable_cores", "ONE_THREAD_ENV", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats",
            "CONFIRMATION_SEED", "CONFIRMATION_SPAN", "check_report_seed", "judged_tasks", "task_time_table",
            "paper_time_table", "TASK_STATUSES"]
 
@@ -654,8 +654,13 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     module_files = tuple(sorted(f for m in modules if m and (f := getattr(sys.modules.get(m), "__file__", None))))
     version = code_version(module_files)
     run = executor if executor is not None else InProcess(host)
+    # the seconds of the last report into this folder, read before this one overwrites them: the order of the tasks
+    # on workers that run side by side (longest first)
+    previous = previous_seconds(out, recipe.paper)
+    previous_confirmation = previous_seconds(out, recipe.paper, "confirmation/")
     results = _run_tasks(recipe, tasks, host, cache, run, outcome, seed=seed, size=size, arch=arch, version=version,
-                         progress=progress, on_task=on_task, label=f"paper {recipe.paper} ({size})")
+                         progress=progress, on_task=on_task, label=f"paper {recipe.paper} ({size})",
+                         previous=previous)
     outcome.tasks.sort(key=lambda t: keys.index(t["key"]))
     for entry in outcome.tasks:  # components that failed inside a task whose other results were kept
         failed = component_errors(results.get(entry["key"], {}))
@@ -677,7 +682,8 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
         if outcome.criteria and confirmation_seed is not None:
             outcome.criteria = _confirmation(recipe, host, cache, run, outcome, options, read, results,
                                              seed=int(confirmation_seed), version=version, progress=progress,
-                                             on_task=on_task, reported={t.key: t for t in tasks})
+                                             on_task=on_task, reported={t.key: t for t in tasks},
+                                             previous=previous_confirmation)
         if size != FIRM_SIZE:
             outcome.criteria = [c.as_indicative() for c in outcome.criteria]
     outcome.confirmation_seed = None if confirmation_seed is None else int(confirmation_seed)
@@ -689,7 +695,8 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
 
 def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
                   options: RecipeOptions, read: set[str], results: Mapping, *, seed: int, version: str,
-                  progress: bool, on_task, reported: Mapping[str, Task] | None = None) -> list[Criterion]:
+                  progress: bool, on_task, reported: Mapping[str, Task] | None = None,
+                  previous: Mapping[str, float] | None = None) -> list[Criterion]:
     """The criteria with their verdicts on the confirmation seed: the tasks they read rerun with ``seed``
     (cached under it), the criteria judged again unchanged on those results (the other tasks' results are the
     reported seed's, which the criteria do not read).  A task they read that is declared ``seeded=False`` is not
@@ -709,7 +716,7 @@ def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, o
     note = PaperOutcome(recipe.paper, recipe.title, options.size, options.filters, "", {})
     fresh = _run_tasks(recipe, tasks, host, cache, run, note, seed=seed, size=options.size, arch=options.arch,
                        version=version, progress=progress, on_task=on_task,
-                       label=f"paper {recipe.paper} ({options.size}, confirmation seed {seed})")
+                       label=f"paper {recipe.paper} ({options.size}, confirmation seed {seed})", previous=previous)
     for task in reused:
         outcome.tasks.append({"key": f"confirmation/{task.key}", "seconds": 0.0, "cached": False, "error": "",
                               "runs": task.runs, "seed": seed, "reused": "the reported seed's result (seeded=False)"})
@@ -732,11 +739,45 @@ def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, o
     return confirm(outcome.criteria, again, seed)
 
 
+def longest_first(tasks: Sequence[Task], seconds: Mapping[str, float]) -> list[Task]:
+    """``tasks`` in the order a pool of workers should take them so that they finish together: the longest first,
+    by ``seconds`` (task key -> the seconds it took last time).  A task without a time (never computed here) goes
+    first, in the declared order (it may be long); ties keep the declared order."""
+    def cost(item):
+        i, task = item
+        known = seconds.get(task.key)
+        return (0, 0.0, i) if known is None else (1, -float(known), i)
+
+    return [t for _, t in sorted(enumerate(tasks), key=cost)]
+
+
+def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float]:
+    """The seconds each task of ``paper`` took when it was last computed into the report folder ``out`` (its saved
+    ``outcome.json``: computed tasks only, keys starting with ``prefix`` with the prefix cut off); empty when there is
+    none or it cannot be read."""
+    try:
+        data = json.loads((Path(out) / f"paper{paper}" / OUTCOME_FILE).read_text(encoding="utf-8"))
+        entries = data.get("tasks") or []
+    except (OSError, ValueError, AttributeError):
+        return {}
+    found = {}
+    for entry in entries:
+        try:
+            key, sec = str(entry.get("key")), float(entry.get("seconds") or 0.0)
+        except (AttributeError, TypeError, ValueError):
+            continue
+        if key.startswith(prefix) and _task_status(entry) == "computed" and sec > 0.0:
+            found[key[len(prefix):]] = sec
+    return found
+
+
 def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
                *, seed: int, size: str, arch: str, version: str, progress: bool, on_task,
-               label: str) -> dict[str, dict[str, np.ndarray]]:
+               label: str, previous: Mapping[str, float] | None = None) -> dict[str, dict[str, np.ndarray]]:
     """Run ``tasks`` with ``seed`` (each finished one cached at once, a cached one reused); their results, with
-    each task's timing in ``outcome.tasks`` and failures in ``outcome.errors``."""
+    each task's timing in ``outcome.tasks`` and failures in ``outcome.errors``.  An executor that runs tasks side by
+    side gets them the longest first (:func:`longest_first`, by ``previous``: the seconds each took in the last
+    report into this folder)."""
     results: dict[str, dict[str, np.ndarray]] = {}
     bar = _progress_bar(len(tasks), label, progress)
     pending = []
@@ -757,7 +798,10 @@ def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: Tas
             bar.update(1)
         else:
             pending.append((task, digest))
-    for task, arrays, seconds, error in run.execute([t for t, _ in pending], seed, arch, on_task):
+    order = [t for t, _ in pending]
+    if not isinstance(run, InProcess):  # one after another: the order changes nothing; side by side: longest first
+        order = longest_first(order, previous or {})
+    for task, arrays, seconds, error in run.execute(order, seed, arch, on_task):
         digest = next(d for t, d in pending if t.key == task.key)
         if error is None:
             used = getattr(run, "used", {}).get(task.key)
@@ -775,7 +819,8 @@ def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: Tas
                                   "runs": task.runs, "traceback": error[1]})
         bar.update(1)
     bar.close()
-    return results
+    # in the declared order, however the tasks came back (from the cache, or from workers as they finished)
+    return {t.key: results[t.key] for t in tasks if t.key in results}
 
 
 def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutcome, paper_dir: Path,
@@ -903,6 +948,215 @@ class InProcess:
 
 _WORKER_HOSTS: dict[tuple[str, ...], PluginHost] = {}
 
+#: The environment of a worker process of :class:`LocalProcesses` (and of a local Dask cluster's workers): one
+#: thread per worker, kernels included, since the workers already share the cores between them and threaded kernels
+#: (Numba, BLAS) in every worker would oversubscribe them.  Read by those libraries when they load, so it is set
+#: before a worker starts (in its environment), never after.
+ONE_THREAD_ENV = {name: "1" for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                         "MKL_NUM_THREADS")}
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system gives one, else the CPU count)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):  # pragma: no cover - no affinity on this system
+        return max(os.cpu_count() or 1, 1)
+
+
+def _host_signature(host: PluginHost) -> dict:
+    """What a worker's host must match to run a task as this process would: every component by hook and name, with
+    the plugin that provides it, and every plugin with its status."""
+    return {"components": {hook: sorted((str(name), str(host.owner.get((hook, name), ""))) for name in table)
+                           for hook, table in host.components.items()},
+            "plugins": sorted((p.name, p.module, p.status) for p in host.plugins)}
+
+
+def _process_task(run, params, seed, arch, block, retries):
+    """Runs in a :class:`LocalProcesses` worker: build (once per process) the worker's own plugin host, then the
+    task, tried ``retries`` more times when it raises.  Returns ``("ok", arrays, seconds, used)`` or ``("error",
+    message, seconds, traceback text)``: a failure comes back as data with the worker's own traceback.  Either way
+    the worker's own peak resident set size (KiB) comes with it, as a fifth item."""
+    from ..bench import own_peak_kib
+    from ..plugins import load_host
+
+    key = tuple(sorted(block))
+    if key not in _WORKER_HOSTS:
+        _WORKER_HOSTS[key] = load_host(block=block)
+    t0 = time.perf_counter()
+    for attempt in range(int(retries) + 1):
+        try:
+            arrays, used = _call_task(run, params, seed, _WORKER_HOSTS[key], arch)
+            return "ok", arrays, time.perf_counter() - t0, sorted(used), own_peak_kib()
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001 - reported, the others carry on
+            if attempt == int(retries):
+                return ("error", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0, traceback.format_exc(),
+                        own_peak_kib())
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+@contextmanager
+def _environment(values: Mapping[str, str]):
+    """``os.environ`` with ``values`` set while the block runs (the worker processes started in it inherit them),
+    restored after."""
+    before = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class WorkerHostMismatch(InputError):
+    """The plugin host a worker process would build (the installed plugins, less the blocked ones) is not the host
+    the report was given (one built with plugins registered in this process only): the workers cannot run its tasks
+    as this process would."""
+
+
+def _picklable(fn) -> bool:
+    """Whether ``fn`` can be sent to a worker process (pickled by reference: a module-level function or a
+    ``functools.partial`` of one)."""
+    import pickle
+
+    try:
+        pickle.dumps(fn)
+    except Exception:  # noqa: BLE001 - any failure to pickle means: run it here
+        return False
+    return True
+
+
+class LocalProcesses:
+    """Run tasks on ``jobs`` local worker processes (``concurrent.futures`` with the ``spawn`` start method), each
+    with one thread for Numba and BLAS (:data:`ONE_THREAD_ENV`) and its own plugin host built once
+    (``load_host(block=block)``); finished tasks come back as they complete.
+
+    Every task's random streams come from the seed and the task's own identity, never from the worker or the
+    order, so results are bit-identical to :class:`InProcess`.  The workers take the tasks in the caller's order
+    (the report hands them the longest first, so that they finish together).  A task that raises is tried
+    ``retries`` more times in its worker, then reported as failed with the worker's traceback; a worker that dies
+    (killed, out of memory) fails the tasks still waiting with one line each, and the tasks finished before it come
+    back as usual (the report caches each one the moment it arrives); the next batch starts new workers.
+
+    The workers start at the first batch that has a task to run (a report read wholly from the cache starts none)
+    and stay up for the report's later batches (its other papers, the confirmation seed) until :meth:`close`.
+    The host given must be the one a worker builds (the installed plugins less ``block``): a host with plugins
+    registered in this process only is refused with :class:`WorkerHostMismatch` (``workbench report --jobs 1`` runs
+    such a host in this process).
+
+    ``worker_peak_kib``: the largest peak resident set size (KiB) a worker of this executor reported (its own
+    ``VmHWM``); :attr:`largest_worker_kib`, the largest of every executor in this process (the report benchmark
+    prints it beside the report process's own peak).
+    """
+
+    #: The largest worker peak (KiB) of any :class:`LocalProcesses` in this process.
+    largest_worker_kib: float = 0.0
+
+    def __init__(self, host: PluginHost, jobs: int, block: Sequence[str] = (), retries: int = 1,
+                 start_method: str = "spawn"):
+        if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
+            raise InputError(f"jobs: a whole number of worker processes >= 1, got {jobs!r}")
+        self.host, self.jobs, self.block, self.retries = host, int(jobs), tuple(block), int(retries)
+        self.start_method = start_method
+        self.used: dict[str, set] = {}  # task key -> the (hook, name) of the components it used
+        self._pool = None
+        self._checked = False
+        self.worker_peak_kib = 0.0
+
+    def check_host(self) -> None:
+        """Refuse (:class:`WorkerHostMismatch`) a host that the workers would not rebuild: its components and
+        plugins against a fresh ``load_host(block=block)``'s."""
+        if self._checked:
+            return
+        from ..plugins import load_host
+
+        if _host_signature(load_host(block=self.block)) != _host_signature(self.host):
+            raise WorkerHostMismatch("the report's plugin host has plugins or components that a worker process "
+                                     "would not load (registered in this process only, not installed): run its "
+                                     "tasks in this process (--jobs 1)")
+        self._checked = True
+
+    def _start(self):
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            self.check_host()
+            self._pool = ProcessPoolExecutor(max_workers=self.jobs,
+                                             mp_context=multiprocessing.get_context(self.start_method))
+        return self._pool
+
+    def close(self) -> None:
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def execute(self, tasks, seed, arch, on_task=None):
+        from concurrent.futures import FIRST_COMPLETED, wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        tasks = list(tasks)
+        if not tasks:
+            return
+        # a task whose function cannot be sent to a worker (a closure or a lambda of a recipe written elsewhere) runs
+        # here, in this process, while the workers run the others: the same numbers, never a failure for it
+        here = [t for t in tasks if not _picklable(t.run)]
+        tasks = [t for t in tasks if _picklable(t.run)]
+        pool = self._start() if tasks else None
+        futures = {}
+        try:
+            # the workers start as the tasks are submitted (spawn: one per submission while none is idle), so the
+            # one-thread environment is theirs from their first line; they take the tasks in this order
+            with _environment(ONE_THREAD_ENV):
+                for task in tasks:
+                    if on_task is not None:
+                        on_task(task.key)
+                    futures[pool.submit(_process_task, task.run, dict(task.params), seed, arch, self.block,
+                                        self.retries)] = task
+            if here:
+                local = InProcess(self.host, self.retries)
+                yield from local.execute(here, seed, arch, on_task)
+                self.used.update(local.used)
+            pending = dict(futures)
+            while pending:
+                done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                for fut in [f for f in pending if f in done]:  # in the caller's order within a batch
+                    task = pending.pop(fut)
+                    try:
+                        status, value, seconds, extra, peak = fut.result()
+                        self.worker_peak_kib = max(self.worker_peak_kib, float(peak))
+                        LocalProcesses.largest_worker_kib = max(LocalProcesses.largest_worker_kib, float(peak))
+                    except BrokenProcessPool as exc:
+                        self._pool = None  # the next batch starts new workers
+                        yield task, None, 0.0, (f"the worker process running it died ({exc or 'BrokenProcessPool'}"
+                                                f"): killed, or out of memory", traceback.format_exc())
+                        continue
+                    except (KeyboardInterrupt, SystemExit):
+                        raise
+                    except Exception as exc:  # noqa: BLE001 - e.g. a result that cannot be sent back
+                        yield task, None, 0.0, (f"{type(exc).__name__}: {exc}", traceback.format_exc())
+                        continue
+                    if status == "ok":
+                        self.used[task.key] = {tuple(u) for u in extra}
+                        yield task, value, seconds, None
+                    else:
+                        yield task, None, seconds, (value, extra)
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+
 
 def _remote_task(run, params, seed, arch, block):
     """Runs on a Dask worker: build (once per process) the worker's own plugin host, then the task."""
@@ -1014,7 +1268,7 @@ class DaskClusterLost(ConnectionError):
         return f"{self.filename}: {self.strerror}"
 
 
-Executor = InProcess | DaskExecutor
+Executor = InProcess | LocalProcesses | DaskExecutor
 
 
 #: Seconds to wait for a Dask scheduler before the report gives up with a network error.
@@ -1034,9 +1288,8 @@ def dask_executor(host: PluginHost, scheduler: str | None = None, workers: int |
             raise InputError(f"--scheduler {scheduler!r}: expected an address such as tcp://host:8786")
         # a scheduler that cannot be reached fails within CONNECT_TIMEOUT, not after Dask's default 30 s
         return DaskExecutor(Client(scheduler, timeout=CONNECT_TIMEOUT), block)
-    # One thread per worker process, kernels included: the workers already share the cores between
-    # them, and threaded kernels (Numba, BLAS) in every worker would oversubscribe them.
-    env = {name: "1" for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    # One thread per worker process, kernels included (ONE_THREAD_ENV).
+    env = dict(ONE_THREAD_ENV)
     # Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536 (its pre-spawn environment, read by
     # glibc at process start).  Any explicit value also turns off glibc's dynamic mmap threshold, so
     # every freed array of the particle filters goes back to the system and the next step page-faults it

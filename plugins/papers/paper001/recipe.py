@@ -91,6 +91,10 @@ VARIANTS: dict[str, dict] = {
     "dtheta3": {"d_theta_deg": 3.0},
     "halves": {"window": 3, "shift": 3, "v_min": 2},
 }
+#: Remover variants whose rows the sim blocks compute already: the main remover (the block's removal, its statistics
+#: ``rem/main/`` and the paper and stated rows after it, ``paper/after/``, ``stated/after/``).  The variants task does
+#: not run it again; the variants table reads it from ``sim/<block>``.
+VARIANTS_IN_SIM = ("main",)
 VARIANT_LABELS = {
     "main": "local latest support within v_max T max(gap, 2), velocity check (main)",
     "previous-rule": "latest support anywhere on the line, within 2 v_max T (the previous rule)",
@@ -207,9 +211,29 @@ def _unknown_changes(unknown: DeclaredUnknown, value) -> dict:
     return {"clutter": SIM_CLUTTER, "tracker_changes": {"confirm_hits": m, "confirm_window": n}}
 
 
-def _unknown_key(unknown: DeclaredUnknown, value, block: int) -> str:
+def _unknown_prefix(unknown: DeclaredUnknown, value) -> str:
     label = f"{value:g}" if isinstance(value, float) else str(value).replace(" ", "")
-    return f"unknown/{'clutter' if unknown is CLUTTER_PER_PING else 'mofn'}/{label}/{block}"
+    return f"unknown/{'clutter' if unknown is CLUTTER_PER_PING else 'mofn'}/{label}/"
+
+
+def _unknown_key(unknown: DeclaredUnknown, value, block: int) -> str:
+    """The task of one grid value and seed block (an unknown of :data:`GRID_IN_SIM` has none: see there)."""
+    return f"{_unknown_prefix(unknown, value)}{block}"
+
+
+#: The unknowns whose grid values change the tracker only, not the detections or the remover: their rows are tracked
+#: inside the sim blocks on the block's own detections and removal (common random numbers: the same scans feed every
+#: grid value), as extra rows ``unknown/mofn/<value>/paper/<phase>/`` of ``sim/<block>``, instead of tasks that
+#: simulated and removed the same detections again.  The clutter per ping changes the detections: its grid values
+#: keep tasks of their own (the target's detections are still the same, drawn first from each run's stream).
+GRID_IN_SIM = (MOFN_WINDOW,)
+
+
+def _unknown_rows(results: Mapping, unknown: DeclaredUnknown, value, block: int) -> tuple[Mapping | None, str]:
+    """Where the paper rows of one grid value and seed block are: ``(result, prefix)`` (``None`` where missing)."""
+    if unknown in GRID_IN_SIM:
+        return results.get(f"sim/{block}"), _unknown_prefix(unknown, value)
+    return results.get(_unknown_key(unknown, value, block)), ""
 
 PUBLISHED = {
     "removal_rate_simulation": 0.78,
@@ -482,6 +506,20 @@ def _sim_task(ctx: TaskContext) -> dict:
             out.update(component_failure(arm if arm.startswith("filter:") else f"{arm} arm ({filt})", exc))
             continue
         out.update(rows)
+    # the grid of the unknowns that change the tracker only (GRID_IN_SIM): the paper rows with each grid value's
+    # tracker settings on these same detections and this same removal (what a grid task of its own computed after
+    # simulating and removing them again: the same numbers, bit for bit)
+    for prefix, changes in p.get("tracker_grid", {}).items():
+        rows = {}
+        try:
+            cfg = _tracker_config(host, "paper", changes)
+            for phase, data in (("before", scans), ("after", after)):
+                _, counts, _ = _track(host, data, PAPER_FILTER, cfg, seed, ("paper", phase))
+                rows.update(_counts_arrays(f"{prefix}paper/{phase}/", counts))
+        except Exception as exc:  # noqa: BLE001 - isolated as the arms are
+            out.update(component_failure(f"{prefix.rstrip('/')} paper rows ({PAPER_FILTER})", exc))
+            continue
+        out.update(rows)
     out["detections_per_ping"] = after.valid.sum(axis=2).mean(axis=0)
     return out
 
@@ -505,8 +543,9 @@ def _unknown_task(ctx: TaskContext) -> dict:
 
 
 def _variants_task(ctx: TaskContext) -> dict:
-    """One seed block through every remover variant, then the paper and the stated-accuracy arms' trackers (after
-    removal only; the before-removal counts are the block's ``paper/before`` and ``stated/before``)."""
+    """One seed block through every remover variant of ``p["variants"]``, then the paper and the stated-accuracy
+    arms' trackers (after removal only; the before-removal counts are the block's ``paper/before`` and
+    ``stated/before``).  The main remover is not among them: its rows are the sim block's (:data:`VARIANTS_IN_SIM`)."""
     p, host = ctx.params, ctx.host
     seed = ctx.seed + int(p["block"])
     scans = simulate_scans(host, seed, "sim", int(p["runs"]))
@@ -687,9 +726,12 @@ def tasks(options: RecipeOptions) -> list[Task]:
     common = {"runs": runs, "hough": HOUGH, "sonar": SONAR, "polar": POLAR, "tracker": TRACKER,
               "clutter": SIM_CLUTTER}
     out = [Task("hough-demo", {"hough": HOUGH}, _demo_task)]
+    tracker_grid = {_unknown_prefix(u, value): _unknown_changes(u, value)["tracker_changes"]
+                    for u in GRID_IN_SIM for value in u.grid if value != u.primary}
     for block in range(seeds):
         out.append(Task(f"sim/{block}", {**common, "block": block, "hough_previous": HOUGH_PREVIOUS,
-                                          "tracker_previous": TRACKER_PREVIOUS, "filters": list(filters)}, _sim_task))
+                                          "tracker_previous": TRACKER_PREVIOUS, "filters": list(filters),
+                                          "tracker_grid": tracker_grid}, _sim_task))
     # the trackers compared (options.trackers: DEFAULT_TRACKERS with --trackers applied; empty: none compared)
     if options.trackers:
         for block in range(seeds):
@@ -698,8 +740,12 @@ def tasks(options: RecipeOptions) -> list[Task]:
                                                    "trackers": list(options.trackers),
                                                    "settings": TRACKER_SETTINGS}, _trackers_task))
     for block in range(min(int(v["variant_seeds"]), seeds)):
-        out.append(Task(f"variants/{block}", {**common, "block": block, "variants": VARIANTS}, _variants_task))
+        out.append(Task(f"variants/{block}", {**common, "block": block,
+                                               "variants": {k: v for k, v in VARIANTS.items()
+                                                            if k not in VARIANTS_IN_SIM}}, _variants_task))
     for unknown in UNKNOWNS:
+        if unknown in GRID_IN_SIM:  # tracked inside the sim blocks
+            continue
         for value in unknown.grid:
             if value == unknown.primary:  # the primary value's rows are the sim blocks' paper rows
                 continue
@@ -743,17 +789,27 @@ def _arm_counts(results: Mapping, arm: str, phase: str, blocks: list[str] | None
     return TrackCounts(*(np.concatenate([getattr(c, f) for c in parts]) for f in FIELDS))
 
 
-def _variant_counts(results: Mapping, variant: str, arm: str) -> tuple[TrackCounts, TrackCounts, list[str]] | None:
-    """Before (the blocks' ``arm``) and after (the variant, tracked by ``arm``) over the blocks with variant
-    results."""
+def _variant_keys(results: Mapping, variant: str) -> tuple[list[str], str]:
+    """The results that hold a remover variant's rows, over the blocks with variant results, and the prefix of its
+    rows there (its counts ``{prefix}{arm}/after/``, ``{prefix}first_output_ping``): the ``variants/<block>`` tasks,
+    or the ``sim/<block>`` tasks for a variant of :data:`VARIANTS_IN_SIM`."""
     keys = sorted((k for k in results if k.startswith("variants/")), key=lambda k: int(k.split("/")[1]))
-    if not keys or f"{variant}/{arm}/after/confirmed" not in results[keys[0]]:
+    if variant in VARIANTS_IN_SIM:
+        return [f"sim/{k.split('/')[1]}" for k in keys], ""
+    return keys, f"{variant}/"
+
+
+def _variant_counts(results: Mapping, variant: str, arm: str) -> tuple[TrackCounts, TrackCounts, list[str], str] | None:
+    """Before (the blocks' ``arm``) and after (the variant, tracked by ``arm``) over the blocks with variant
+    results; the results that hold the variant's rows and their prefix (:func:`_variant_keys`)."""
+    keys, prefix = _variant_keys(results, variant)
+    if not keys or any(k not in results for k in keys) or f"{prefix}{arm}/after/confirmed" not in results[keys[0]]:
         return None
     blocks = [f"sim/{k.split('/')[1]}" for k in keys]
     before = _arm_counts(results, arm, "before", blocks)
-    after = [TrackCounts.from_arrays(results[k], f"{variant}/{arm}/after/") for k in keys]
+    after = [TrackCounts.from_arrays(results[k], f"{prefix}{arm}/after/") for k in keys]
     after = TrackCounts(*(np.concatenate([getattr(c, f) for c in after]) for f in FIELDS))
-    return before, after, keys
+    return before, after, keys, prefix
 
 
 def _post(results: Mapping, T: int, key: str | None = None) -> np.ndarray:
@@ -1414,8 +1470,8 @@ def _variant_table(results) -> Table:
         got = {arm: _variant_counts(results, name, arm) for arm in ("paper", "stated")}
         if got["paper"] is None or got["stated"] is None:
             continue
-        keys = got["paper"][2]
-        post = np.arange(got["paper"][0].false.shape[1]) >= int(results[keys[0]][f"{name}/first_output_ping"])
+        keys, prefix = got["paper"][2], got["paper"][3]
+        post = np.arange(got["paper"][0].false.shape[1]) >= int(results[keys[0]][f"{prefix}first_output_ping"])
         s = {arm: summary(got[arm][0], got[arm][1], post) for arm in got}
         st = _pooled_stats(results, keys, f"rem/{name}/")
         rows.append((VARIANT_LABELS[name], _kept_text(st, f"rem/{name}/", "hit"),
@@ -1662,10 +1718,10 @@ def _unknown_counts(results: Mapping, unknown: DeclaredUnknown, value, phase: st
     """The paper rows at one grid value, pooled over the seed blocks (None where a block's task is missing)."""
     parts = []
     for block in range(len(_blocks(results))):
-        key = _unknown_key(unknown, value, block)
-        if key not in results or f"paper/{phase}/confirmed" not in results[key]:
+        res, prefix = _unknown_rows(results, unknown, value, block)
+        if res is None or f"{prefix}paper/{phase}/confirmed" not in res:
             return None
-        parts.append(TrackCounts.from_arrays(results[key], f"paper/{phase}/"))
+        parts.append(TrackCounts.from_arrays(res, f"{prefix}paper/{phase}/"))
     return TrackCounts(*(np.concatenate([getattr(c, f) for c in parts]) for f in FIELDS))
 
 

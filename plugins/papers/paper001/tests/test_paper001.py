@@ -220,8 +220,8 @@ def test_tables_hold_every_row_and_the_tuning_choice(report):
     assert all("SYNTHETIC" in r[0] for r in removal if "surrogate" in r[0])
     assert any("EXTENSION" in r[1] for r in removal)
     # remover variants: the share of target detections kept after a miss, recomputed from the raw counts
-    res = results["variants/0"]
     for i, name in enumerate(paper001.VARIANTS):
+        res = results["sim/0" if name in paper001.VARIANTS_IN_SIM else "variants/0"]  # the main remover: sim's rows
         n, kept = res[f"rem/{name}/miss_n"].sum(), res[f"rem/{name}/miss_kept"].sum()
         assert tables["remover-variants"].rows[i][2].startswith(f"{100 * kept / n:.1f} %")
     assert len(tables["seed-blocks"].rows) == 1 and len(tables["removal-per-ping"].rows) == 21
@@ -444,8 +444,10 @@ def test_declared_unknowns_are_judged_across_their_grids_on_the_same_runs(report
         assert (s.origin == 0).sum() == (base.origin == 0).sum()
     np.testing.assert_array_equal(dense.z[dense.origin == 0], base.z[base.origin == 0])
     # M-of-N 2 of 4 confirms at least as many tracks as 3 of 5 before removal (a weaker rule), run by run
-    res = results[paper001._unknown_key(paper001.MOFN_WINDOW, "2 of 4", 0)]
-    assert res["paper/before/confirmed"].sum() >= _counts(results, "paper", "before").confirmed.sum()
+    # (tracked in the sim block, on its own detections: GRID_IN_SIM)
+    assert "unknown/mofn/2of4/0" not in results and "unknown/mofn/2of4/paper/before/confirmed" in results["sim/0"]
+    res = TrackCounts.from_arrays(results["sim/0"], "unknown/mofn/2of4/paper/before/")
+    assert res.confirmed.sum() >= _counts(results, "paper", "before").confirmed.sum()
 
 
 def test_the_quick_report_still_renders_the_papers_numbers(report, tmp_path):
@@ -464,3 +466,34 @@ def test_the_quick_report_still_renders_the_papers_numbers(report, tmp_path):
     assert "78 %" in page and "84 %" in page and "&gt;= 90 % of runs" in page
     assert "Declared unknowns" in page and "clutter per ping = 62.5" in page and "M-of-N confirmation = 2 of 4" in page
     assert "off (quick run)" in page and "the cap on it" in page
+
+
+def test_the_rows_shared_with_the_sim_blocks_are_those_a_task_of_their_own_computes(report):
+    """Common random numbers: the M-of-N grid rows and the main remover's variant rows are read from ``sim/<block>``
+    (no task of their own simulates and removes the same detections again).  Recomputed here from the inputs, as the
+    separate tasks did: the block's detections simulated and removed afresh, the paper rows tracked with each grid
+    value's settings, and the variants task run on the main remover alone: equal bit for bit."""
+    _, results = report
+    sim = results["sim/0"]
+    scans = paper001.simulate_scans(HOST, 1, "sim", RUNS)  # block 0 of seed 1
+    after = HOST.clutter_remover(paper001.REMOVER).remove(scans, **paper001.HOUGH)
+    for value in ("2 of 4", "4 of 6"):
+        m, n = (int(v) for v in value.split(" of "))
+        cfg = paper001._tracker_config(HOST, "paper", {"confirm_hits": m, "confirm_window": n})
+        for phase, data in (("before", scans), ("after", after)):
+            _, counts, _ = paper001._track(HOST, data, paper001.PAPER_FILTER, cfg, 1, ("paper", phase))
+            prefix = f"unknown/mofn/{value.replace(' ', '')}/paper/{phase}/"
+            for name, arr in counts.to_arrays("").items():
+                np.testing.assert_array_equal(sim[prefix + name], arr)
+    own = paper001._variants_task(TaskContext(params={**_sim_params(), "variants": {"main": {}}}, seed=1,
+                                              host=HOST))
+    for arm in ("paper", "stated"):
+        for name in paper001.FIELDS:
+            np.testing.assert_array_equal(own[f"main/{arm}/after/{name}"], sim[f"{arm}/after/{name}"])
+    for name in ("miss_n", "miss_kept", "hit_n", "hit_kept", "clutter_n", "clutter_kept"):
+        np.testing.assert_array_equal(own[f"rem/main/{name}"], sim[f"rem/main/{name}"])
+    assert int(own["main/first_output_ping"]) == int(sim["first_output_ping"])
+
+
+def _sim_params() -> dict:
+    return {"runs": RUNS, "hough": paper001.HOUGH, "block": 0}

@@ -1,0 +1,258 @@
+"""Tasks on local worker processes (``workbench report --jobs N``): bit-identical to one process, the longest task
+first, a failing task or a dying worker reported by name with the finished tasks kept."""
+
+import json
+import os
+import signal
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fixtures import demo_plugin
+
+from workbench import hookimpl
+from workbench.cli import EXIT, main
+from workbench.report.cache import load_arrays
+from workbench.report.engine import (InProcess, LocalProcesses, WorkerHostMismatch, longest_first, previous_seconds,
+                                     run_recipe, run_report)
+from workbench.specs import Task
+from workbench.types import InputError
+
+TESTS = Path(__file__).parent
+
+
+@pytest.fixture(scope="module")
+def installed_host(tmp_path_factory):
+    """The installed plugins and the demo plugin, installed through an entry point (a dist-info folder) that this
+    process and the worker processes (PYTHONPATH) both see, so that a worker's ``load_host()`` builds this host."""
+    from workbench.plugins import load_host
+
+    site = tmp_path_factory.mktemp("site")
+    info = site / "demo_fixture-1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-fixture\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text("[workbench]\ndemo = fixtures.demo_plugin\n")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(site))
+        mp.setenv("PYTHONPATH", os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))
+        host = load_host()
+        assert "demo" in host.recipes
+        yield host
+
+
+@pytest.fixture(scope="module")
+def two_workers(installed_host):
+    """One pool of two worker processes, shared by the tests of this module that do not break it (starting a worker
+    costs seconds: it imports the workbench and builds its plugin host)."""
+    with LocalProcesses(installed_host, 2) as pool:
+        yield pool
+
+
+def _numbers(out: Path) -> dict:
+    """Every number a report's summary gives of its papers' criteria and tables, and the figure data."""
+    summary = json.loads((out / "summary.json").read_text())
+    paper = summary["papers"][0]
+    return {"criteria": [{k: v for k, v in c.items()} for c in paper["criteria"]],
+            "tables": [t["rows"] for t in paper["tables"]]}
+
+
+@pytest.mark.slow
+def test_two_worker_processes_give_the_numbers_of_one_process_bit_for_bit(tmp_path, installed_host, two_workers):
+    one = run_report(installed_host, tmp_path / "one", papers=["demo"], filters="+sir", seed=4, progress=False)
+    two = run_report(installed_host, tmp_path / "two", papers=["demo"], filters="+sir", seed=4, progress=False,
+                     executor=two_workers)
+    assert {"mse-kf", "mse-ekf", "mse-sir"} <= set(two_workers.used)  # every task ran on a worker
+    assert not one.papers[0].errors and not two.papers[0].errors
+    a, b = load_arrays(tmp_path / "one" / "paperdemo" / "fig1.npz"), load_arrays(tmp_path / "two" / "paperdemo" /
+                                                                                 "fig1.npz")
+    assert list(a["filters"]) == list(b["filters"]) == ["ekf", "kf", "sir"]
+    assert np.array_equal(a["mse"], b["mse"])  # bit-identical, the particle filter included
+    assert _numbers(tmp_path / "one") == _numbers(tmp_path / "two")
+    assert {t["key"] for t in two.papers[0].tasks} == {"mse-kf", "mse-ekf", "mse-sir"}
+    assert all(t["seconds"] > 0 and not t["cached"] for t in two.papers[0].tasks)
+
+
+def _recipe_with(*extra):
+    return replace(demo_plugin.RECIPE, tasks=lambda o: [*demo_plugin._tasks(o)[:1], *extra])
+
+
+@pytest.mark.slow
+def test_a_failing_task_is_retried_in_its_worker_and_one_failing_always_is_named(tmp_path, installed_host,
+                                                                                  two_workers):
+    recipe = _recipe_with(Task("flaky", {"marker": str(tmp_path / "marker")}, demo_plugin.flaky_task),
+                          Task("doomed", {}, demo_plugin.always_fails))
+    outcome = run_recipe(recipe, installed_host, tmp_path / "out", progress=False, executor=two_workers)
+    status = {t["key"]: t["error"] for t in outcome.tasks}
+    assert status["mse-kf"] == "" and status["flaky"] == ""  # flaky failed once, then passed on its retry
+    assert "RuntimeError: this chunk always fails" in status["doomed"]
+    doomed = next(t for t in outcome.tasks if t["key"] == "doomed")
+    assert "always_fails" in doomed["traceback"]  # the worker's own traceback
+    cached = sorted(p.name.split("-")[0] for p in (tmp_path / "out" / "cache" / "paperdemo").glob("*.npz"))
+    assert cached == ["flaky", "mse"]
+
+
+@pytest.mark.slow
+def test_a_task_that_cannot_be_sent_to_a_worker_runs_in_this_process(tmp_path, installed_host, two_workers):
+    """A recipe written elsewhere may give a closure as a task's function: it cannot be pickled to a worker, so it
+    runs in the report's own process (with the same seed) while the workers run the others; never a failure."""
+    pid = os.getpid()
+
+    def here(ctx):  # a closure: pickle refuses it
+        from workbench.rng import generator
+
+        return {"pid": np.array(os.getpid()), "draw": generator(ctx.seed, "closure").standard_normal(3)}
+
+    recipe = _recipe_with(Task("closure", {}, here))
+    outcome = run_recipe(recipe, installed_host, tmp_path / "out", progress=False, executor=two_workers)
+    assert {t["key"]: t["error"] for t in outcome.tasks} == {"mse-kf": "", "closure": ""}
+    run_recipe(recipe, installed_host, tmp_path / "inline", progress=False, executor=InProcess(installed_host))
+    got = [load_arrays(next((tmp_path / d / "cache" / "paperdemo").glob("closure-*.npz"))) for d in ("out", "inline")]
+    assert int(got[0]["pid"]) == pid and np.array_equal(got[0]["draw"], got[1]["draw"])
+    assert "mse-kf" in two_workers.used  # the other task still ran on a worker
+
+
+@pytest.mark.slow
+def test_a_worker_that_dies_fails_its_task_by_name_and_the_finished_tasks_are_kept(tmp_path, installed_host,
+                                                                                   monkeypatch):
+    """The ``sir`` task blocks in its worker (the demo task's hook) until the test kills the worker, once the two
+    other tasks are cached: no wall clock decides anything, however loaded the machine.  One worker: it takes the
+    tasks in order (kf, ekf, then sir, which blocks)."""
+    monkeypatch.setenv("WORKBENCH_TEST_SLOW_TASK", "sir")
+    cache = tmp_path / "out" / "cache" / "paperdemo"
+    pool = LocalProcesses(installed_host, 1)
+    killed = []
+
+    def kill_when_two_are_cached():
+        while len(list(cache.glob("*.npz"))) < 2:
+            time.sleep(0.05)
+        for proc in list(pool._pool._processes.values()):
+            os.kill(proc.pid, signal.SIGKILL)
+            killed.append(proc.pid)
+
+    watcher = threading.Thread(target=kill_when_two_are_cached, daemon=True)
+    watcher.start()
+    try:
+        outcome = run_recipe(demo_plugin.RECIPE, installed_host, tmp_path / "out", progress=False, executor=pool,
+                             filters="+sir")
+    finally:
+        pool.close()
+    watcher.join(timeout=60)
+    assert killed
+    status = {t["key"]: t["error"] for t in outcome.tasks}
+    assert status["mse-kf"] == "" and status["mse-ekf"] == ""
+    assert "the worker process running it died" in status["mse-sir"]
+    assert any("mse-sir" in e and "died" in e for e in outcome.errors)
+    assert sorted(p.name.split("-")[1] for p in cache.glob("*.npz")) == ["ekf", "kf"]
+    # the next report into the folder reuses the finished tasks and runs only the lost one
+    monkeypatch.delenv("WORKBENCH_TEST_SLOW_TASK")
+    outcome = run_recipe(demo_plugin.RECIPE, installed_host, tmp_path / "out", progress=False, filters="+sir")
+    assert {t["key"]: t["cached"] for t in outcome.tasks} == {"mse-kf": True, "mse-ekf": True, "mse-sir": False}
+    assert not outcome.errors
+
+
+def _task(key):
+    return Task(key, {}, demo_plugin.always_fails)
+
+
+def test_longest_first_puts_unknown_tasks_first_then_the_longest_keeping_the_declared_order_in_ties():
+    tasks = [_task(k) for k in ("a", "b", "c", "d", "e", "f")]
+    seconds = {"a": 1.0, "b": 30.0, "d": 30.0, "e": 5.0}  # c and f never computed here
+    # written out by hand: the unknown ones in declared order, then 30 (b before d), 5, 1
+    assert [t.key for t in longest_first(tasks, seconds)] == ["c", "f", "b", "d", "e", "a"]
+    assert [t.key for t in longest_first(tasks, {})] == ["a", "b", "c", "d", "e", "f"]
+
+
+class _Recording:
+    """An executor that records the order it is handed the tasks in (and runs them in this process)."""
+
+    def __init__(self, host):
+        self.inner, self.order = InProcess(host), []
+        self.used = self.inner.used
+
+    def execute(self, tasks, seed, arch, on_task=None):
+        tasks = list(tasks)
+        self.order.append([t.key for t in tasks])
+        yield from self.inner.execute(tasks, seed, arch, on_task)
+
+
+def _rerun_with_times(out, host, saved, times) -> list:
+    """Run the demo recipe again into ``out`` (its cache emptied) after a report whose time table gave ``times``;
+    the order the executor was handed the tasks in."""
+    for entry in saved["tasks"]:
+        if entry["key"] in times:
+            entry["seconds"] = times[entry["key"]]
+    (out / "paperdemo" / "outcome.json").write_text(json.dumps(saved))
+    for f in (out / "cache" / "paperdemo").glob("*.npz"):
+        f.unlink()
+    recording = _Recording(host)
+    run_recipe(demo_plugin.RECIPE, host, out, progress=False, filters="+sir", executor=recording)
+    return recording.order
+
+
+def test_workers_get_the_tasks_longest_first_by_the_last_report_s_time_table(tmp_path, demo_host):
+    out = tmp_path / "out"
+    run_recipe(demo_plugin.RECIPE, demo_host, out, progress=False, filters="+sir")  # in process: declared order
+    saved = json.loads((out / "paperdemo" / "outcome.json").read_text())
+    assert [t["key"] for t in saved["tasks"]] == ["mse-kf", "mse-ekf", "mse-sir"]
+    saved["tasks"].append({"key": "confirmation/mse-kf", "seconds": 2.0, "cached": False, "error": ""})
+    saved["tasks"].append({"key": "mse-old", "seconds": 7.0, "cached": True, "error": ""})  # cached: no time
+    assert _rerun_with_times(out, demo_host, saved, {"mse-kf": 1.0, "mse-ekf": 9.0, "mse-sir": 5.0}) == [
+        ["mse-ekf", "mse-sir", "mse-kf"]]
+    saved = json.loads((out / "paperdemo" / "outcome.json").read_text())
+    saved["tasks"].append({"key": "confirmation/mse-kf", "seconds": 2.0, "cached": False, "error": ""})
+    (out / "paperdemo" / "outcome.json").write_text(json.dumps(saved))
+    assert previous_seconds(out, "demo", "confirmation/") == {"mse-kf": 2.0}
+    assert _rerun_with_times(out, demo_host, saved, {"mse-kf": 3.0, "mse-ekf": 2.0, "mse-sir": 4.0}) == [
+        ["mse-sir", "mse-kf", "mse-ekf"]]
+    assert previous_seconds(out / "nowhere", "demo") == {}
+
+
+class HereOnly:
+    """A plugin registered in this process only (no entry point names it): the demo recipe as paper ``here``."""
+
+    @hookimpl
+    def workbench_report_recipes(self):
+        return [replace(demo_plugin.RECIPE, paper="here")]
+
+
+def test_a_host_with_plugins_registered_in_this_process_only_is_refused_by_name(demo_host):
+    from workbench.plugins import load_host
+
+    pool = LocalProcesses(load_host(extra_plugins=[("registered-here-only", HereOnly())]), 2)
+    with pytest.raises(WorkerHostMismatch, match="would not load"):
+        pool.check_host()
+    with pytest.raises(InputError, match="jobs: a whole number"):
+        LocalProcesses(demo_host, 0)
+
+
+def _one_error_line(capsys, *parts):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("workbench: error: "), err
+    for part in parts:
+        assert part in err[0]
+
+
+def test_the_command_line_jobs_option(tmp_path, capsys, monkeypatch):
+    import workbench.cli as cli
+    from workbench.plugins import load_host
+
+    here_only = load_host(extra_plugins=[("registered-here-only", HereOnly())])
+
+    assert main(["report", "--jobs", "2", "--workers", "2", "--out", str(tmp_path / "a")]) == EXIT["input"]
+    _one_error_line(capsys, "--jobs 2 and --workers", "not both")
+    with pytest.raises(SystemExit):
+        main(["report", "--jobs", "0"])
+    assert "expected a whole number >= 1, got 0" in capsys.readouterr().err
+    # a host with a plugin registered in this process only: --jobs 2 is refused by name, before any paper runs ...
+    monkeypatch.setattr(cli, "load_host", lambda block=(): here_only)
+    code = main(["report", "--paper", "here", "--jobs", "2", "--out", str(tmp_path / "b"), "--no-progress"])
+    assert code == EXIT["input"]
+    _one_error_line(capsys, "--jobs 2:", "would not load", "--jobs 1")
+    assert not (tmp_path / "b" / "paperhere").exists()
+    # ... and the default (no --jobs) runs its tasks in this process, whatever the machine's cores
+    assert main(["report", "--paper", "here", "--out", str(tmp_path / "c"), "--no-progress"]) == 0
+    assert (tmp_path / "c" / "paperhere" / "fig1.png").exists()
