@@ -79,8 +79,8 @@ def test_a_non_positive_definite_innovation_falls_back_to_the_numpy_path():
     model = linear_measurement(np.eye(2), np.eye(2))
     fast = kalman_core._compiled()
     out_x, out_p = np.empty((1, 2)), np.empty((1, 2, 2))
-    assert not fast.update_items(g.mean, g.cov, np.ones((1, 2)), np.eye(2)[None], np.eye(2)[None],
-                                 np.ones(1, bool), out_x, out_p)
+    assert not fast.update_items(g.mean, g.cov, np.ones((1, 2)), np.zeros((1, 2)), np.zeros(2, bool), np.eye(2)[None],
+                                 np.eye(2)[None], np.ones(1, bool), out_x, out_p)
     result = kalman_core.kalman_update(g, Scan.single(np.ones((1, 2))), model, np.eye(2)[None], "kf")
     assert kalman_core.last_backend() == "numpy"  # the NumPy path's general solve took over
     assert np.all(np.isfinite(result.mean))

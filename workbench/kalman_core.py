@@ -140,16 +140,38 @@ def _compiled():
     return _LOOPS[0]
 
 
+def _present_any(present: np.ndarray) -> bool:
+    """``present.any()``, without NumPy's reduction machinery for one item (a tenth of the time at B = 1)."""
+    return bool(present[0]) if present.shape[0] == 1 else bool(present.any())
+
+
+_ANGLES: dict = {}
+
+
+def _angle_mask(model: MeasurementModel) -> np.ndarray:
+    """``model.angle_mask``, one array per declared ``angular`` tuple (read, never written, by the loops)."""
+    mask = _ANGLES.get(model.angular)
+    if mask is None:
+        mask = _ANGLES.setdefault(model.angular, np.array(model.angular, dtype=bool))
+    return mask
+
+
 def linear_predict(state: Gaussian, motion: MotionModel, who: str = "kf") -> Gaussian:
     """One step of the linear motion model for every item of the batch; :class:`~workbench.types.InputError`
     naming the filter ``who`` and the model when the model overrides ``f`` (it is not linear)."""
     require_linear(motion, who)
-    if state.batch < SMALL_BATCH and (fast := _compiled()) is not None:
-        mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
-        fast.predict_items(state.mean, state.cov, np.ascontiguousarray(motion.F, dtype=float),
-                           np.ascontiguousarray(motion.Q, dtype=float), mean, cov)
-        _RECORD.note("numba")
-        return Gaussian.trusted(mean, cov)
+    return _linear_predict(state, motion)
+
+
+def _linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
+    """:func:`linear_predict` of a model known to be linear."""
+    if state.mean.shape[0] < SMALL_BATCH and (fast := _compiled()) is not None:
+        mean, cov = np.empty(state.mean.shape), np.empty(state.cov.shape)
+        if fast.predict_items(state.mean, state.cov, np.ascontiguousarray(motion.F, dtype=float),
+                              np.ascontiguousarray(motion.Q, dtype=float), mean, cov):
+            _RECORD.note("numba")
+            return Gaussian.kernel_output(mean, cov)  # float, shapes of `state`, every number checked finite
+        # a number that is not finite: the NumPy code below computes it again and Gaussian.trusted names it
     _RECORD.note("numpy")
     mean = state.mean @ motion.F.T  # x- = F x
     cov = symmetrise(motion.F @ state.cov @ motion.F.T + motion.Q)  # P- = F P F^T + Q
@@ -161,7 +183,7 @@ def extended_predict(state: Gaussian, motion: MotionModel, who: str = "ekf") -> 
     overrides ``f``, ``x- = f(x)``, ``P- = J P J^T + Q`` with the model's ``jacobian`` at ``x``.  A nonlinear
     model without a Jacobian is refused naming the filter ``who`` and the model."""
     if motion.linear:
-        return linear_predict(state, motion, who)
+        return _linear_predict(state, motion)  # linear_predict, whose one check this is
     mean, J = linearised(state.mean, motion, who)
     _RECORD.note("numpy")
     cov = symmetrise(J @ state.cov @ np.swapaxes(J, -1, -2) + motion.Q)  # P- = J P J^T + Q
@@ -240,7 +262,12 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
     second an :class:`Innovations`: ``y = wrap(z - h(x-))``, ``S``, NIS and ``log N(y; 0, S)`` of the same update.
     """
     z, present = single_measurement(scan, who)
-    if not present.any():
+    B, n = state.mean.shape
+    H = np.asarray(H, dtype=float)
+    if H.shape != (B, model.dim, n):  # the compiled loops index by it; NumPy would broadcast or fail unnamed
+        raise InputError(f"filter {who!r}: measurement model {model.name!r} gave H (its Jacobian) of shape "
+                         f"{H.shape} for states {(B, n)}; expected {(B, model.dim, n)}")
+    if not _present_any(present):
         return (state, Innovations.absent(state.batch, model.dim)) if innovations else state
     R = measurement_covariance(scan, model, present)
     if innovations:
@@ -248,15 +275,25 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
         Ht = np.swapaxes(H, -1, -2)
         S = symmetrise(H @ state.cov @ Ht + R)
         return kalman_update(state, scan, model, H, who), gaussian_innovations(nu, S, present)
-    if state.batch < SMALL_BATCH and (fast := _compiled()) is not None:
-        nu = model.residual(z, model.h(state.mean))  # wrap(z - h(x-))
-        mean, cov = np.empty_like(state.mean), np.empty_like(state.cov)
-        Rb = R if R.ndim == 3 else (R[None] if state.batch == 1 else np.broadcast_to(R, (state.batch,) + R.shape))
-        if fast.update_items(state.mean, state.cov, np.ascontiguousarray(nu, dtype=float),
-                             np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(Rb, dtype=float), present,
-                             mean, cov):
-            _RECORD.note("numba")
-            return Gaussian.trusted(mean, cov)
+    if B < SMALL_BATCH and (fast := _compiled()) is not None:
+        m = z.shape[1]
+        hx = np.ascontiguousarray(model.h(state.mean), dtype=float)
+        angular = _angle_mask(model)
+        if type(model).residual is not MeasurementModel.residual or hx.shape != (B, m) or angular.shape != (m,):
+            # the model's own residual (or an h of another shape, which the NumPy code then reports): nu itself,
+            # as z with h = 0 and no angle (z - 0 is z exactly)
+            z = np.ascontiguousarray(model.residual(z, hx), dtype=float)
+            hx, angular = np.zeros((B, m)), np.zeros(m, dtype=bool)
+        Rb = np.ascontiguousarray(R if R.ndim == 3 else R[None] if B == 1 else np.broadcast_to(R, (B, *R.shape)),
+                                  dtype=float)
+        Hc = np.ascontiguousarray(H)
+        if z.shape == (B, m) and Hc.shape == (B, m, n) and Rb.shape == (B, m, m):  # the loops index by these
+            mean, cov = np.empty(state.mean.shape), np.empty(state.cov.shape)
+            if fast.update_items(state.mean, state.cov, np.ascontiguousarray(z, dtype=float), hx, angular, Hc, Rb,
+                                 present, mean, cov):
+                _RECORD.note("numba")
+                return Gaussian.kernel_output(mean, cov)  # shapes of `state`, every number checked finite
+        z, _ = single_measurement(scan, who)  # declined: the NumPy code computes it again and names any problem
     _RECORD.note("numpy")
     P = state.cov
     S = symmetrise(H @ P @ np.swapaxes(H, -1, -2) + R)  # S = H P- H^T + R

@@ -2,17 +2,21 @@
 
 At one item, the batched NumPy code of :mod:`workbench.kalman_core` spends its time in about forty tiny NumPy
 calls; these loops do the same algebra item by item in one compiled call.  The NumPy code is the reference they
-are held to (``tests/test_kalman_numba.py``)::
+are held to (``tests/test_kalman_numba.py``, ``tests/test_one_track.py``)::
 
     predict   x- = F x,  P- = F P F^T + Q                       (symmetrised)
-    update    S = H P- H^T + R,  S = L L^T
+    update    nu = z - h(x-), angular components wrapped to (-pi, pi]   (the model's residual)
+              S = H P- H^T + R,  S = L L^T
               K = P- H^T S^-1          (two triangular solves with L)
-              x = x- + K nu            (nu: the model's wrapped residual, computed by the caller)
+              x = x- + K nu
               P = (I - K H) P- (I - K H)^T + K R K^T   (Joseph form, symmetrised)
 
-``R`` is ``(B, m, m)`` (the model's broadcast, or each item's own).  An item whose ``S`` is not numerically
-positive definite makes the call return ``False`` and the caller takes the NumPy path (its solve falls back to
-a general one).  Serial on purpose: these are for small batches, where a thread pool costs more than the work.
+``R`` is ``(B, m, m)`` (the model's broadcast, or each item's own).  Both loops check every number they write
+finite and return ``False`` where one is not (an overflow, a NaN from the model's ``h`` or Jacobian), as the
+update does for an item whose ``S`` is not numerically positive definite: the caller then takes the NumPy path,
+which names the problem or (for ``S``) falls back to a general solve.  So the caller may wrap what they return
+without reading it again (:meth:`workbench.types.Gaussian.kernel_output`).  Serial on purpose: these are for
+small batches, where a thread pool costs more than the work.
 """
 
 import math
@@ -21,11 +25,31 @@ import numba
 import numpy as np
 
 jit = numba.njit(error_model="numpy", cache=True)
+TWO_PI = 2.0 * math.pi
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _wrap(a):
+    # wrap to (-pi, pi], the formula of workbench.linalg.wrap_angle: a - 2 pi ceil((a - pi) / 2 pi)
+    return a - TWO_PI * math.ceil((a - math.pi) * (1.0 / TWO_PI))
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _finite(x_out, P_out, b):
+    """Whether item ``b`` of the outputs is finite (NaN and inf make the sum NaN or inf)."""
+    s = 0.0
+    for i in range(x_out.shape[1]):
+        s += x_out[b, i] * 0.0
+        for j in range(x_out.shape[1]):
+            s += P_out[b, i, j] * 0.0
+    return s == 0.0
 
 
 @jit
 def predict_items(x, P, F, Q, x_out, P_out):
+    """``x_out, P_out`` = the prediction of every item; ``False`` if some number written is not finite."""
     B, n = x.shape
+    ok = True
     FP = np.empty((n, n))
     for b in range(B):
         for i in range(n):
@@ -50,12 +74,18 @@ def predict_items(x, P, F, Q, x_out, P_out):
                 m = 0.5 * (P_out[b, i, j] + P_out[b, j, i])
                 P_out[b, i, j] = m
                 P_out[b, j, i] = m
+        ok = ok and _finite(x_out, P_out, b)
+    return ok
 
 
 @jit
-def update_items(x, P, nu, H, R, present, x_out, P_out):
+def update_items(x, P, z, hx, angular, H, R, present, x_out, P_out):
+    """``x_out, P_out`` = the update of every present item with ``nu = z - hx`` (wrapped where ``angular``);
+    absent items are copied.  ``False`` if some ``S`` is not positive definite or some number written is not
+    finite (then nothing is to be used)."""
     B, n = x.shape
-    m = nu.shape[1]
+    m = z.shape[1]
+    nu = np.empty(m)
     PHt = np.empty((n, m))
     S = np.empty((m, m))
     L = np.empty((m, m))
@@ -67,7 +97,12 @@ def update_items(x, P, nu, H, R, present, x_out, P_out):
         if not present[b]:
             x_out[b] = x[b]
             P_out[b] = P[b]
+            if not _finite(x_out, P_out, b):
+                return False
             continue
+        for i in range(m):  # nu = z - h(x-), angles wrapped
+            d = z[b, i] - hx[b, i]
+            nu[i] = _wrap(d) if angular[i] else d
         for i in range(n):  # P H^T
             for j in range(m):
                 s = 0.0
@@ -111,7 +146,7 @@ def update_items(x, P, nu, H, R, present, x_out, P_out):
         for i in range(n):  # x = x- + K nu
             s = x[b, i]
             for j in range(m):
-                s += K[i, j] * nu[b, j]
+                s += K[i, j] * nu[j]
             x_out[b, i] = s
         for i in range(n):  # A = I - K H
             for j in range(n):
@@ -140,4 +175,6 @@ def update_items(x, P, nu, H, R, present, x_out, P_out):
                     s += KR[i, k] * K[j, k]
                 P_out[b, i, j] = s
                 P_out[b, j, i] = s
+        if not _finite(x_out, P_out, b):
+            return False
     return True

@@ -164,6 +164,14 @@ class SigmaPointState:
     batch_fields = ("mean", "cov")
 
 
+def _full_state(mean: np.ndarray, cov: np.ndarray, jitters: int) -> SigmaPointState:
+    """``SigmaPointState(mean, cov, jitters)`` without the frozen dataclass's ``__init__`` (which sets each field
+    through ``object.__setattr__``, a third of the time): the compiled paths build one per step."""
+    out = object.__new__(SigmaPointState)
+    out.__dict__.update(mean=mean, cov=cov, jitters=jitters)
+    return out
+
+
 def _init_full(prior: Gaussian, rng=None) -> SigmaPointState:
     return SigmaPointState(prior.mean, prior.cov)
 
@@ -200,14 +208,30 @@ def backend_counts() -> dict:
     return _RECORD.counts()
 
 
+_LOOPS: list = []
+
+
 def _compiled(weights: SigmaWeights):
     """The Numba loops of the UKF (:mod:`workbench_filters.sigma_point.sigma_numba`) where the backend policy picks Numba
     (:func:`workbench.kernels.backend.runs_numba`) and the weights are unscented, else ``None``."""
     if weights.kind != "unscented" or not runs_numba():
         return None
-    from . import sigma_numba
+    if not _LOOPS:  # imported once: an import statement per call costs a tenth of a one-track step's Python
+        from . import sigma_numba
 
-    return sigma_numba
+        _LOOPS.append(sigma_numba)
+    return _LOOPS[0]
+
+
+_ANGLES: dict = {}
+
+
+def _angle_mask(model: MeasurementModel) -> np.ndarray:
+    """``model.angle_mask``, one array per declared ``angular`` tuple (read, never written, by the loops)."""
+    mask = _ANGLES.get(model.angular)
+    if mask is None:
+        mask = _ANGLES.setdefault(model.angular, np.array(model.angular, dtype=bool))
+    return mask
 
 
 def _compiled_points(fast, x: np.ndarray, P: np.ndarray, spread: float) -> np.ndarray | None:
@@ -224,13 +248,20 @@ def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weig
     x, P = state.mean, state.cov
     n = x.shape[1]
     fast = _compiled(weights)
+    if fast is not None and motion.linear:  # f(X) = X F^T, declared: points, f and moments in one compiled call
+        mean, cov = np.empty(x.shape), np.empty(P.shape)
+        if fast.linear_predict(x, P, np.ascontiguousarray(motion.F, dtype=float), float(weights.spread), weights.mean,
+                               weights.cov, np.ascontiguousarray(motion.Q, dtype=float), mean, cov):
+            _RECORD.note("numba")
+            return _full_state(mean, cov, state.jitters)
+        fast = None  # some P not positive definite: the NumPy code below adds and counts jitter
     X = _compiled_points(fast, x, P, weights.spread)
     if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
         Xf = np.ascontiguousarray(motion.f(X))
-        mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
+        mean, cov = np.empty(x.shape), np.empty(P.shape)
         fast.predicted_moments(Xf, weights.mean, weights.cov, np.asarray(motion.Q, dtype=float), mean, cov)
         _RECORD.note("numba")
-        return SigmaPointState(mean, cov, state.jitters)
+        return _full_state(mean, cov, state.jitters)
     _RECORD.note("numpy")
     S, jit = _cholesky(P)
     Xf = motion.f(sigma_points(x, S, weights.spread))  # X* = f(X)
@@ -248,20 +279,24 @@ def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weig
 def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rng=None, *,
                  weights: SigmaWeights, who: str) -> SigmaPointState:
     z, present = single_measurement(scan, who)
-    if not present.any():
+    if not (present[0] if present.shape[0] == 1 else present.any()):  # any(), a tenth of the time at B = 1
         return state
-    require_finite(z, present, who)
     x, P = state.mean, state.cov
-    n = x.shape[1]
+    B, n = x.shape
     fast = _compiled(weights)
     X = _compiled_points(fast, x, P, weights.spread)
     if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
         Y = np.ascontiguousarray(model.h(X), dtype=float)
-        mean, cov = np.empty_like(x, dtype=float), np.empty_like(P, dtype=float)
-        if fast.unscented_update(x, P, X, Y, weights.mean, weights.cov, model.angle_mask, model.R,
-                                        np.ascontiguousarray(z, dtype=float), present, mean, cov):
-            _RECORD.note("numba")
-            return SigmaPointState(mean, cov, state.jitters)
+        m = z.shape[1]
+        angular = _angle_mask(model)
+        if Y.shape == (B, 2 * n + 1, m) and model.R.shape == (m, m) and angular.shape == (m,):  # the loop's indices
+            mean, cov = np.empty(x.shape), np.empty(P.shape)
+            # declined (False) for a Pyy that is not positive definite or a present z that is not finite
+            if fast.unscented_update(x, P, X, Y, weights.mean, weights.cov, angular, model.R,
+                                     np.ascontiguousarray(z, dtype=float), present, mean, cov):
+                _RECORD.note("numba")
+                return _full_state(mean, cov, state.jitters)
+    require_finite(z, present, who)
     _RECORD.note("numpy")
     S, jit = _cholesky(P)
     X = sigma_points(x, S, weights.spread)  # redraw from (x-, P-)

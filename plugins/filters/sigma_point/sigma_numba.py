@@ -6,11 +6,14 @@ per step.  The motion's ``f`` and the sensor's ``h`` stay NumPy calls of the mod
 
 - :func:`chol_sigma`: ``S = chol(P)`` and the points ``[x, x + c S_j, x - c S_j]``;
 - :func:`predicted_moments`: ``x- = sum Wm X*``, ``P- = sum Wc (X* - x-)(.)^T + Q``;
+- :func:`linear_predict`: the three steps of a predict in one call for a :attr:`~workbench.models.MotionModel.linear`
+  motion (``X* = X F^T``, the model's declared ``f``), which needs no Python call between them;
 - :func:`unscented_update`: the angle-aware ``y^``, ``Pxy``, ``Pyy = sum Wc dY dY^T + R``,
   ``K = Pxy Pyy^-1`` (Cholesky solves), ``x = x- + K wrap(z - y^)``, ``P = P- - (K L)(K L)^T``.
 
 A matrix that is not numerically positive definite makes the call return ``False``; the caller then
-takes the NumPy path, which adds and counts jitter.
+takes the NumPy path, which adds and counts jitter.  So does a present measurement that is not finite: the NumPy
+path refuses it by name (:func:`workbench.filtering.require_finite`).
 
 Each loop is compiled twice, threaded and serial (``prange`` is ``range`` there), and called serial below
 :data:`PARALLEL_MIN` items: for one track, waking the thread pool costs more than the work (milliseconds on a
@@ -111,6 +114,48 @@ def _predicted_moments(Xf, wm, wc, Q, mean, cov):
                 cov[b, c, r] = v
 
 
+def _linear_predict(x, P, F, spread, wm, wc, Q, mean, cov):
+    """:func:`_chol_sigma`, ``X* = X F^T`` and :func:`_predicted_moments` per item, without the ``(B, 2n + 1, n)``
+    points between them.  Returns whether every ``P[b]`` was positive definite."""
+    B, n = x.shape
+    S = 2 * n + 1
+    ok = np.ones(B, dtype=np.bool_)
+    for b in numba.prange(B):
+        L = np.zeros((n, n))
+        if not cholesky_into(P[b], L):
+            ok[b] = False
+            continue
+        X = np.empty((S, n))
+        for r in range(n):
+            X[0, r] = x[b, r]
+        for j in range(n):
+            for r in range(n):
+                step = spread * L[r, j]  # column j of the factor
+                X[1 + j, r] = x[b, r] + step
+                X[1 + n + j, r] = x[b, r] - step
+        Xf = np.empty((S, n))
+        for s in range(S):  # X* = f(X) = X F^T
+            for r in range(n):
+                acc = 0.0
+                for k in range(n):
+                    acc += X[s, k] * F[r, k]
+                Xf[s, r] = acc
+        for r in range(n):
+            acc = 0.0
+            for s in range(S):
+                acc += wm[s] * Xf[s, r]
+            mean[b, r] = acc
+        for r in range(n):
+            for c in range(r + 1):
+                acc = 0.0
+                for s in range(S):
+                    acc += wc[s] * (Xf[s, r] - mean[b, r]) * (Xf[s, c] - mean[b, c])
+                v = acc + 0.5 * (Q[r, c] + Q[c, r])
+                cov[b, r, c] = v
+                cov[b, c, r] = v
+    return ok.all()
+
+
 def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
     """The UKF update of every present item (an absent one keeps ``x``, ``P``); ``False`` if some ``Pyy``
     was not positive definite (then nothing is to be used)."""
@@ -123,6 +168,12 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
                 mean[b, r] = x[b, r]
                 for c in range(n):
                     cov[b, r, c] = P[b, r, c]
+            continue
+        finite = True
+        for k in range(m):
+            finite = finite and math.isfinite(z[b, k])
+        if not finite:  # the NumPy path names it
+            ok[b] = False
             continue
         # y^ = sum Wm Y; angular components as y_0 + sum Wm wrap(y_s - y_0), wrapped
         y_hat = np.empty(m)
@@ -206,4 +257,5 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
 
 chol_sigma = _dispatch(_chol_sigma, "chol_sigma")
 predicted_moments = _dispatch(_predicted_moments, "predicted_moments")
+linear_predict = _dispatch(_linear_predict, "linear_predict")
 unscented_update = _dispatch(_unscented_update, "unscented_update")
