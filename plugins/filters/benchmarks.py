@@ -705,7 +705,10 @@ def bench_motion(quick: bool = False) -> dict:
     pf_problem = ct_problem(1, pf_steps)
     pf, pf_rmse = _problem_runner(sir_every_step(host, N), pf_problem, 0, "motion-sir")
     # the step's one compiled pass (turn, noise, likelihood), as the model declares it and the policy runs Numba
-    fused = out["pf_backend"] == "numba" and pf_problem[3].fused_particle_propagator("range-bearing") is not None
+    from workbench.models import coordinated_turn_rate
+
+    ct_motion = coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)  # the model of ct_problem
+    fused = out["pf_backend"] == "numba" and ct_motion.fused_particle_propagator("range-bearing") is not None
     key = "sir_ct_speedup_vs_stonesoup"
     out[f"target_{key}"] = f">= {PF_CT_TARGET:g}"
     if version is not None:
