@@ -19,6 +19,17 @@ def _reports_save_png_only():
         yield
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _reports_run_in_process():
+    """The suite's reports run their tasks in the test's own process (``WORKBENCH_JOBS=1``, unless the environment
+    already sets it): the test files already run side by side on the cores (pytest-xdist), and a pool of worker
+    processes per report would start a fresh interpreter per core for each report.  The worker pool has tests of its
+    own (tests/test_report_jobs.py, which ask for it by name with ``--jobs`` or an executor)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("WORKBENCH_JOBS", os.environ.get("WORKBENCH_JOBS", "1"))
+        yield
+
+
 @pytest.fixture
 def demo_host():
     """A host with the installed plugins plus the demo fixture plugin (sensor + recipe)."""

@@ -241,6 +241,7 @@ def test_the_command_line_jobs_option(tmp_path, capsys, monkeypatch):
     from workbench.plugins import load_host
 
     here_only = load_host(extra_plugins=[("registered-here-only", HereOnly())])
+    monkeypatch.delenv("WORKBENCH_JOBS", raising=False)  # the default of a plain command line (tests/conftest.py sets 1)
 
     assert main(["report", "--jobs", "2", "--workers", "2", "--out", str(tmp_path / "a")]) == EXIT["input"]
     _one_error_line(capsys, "--jobs 2 and --workers", "not both")
@@ -256,3 +257,24 @@ def test_the_command_line_jobs_option(tmp_path, capsys, monkeypatch):
     # ... and the default (no --jobs) runs its tasks in this process, whatever the machine's cores
     assert main(["report", "--paper", "here", "--out", str(tmp_path / "c"), "--no-progress"]) == 0
     assert (tmp_path / "c" / "paperhere" / "fig1.png").exists()
+
+
+def test_the_jobs_variable_sets_the_default_and_a_bad_value_is_refused_by_name(tmp_path, capsys, monkeypatch):
+    import workbench.report.engine as engine
+    from workbench.cli import JOBS_VARIABLE, _default_jobs
+
+    monkeypatch.delenv(JOBS_VARIABLE, raising=False)
+    assert _default_jobs(3) == 3 and _default_jobs(64) == 8
+    monkeypatch.setenv(JOBS_VARIABLE, " 5 ")
+    assert _default_jobs(2) == 5
+    for bad in ("0", "-2", "two", "1.5"):
+        monkeypatch.setenv(JOBS_VARIABLE, bad)
+        assert main(["report", "--paper", "003", "--out", str(tmp_path / bad), "--no-progress"]) == EXIT["input"]
+        _one_error_line(capsys, f"{JOBS_VARIABLE}={bad!r}", "whole number of worker processes >= 1")
+        assert not (tmp_path / bad).exists()
+    # WORKBENCH_JOBS=1: no worker pool is started; --jobs still overrides it (refused here with --workers, by name)
+    started = []
+    monkeypatch.setattr(engine, "LocalProcesses", lambda *a, **k: started.append(a) or pytest.fail("pool started"))
+    monkeypatch.setenv(JOBS_VARIABLE, "1")
+    assert main(["report", "--paper", "here", "--out", str(tmp_path / "one"), "--no-progress"]) == EXIT["input"]
+    assert not started

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import errno
+import os
 import shlex
 import sys
 import traceback
@@ -49,6 +50,24 @@ class PluginFailure(RuntimeError):
 #: ``workbench report``'s default number of worker processes is the usable cores, at most this many (each worker
 #: holds its own plugin host and its tasks' arrays).
 DEFAULT_JOBS_CAP = 8
+#: The environment variable that sets the report's default number of worker processes (``--jobs`` overrides it).
+JOBS_VARIABLE = "WORKBENCH_JOBS"
+
+
+def _default_jobs(cores: int) -> int:
+    """The report's worker processes without ``--jobs``: :data:`JOBS_VARIABLE` where set (a whole number >= 1,
+    else refused by name), else the usable cores up to :data:`DEFAULT_JOBS_CAP`."""
+    text = os.environ.get(JOBS_VARIABLE, "").strip()
+    if not text:
+        return min(cores, DEFAULT_JOBS_CAP)
+    try:
+        jobs = int(text)
+    except ValueError:
+        jobs = 0
+    if jobs < 1:
+        raise InputError(f"{JOBS_VARIABLE}={text!r}: expected a whole number of worker processes >= 1 "
+                         "(1: the tasks run one after another in the report's own process)")
+    return jobs
 
 
 def _positive_int(text: str) -> int:
@@ -127,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--workers", type=_positive_int, default=None, metavar="N",
                      help="start a local Dask cluster of N worker processes for the tasks")
     rep.add_argument("--jobs", type=_positive_int, default=None, metavar="N",
-                     help="run the tasks on N local worker processes, bit-identical to one (default: the usable "
+                     help="run the tasks on N local worker processes, bit-identical to one (default: $WORKBENCH_JOBS, else the usable "
                           f"cores, at most {DEFAULT_JOBS_CAP}; --jobs 1 runs them one after another in this process)")
 
     run = sub.add_parser("run", help="run one scenario file: a results file and its plots")
@@ -289,7 +308,7 @@ def cmd_report(args) -> int:
     if not (args.scheduler or args.workers):
         from .report.engine import LocalProcesses, WorkerHostMismatch, usable_cores
 
-        jobs = args.jobs if args.jobs is not None else min(usable_cores(), DEFAULT_JOBS_CAP)
+        jobs = args.jobs if args.jobs is not None else _default_jobs(usable_cores())
         if jobs > 1:
             executor = LocalProcesses(host, jobs, block=args.block)
             try:
