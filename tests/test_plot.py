@@ -400,3 +400,57 @@ def test_workbench_run_on_recorded_data_prints_its_summary_and_draws_nis(tmp_pat
     N = int(n)
     assert (mean, lo, hi) == tuple(f"{v:.3g}" for v in (nis[updated].mean(), chi2.ppf(0.025, 2 * N) / N,
                                                           chi2.ppf(0.975, 2 * N) / N))
+
+
+def test_nis_density_draws_the_histogram_and_the_chi2_density_in_closed_form():
+    edges = np.linspace(0.0, 12.0, 25)
+    samples = wb.generator(20, "plot", "nis-density").chisquare(3, size=4000)
+    density = np.histogram(np.minimum(samples, edges[-1] - 1e-9), edges, density=True)[0]
+    ax = plot.nis_density(_ax(), density, edges, 3, label="kf", color="C1")
+    mid = (edges[1:] + edges[:-1]) / 2
+    np.testing.assert_array_equal(_xy(_one(ax, "nis-density:kf")), np.column_stack([mid, density]))
+    # the chi-square(3) density in closed form: sqrt(x) exp(-x/2) / sqrt(2 pi)
+    ref = _one(ax, "chi2-density:3")
+    np.testing.assert_array_equal(ref.get_xdata(), mid)
+    np.testing.assert_allclose(ref.get_ydata(), np.sqrt(mid) * np.exp(-mid / 2) / np.sqrt(2 * np.pi), rtol=1e-12)
+    assert ref.get_label() == "chi-square, 3 dof"
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("NIS (dimensionless; 3 dof)", "probability density")
+    assert ax.get_yscale() == "log"
+    ax.figure.canvas.draw()
+    labels = [t.get_text() for t in ax.get_yticklabels(minor=False) + ax.get_yticklabels(minor=True)]
+    assert any(labels) and all(_plain(t) for t in labels), labels
+    # a second histogram on the same Axes leaves the reference out
+    plot.nis_density(ax, density / 2, edges, 3, label="other", reference=False)
+    assert len(_lines(ax, "chi2-density")) == 1 and len(_lines(ax, "nis-density")) == 2
+    with pytest.raises(InputError, match=r"plot.nis_density: density must have one value per bin, shape \(24,\)"):
+        plot.nis_density(_ax(), density[:-1], edges, 3)
+    with pytest.raises(InputError, match="plot.nis_density: edges must be finite and increasing"):
+        plot.nis_density(_ax(), density, edges[::-1], 3)
+    with pytest.raises(InputError, match="plot.nis_density: dof must be a positive integer"):
+        plot.nis_density(_ax(), density, edges, 0)
+
+
+def test_error_over_time_draws_the_given_curve_with_its_quantity_and_unit():
+    values = wb.generator(21, "plot", "error").random(8) * 50 + 0.5
+    times = np.arange(8) * 0.25 + 1.0
+    ax = plot.error_over_time(_ax(), values, times=times, quantity="position MSE", unit="m^2", label="ukf",
+                              linestyle="--")
+    line = _one(ax, "error:ukf")
+    np.testing.assert_array_equal(_xy(line), np.column_stack([times, values]))
+    assert line.get_linestyle() == "--" and line.get_label() == "ukf"
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("time (s)", "position MSE (m^2)")
+    assert ax.get_yscale() == "log"
+    ax.figure.canvas.draw()
+    labels = [t.get_text() for t in ax.get_yticklabels(minor=False) + ax.get_yticklabels(minor=True)]
+    assert any(labels) and all(_plain(t) for t in labels), labels
+    # without times: the step index; without a unit: said so; a linear axis on request
+    ax = plot.error_over_time(_ax(), values, log=False)
+    np.testing.assert_array_equal(_one(ax, "error:estimate").get_xdata(), np.arange(8))
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("scan", "position RMSE (unit not declared)")
+    assert ax.get_yscale() == "linear"
+    with pytest.raises(InputError, match=r"plot.error_over_time: values must be one curve \(T,\)"):
+        plot.error_over_time(_ax(), values[None])
+    with pytest.raises(InputError, match="plot.error_over_time: values must be >= 0"):
+        plot.error_over_time(_ax(), -values)
+    with pytest.raises(InputError, match=r"plot.error_over_time: times must have shape \(8,\)"):
+        plot.error_over_time(_ax(), values, times=times[:-1])

@@ -15,7 +15,9 @@ unit the label says so (``"state component 2"``); nothing is guessed from an arr
   covariance ellipses;
 - ``ellipses``: ``n_sigma`` covariance ellipses of the 2x2 position block at chosen steps;
 - ``nees``, ``nis``: the mean over runs per step with the two-sided chi-square band of a run-average;
-- ``rmse``: position RMSE over runs per step; ``gospa``: GOSPA per scan; ``track_counts``: confirmed tracks per
+- ``nis_density``: a histogram density of NIS values (computed by the caller) against the chi-square density;
+- ``rmse``: position RMSE over runs per step; ``error_over_time``: an error measure per step that the caller
+  computed (one method's MSE or RMSE curve); ``gospa``: GOSPA per scan; ``track_counts``: confirmed tracks per
   scan;
 - ``log_axis``: a logarithmic axis with plain tick labels (``20``, not ``2x10^1``).
 
@@ -40,8 +42,9 @@ import numpy as np
 
 from .types import CLUTTER, InputError
 
-__all__ = ["truth", "detections", "tracks", "estimate", "ellipses", "nees", "nis", "rmse", "gospa",
-           "track_counts", "log_axis", "plain_number", "state_label", "ellipse_vertices", "chi2_band", "LINESTYLES"]
+__all__ = ["truth", "detections", "tracks", "estimate", "ellipses", "nees", "nis", "nis_density", "rmse",
+           "error_over_time", "gospa", "track_counts", "log_axis", "plain_number", "state_label",
+           "ellipse_vertices", "chi2_band", "LINESTYLES"]
 
 #: The line styles given to the 1st, 2nd, ... filter or tracker drawn on one Axes (with colours ``C0``,
 #: ``C1``, ...), so that one never hides another.
@@ -500,6 +503,91 @@ def nis(ax, values, dof: int | None = None, runs: int | None = None, times=None,
     if dof is None:
         raise InputError("plot.nis: dof (the measurement dimension) is needed with an array of NIS values")
     return _consistency("nis", ax, values, dof, runs, times, confidence, label, color, log)
+
+
+def nis_density(ax, density, edges, dof: int, label: str = "NIS", color: str | None = None, linestyle: str = "-",
+                reference: bool = True, log: bool = True):
+    """Draw a histogram density of NIS values (computed by the caller, e.g. ``numpy.histogram(...,
+    density=True)``) as steps at the bin centres, and the chi-square(``dof``) density ``scipy.stats.chi2.pdf`` at
+    the same centres: the distribution a consistent filter's NIS follows.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes or None
+    density : array (K,)
+        The histogram's density per bin (finite, >= 0).
+    edges : array (K + 1,)
+        The bins' edges, increasing.
+    dof : int
+        The measurement dimension (the chi-square's degrees of freedom).
+    label : str
+        The legend entry and ``gid`` (``"nis-density:<label>"``); the reference is ``"chi2-density:<dof>"``.
+    reference : bool
+        Draw the chi-square density (leave it out for a second histogram on the same Axes).
+    log : bool
+        A logarithmic y axis with plain tick labels (default).
+    """
+    from scipy.stats import chi2
+
+    ax = _axes(ax, "nis_density")
+    density, edges = np.asarray(density, dtype=float), np.asarray(edges, dtype=float)
+    if edges.ndim != 1 or edges.size < 2 or not np.all(np.isfinite(edges)) or np.any(np.diff(edges) <= 0):
+        raise InputError(f"plot.nis_density: edges must be finite and increasing, shape (K + 1,) with K >= 1, got "
+                         f"shape {edges.shape}")
+    if density.shape != (edges.size - 1,):
+        raise InputError(f"plot.nis_density: density must have one value per bin, shape ({edges.size - 1},), got "
+                         f"{density.shape}")
+    if not np.all(np.isfinite(density)) or np.any(density < 0):
+        raise InputError("plot.nis_density: density must be finite and >= 0")
+    if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 1:
+        raise InputError(f"plot.nis_density: dof must be a positive integer (the measurement dimension), got "
+                         f"{dof!r}")
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    color = color or _next_color(ax)
+    ax.step(mid, density, where="mid", ls=linestyle, color=color, lw=1.2, label=label, gid=f"nis-density:{label}")
+    if reference:
+        ax.plot(mid, chi2.pdf(mid, int(dof)), "-", color="k", lw=0.8, label=f"chi-square, {int(dof)} dof",
+                gid=f"chi2-density:{int(dof)}")
+    _set_labels(ax, f"NIS (dimensionless; {int(dof)} dof)", "probability density")
+    if log:
+        log_axis(ax, "y")
+    return ax
+
+
+def error_over_time(ax, values, times=None, quantity: str = "position RMSE", unit: str | None = None,
+                    label: str = "estimate", color: str | None = None, linestyle: str = "-",
+                    linewidth: float = 1.2, log: bool = True):
+    """Draw an error measure per step that the caller computed (one curve per call: a method's position MSE
+    averaged over runs, say), where ``rmse`` would need the truth and the estimates themselves.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes or None
+    values : array (T,)
+        The measure per step (>= 0; NaN or inf leaves a gap).
+    times : array (T,) or None
+        Default: the step index.
+    quantity, unit : str
+        The y label, ``"<quantity> (<unit>)"`` (``"unit not declared"`` without a unit).
+    label : str
+        The legend entry and ``gid`` (``"error:<label>"``).
+    log : bool
+        A logarithmic y axis with plain tick labels (default).
+    """
+    ax = _axes(ax, "error_over_time")
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 1:
+        raise InputError(f"plot.error_over_time: values must be one curve (T,) per call, got {values.shape}")
+    if np.any(values < 0):
+        raise InputError("plot.error_over_time: values must be >= 0 (an error measure; NaN or inf, a diverged "
+                         "run's, leaves a gap)")
+    x, xlabel = _time_axis("error_over_time", times, values.shape[0])
+    color = color or _next_color(ax)
+    ax.plot(x, values, linestyle, color=color, lw=linewidth, label=label, gid=f"error:{label}")
+    _set_labels(ax, xlabel, f"{quantity} ({unit if unit else 'unit not declared'})")
+    if log:
+        log_axis(ax, "y")
+    return ax
 
 
 def rmse(ax, truth, estimate, position_dims: int | None = None, motion=None, times=None, label: str | None = None,

@@ -28,12 +28,14 @@ from typing import Mapping
 
 import numpy as np
 
+from workbench import plot as wbplot
 from workbench.criteria import where_it_holds
 from workbench.filtering import run_filter
 from workbench.metrics import position_sq_error
 from workbench.rng import generator
 from workbench.specs import FigureSpec, RecipeOptions, RecipeSpec, Table, TableSpec, Task, TaskContext
-from workbench.types import InputError, Scans
+from workbench.models import random_walk_velocity
+from workbench.types import InputError, Scans, Truth
 
 from . import judging
 from .judging import CRPF_FILTERS, KALMAN_TYPE, SR_PAIRS  # noqa: F401 - the filter groups the criteria use
@@ -523,15 +525,21 @@ def fig3_data(results) -> dict:
     return _example_data(results, level, run, names, why)
 
 
+#: The filters' motion model (the nominal level's): its declared state names and units label the example figures.
+_FIGURE_MOTION = random_walk_velocity(2, DT, LEVELS[NOMINAL][2])
+
+
 def _draw_example(data, fig) -> None:
     ax = fig.add_subplot()
-    ax.plot(data["meas_xy"][:, 0], data["meas_xy"][:, 1], ".", color="0.7", ms=3, label="measurements")
-    ax.plot(data["truth_xy"][:, 0], data["truth_xy"][:, 1], "k-", lw=2, label="truth")
-    for name, xy, lost in zip(data["filters"], data["est_xy"], data["lost"]):
-        ax.plot(xy[:, 0], xy[:, 1], "-", lw=1, label=f"{name}{' (lost)' if lost else ''}")
-    ax.plot([0], [0], "k^", ms=8, label="sensor")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    ax.plot(data["meas_xy"][:, 0], data["meas_xy"][:, 1], ".", color="0.7", ms=3, label="measurements",
+            gid="measurements")
+    truth_xy = np.asarray(data["truth_xy"], dtype=float)
+    wbplot.truth(ax, Truth(truth_xy[None], np.arange(truth_xy.shape[0]) * DT), motion=_FIGURE_MOTION, color="k")
+    for i, (name, xy, lost) in enumerate(zip(data["filters"], data["est_xy"], data["lost"])):
+        wbplot.estimate(ax, np.asarray(xy, dtype=float)[None], motion=_FIGURE_MOTION, color=f"C{i % 10}",
+                        linestyle=wbplot.LINESTYLES[i % len(wbplot.LINESTYLES)], linewidth=1.0,
+                        label=f"{name}{' (lost)' if lost else ''}")
+    ax.plot([0], [0], "k^", ms=8, label="sensor", gid="sensor")
     ax.set_title(f"{data['level']} run {int(data['run'])}: {data['why']} "
                  f"(lost beyond {float(data['lost_threshold_m']):.3g} m)", fontsize=9)
     truth = data["truth_xy"]
@@ -575,9 +583,8 @@ def _plot_curves(ax, data, title) -> None:
         name = str(name)
         styles = {"reference": dict(color="k", ls="--", lw=1.8), "ablation": dict(color="tab:olive", ls=":", lw=1.8)}
         style = styles.get(str(kind), dict(lw=1.2, ls="--" if name.startswith("sr-") else "-"))
-        ax.semilogy(data["time"], curve, label=name, **style)
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("position MSE (m$^2$)")
+        wbplot.error_over_time(ax, curve, times=data["time"], quantity="position MSE", unit="m$^2$", label=name,
+                               color=style.get("color"), linestyle=style["ls"], linewidth=style["lw"])
     ax.set_title(title, fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
 
@@ -624,7 +631,7 @@ def _draw_time(data, fig) -> None:
     ax.bar(x - 0.2, data["unbatched_s_per_run"] * 1e3, 0.4, label="un-batched (B = 1), median of the timed runs")
     ax.bar(x + 0.2, data["batched_s_per_run"] * 1e3, 0.4, label="batched (all runs in one call), median of repeats",
            hatch="//")
-    ax.set_yscale("log")
+    wbplot.log_axis(ax, "y")
     ax.set_xticks(x, [str(n) for n in data["filters"]], rotation=30, ha="right")
     ax.set_ylabel("wall time per run of 100 steps (ms)")
     ax.set_title("warmed-up code (each filter ran once before the clock)", fontsize=9)

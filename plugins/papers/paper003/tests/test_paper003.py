@@ -308,6 +308,78 @@ def test_example_figures(tiny):
     assert int(fig2["lost"].sum()) == fewest
 
 
+def _line(ax, gid):
+    found = [ln for ln in ax.lines if ln.get_gid() == gid]
+    assert len(found) == 1, (gid, [ln.get_gid() for ln in ax.lines])
+    return np.column_stack([found[0].get_xdata(), found[0].get_ydata()]).astype(float)
+
+
+def _plain_ticks(ax) -> bool:
+    ax.figure.canvas.draw()
+    labels = [t.get_text() for t in ax.get_yticklabels(minor=False) + ax.get_yticklabels(minor=True)]
+    return any(labels) and all(t == "" or t.replace(".", "", 1).isdigit() for t in labels)
+
+
+def test_figures_draw_their_data_through_workbench_plot():
+    """Each drawn figure holds its data (hand-made here, of the data functions' shapes): the example runs'
+    truth and estimates (one colour and line style per filter), the MSE curves per row on a log axis with plain
+    tick labels, the timings' log axis."""
+    from matplotlib.figure import Figure
+
+    rng = generator(3, "test", "figures")
+    T, names = 10, ["ekf", "ukf", "sr-ukf"]
+    truth = np.cumsum(rng.normal(size=(T, 2)), axis=0) + [100.0, 50.0]
+    example = {"level": np.array("L2"), "run": np.array(4), "why": np.array("all filters track"),
+               "filters": np.array(names), "truth_xy": truth, "meas_xy": truth + rng.normal(size=(T, 2)),
+               "est_xy": truth + rng.normal(size=(3, T, 2)), "lost": np.array([False, True, False]),
+               "lost_threshold_m": np.array(80.0)}
+    fig = Figure()
+    _figure("fig2").draw(example, fig)
+    ax = fig.axes[0]
+    np.testing.assert_array_equal(_line(ax, "truth:truth"), truth)
+    np.testing.assert_array_equal(_line(ax, "measurements"), example["meas_xy"])
+    drawn = []
+    for name, xy, label in zip(names, example["est_xy"], ["ekf", "ukf (lost)", "sr-ukf"]):
+        np.testing.assert_array_equal(_line(ax, f"estimate:{label}"), xy)
+        np.testing.assert_array_equal(_line(ax, f"estimate-start:{label}"), xy[:1])
+        drawn += [ln for ln in ax.lines if ln.get_gid() == f"estimate:{label}"]
+    assert len({ln.get_color() for ln in drawn}) == len({ln.get_linestyle() for ln in drawn}) == 3
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (m)", "y (m)")
+    assert ax.get_title().startswith("L2 run 4: all filters track")
+    curves = rng.random((5, T)) * 100 + 1
+    mse = {"level": np.array("L2"), "reading": np.array("rad"), "time": np.arange(T) * p3.DT, "mse_t": curves,
+           "filters": np.array(names + ["crpf-100 previous (ablation)", "pf-5000 (true noise), first 4 runs"]),
+           "kind": np.array(["filter"] * 3 + ["ablation", "reference"])}
+    fig = Figure()
+    _figure("fig5").draw(mse, fig)
+    ax = fig.axes[0]
+    for name, curve in zip(mse["filters"], curves):
+        np.testing.assert_array_equal(_line(ax, f"error:{name}"), np.column_stack([mse["time"], curve]))
+    assert [ln.get_linestyle() for ln in ax.lines if str(ln.get_gid()).startswith("error:")] == \
+        ["-", "-", "--", ":", "--"]  # sr- filters dashed, the ablation dotted, the reference dashed black
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("time (s)", "position MSE (m$^2$)")
+    assert ax.get_yscale() == "log" and _plain_ticks(ax)
+    deg = {"time": mse["time"]}
+    for i, level in enumerate(p3.LEVELS):
+        deg.update({f"{level}:filters": mse["filters"], f"{level}:kind": mse["kind"],
+                    f"{level}:mse_t": curves * (i + 1)})
+    fig = Figure()
+    _figure("fig8").draw(deg, fig)
+    for i, ax in enumerate(fig.axes):
+        np.testing.assert_array_equal(_line(ax, "error:ukf")[:, 1], curves[1] * (i + 1))
+        assert ax.get_ylabel() == "position MSE (m$^2$)" and ax.get_yscale() == "log"
+    timing = {"filters": np.array(names), "unbatched_s_per_run": np.array([0.02, 0.5, 0.04]),
+              "batched_s_per_run": np.array([0.001, 0.01, 0.002]), "timing_runs": np.array([2, 2, 2]),
+              "batched_repeats": np.array([2, 2, 2])}
+    fig = Figure()
+    _figure("fig7").draw(timing, fig)
+    ax = fig.axes[0]
+    heights = np.array([bar.get_height() for bar in ax.patches])
+    np.testing.assert_allclose(heights, np.concatenate([timing["unbatched_s_per_run"],
+                                                        timing["batched_s_per_run"]]) * 1e3, rtol=1e-12)
+    assert ax.get_yscale() == "log" and _plain_ticks(ax)
+
+
 def test_mse_tables(tiny):
     _, results = tiny
     tables = {t.id: t.make(results) for t in RECIPE.tables if t.id in ("mse", "mse-deg")}
