@@ -63,11 +63,11 @@ def test_quick_mode_never_says_met():
 def test_target_table_format_one_line_per_target():
     rows = collect_targets(_results(), quick=False)
     lines = format_targets(rows, quick=False).splitlines()
-    assert lines[0] == "targets" and lines[1].split() == ["group", "target", "goal", "measured", "verdict"]
+    assert lines[0] == "targets" and lines[1].split() == ["group", "target", "goal", "min", "median", "max", "verdict"]
     body = [line for line in lines[2:] if not line.lstrip().startswith("note:")]
     assert len(body) == len(rows)
     speed = next(line for line in body if line.split()[1] == "speedup")
-    assert speed.split()[2:] == [">=", "10", "7.25", "not", "met"]
+    assert speed.split()[2:] == [">=", "10", "-", "7.25", "-", "not", "met"]  # no spread given: min and max "-"
     assert any(line.strip() == "note: floor of the draws" for line in lines)
     assert format_targets([], quick=False) == "targets: none declared"
 
@@ -78,7 +78,7 @@ def test_printed_results_keep_curves_out_of_the_figures():
     assert rows["core.curves"].startswith("1 scaling figure") and "core.curves[0].id" not in rows
     lines = []
     print_results(res, quick=False, out=lines.append)
-    assert "\n".join(lines).splitlines()[-1].split() == ["core", "a", "<=", "1", "0.5", "met"]
+    assert "\n".join(lines).splitlines()[-1].split() == ["core", "a", "<=", "1", "-", "0.5", "-", "met"]
 
 
 def _curve(**extra):

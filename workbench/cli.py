@@ -170,6 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="small sizes (seconds, for CI)")
     bench.add_argument("--json", default="workbench-bench.json", help="write the figures here as JSON")
     bench.add_argument("--only", action="append", default=[], help="only this benchmark group (repeatable)")
+    bench.add_argument("--repeats", type=int, default=None, metavar="R",
+                       help="run each group R times, each in a fresh process, and report every figure's median with "
+                            "its min and max; targets are judged on the median (default: 3, with --quick 1)")
     bench.add_argument("--arch", default="cpu", choices=list(kernel_policy.RUN_ARCHES),
                        help="run the Taichi kernels on this arch (cuda: the GPU; default: cpu)")
     bench.add_argument("--plot", default=None, metavar="DIR",
@@ -492,6 +495,8 @@ def cmd_bench(args) -> int:
         if not Path(args.from_json).is_file():
             raise InputError(f"bench --from: no such file {args.from_json!r}")
         return replot(Path(args.from_json), Path(args.plot))
+    if args.repeats is not None and args.repeats < 1:
+        raise InputError(f"bench --repeats: expected a whole number >= 1, got {args.repeats}")
     if args.arch != "cpu":
         from .kernels.runtime import taichi_available_arches
 
@@ -500,7 +505,7 @@ def cmd_bench(args) -> int:
                              f"figures are not available here; run it where a GPU is lent, or use --arch cpu")
     host = _host(args)
     return run_bench(host, quick=args.quick, json_path=Path(args.json), only=args.only, block=tuple(args.block),
-                     arch=args.arch, plot_dir=None if args.plot is None else Path(args.plot))
+                     arch=args.arch, plot_dir=None if args.plot is None else Path(args.plot), repeats=args.repeats)
 
 
 COMMANDS = {"plugins": cmd_plugins, "report": cmd_report, "run": cmd_run, "check-plugin": cmd_check_plugin,

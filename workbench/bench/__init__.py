@@ -9,22 +9,36 @@ Taichi kernels on the GPU) and records the arch as ``kernel_arch``.
 Timing figures inside a group are medians of repeated runs after a warm-up; every comparison with a
 peer library is a ratio measured in the same process and run.
 
+Repeats.  Each group runs ``repeats`` times (3 at full size, 1 with ``--quick``), each run in its own fresh
+process, one after another; :func:`combine_runs` reads the runs against each other: every numeric figure becomes
+its median (where readers expect a number: ``groups`` of the JSON, the plots) with its spread beside it
+(``spread[group][figure] = {"min", "median", "max", "runs"}``), and every target is judged on the median of its
+``measured_X`` (:func:`workbench.bench.targets.median_verdict`).  The header and the JSON's ``machine`` say where
+it ran (:func:`machine_info`: CPU model, usable cores, Python / NumPy / Numba versions) and the load average
+before and after each group's runs.
+
 After the figures the runner prints the target table (:mod:`.targets`: every ``target_X`` / ``measured_X`` /
-``met_X`` a group declares, one line each, "indicative" in quick mode), and with ``plot_dir`` draws every
-group's ``curves`` (:mod:`.plots`).
+``met_X`` a group declares, one line each with min / median / max, "indicative" in quick mode), and with
+``plot_dir`` draws every group's ``curves`` (:mod:`.plots`, from the medians).
 """
 
 from __future__ import annotations
 
 import json
+import math
+import os
+import platform
+import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from .targets import collect_targets, format_targets
+from ..types import InputError
+from .targets import NOT_UNDERSTOOD, collect_targets, format_targets, median_verdict, parse_goal
 
-__all__ = ["discover_groups", "run_group", "run_bench", "median_time", "flatten", "child_main", "own_peak_kib"]
+__all__ = ["discover_groups", "run_group", "run_bench", "median_time", "flatten", "child_main", "own_peak_kib",
+           "combine_runs", "machine_info", "load_average", "default_repeats"]
 
 _CHILD = """
 import sys
@@ -90,6 +104,156 @@ def run_group(name: str, quick: bool, timeout: float = 1800, block: tuple[str, .
     return out
 
 
+def default_repeats(quick: bool) -> int:
+    """Runs per group when ``--repeats`` is not given: 3 at full size, 1 with ``--quick``."""
+    return 1 if quick else 3
+
+
+def load_average() -> list[float] | None:
+    """The 1, 5 and 15 minute load averages (``os.getloadavg``), ``None`` where the platform has none."""
+    try:
+        return [float(v) for v in os.getloadavg()]
+    except (AttributeError, OSError):
+        return None
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def _version(module: str) -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version(module)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def machine_info() -> dict:
+    """Where the figures were measured: ``cpu_model`` (``/proc/cpuinfo``'s "model name", else
+    ``platform.processor()``), ``usable_cores`` (``os.sched_getaffinity`` where present, else ``os.cpu_count()``),
+    ``logical_cores``, ``platform``, and the ``python`` / ``numpy`` / ``numba`` versions ("not installed" where
+    absent).  The runner adds ``load_avg``: the load averages before and after each group's runs."""
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        usable = os.cpu_count() or 1
+    return {"cpu_model": _cpu_model(), "usable_cores": int(usable), "logical_cores": int(os.cpu_count() or usable),
+            "platform": platform.platform(), "python": platform.python_version(), "numpy": _version("numpy"),
+            "numba": _version("numba")}
+
+
+_ABSENT = object()
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _join(path: str, key) -> str:
+    return f"{path}.{key}" if path else str(key)
+
+
+def _merge(path: str, values: list, spread: dict):
+    """The median reading of one figure over the runs (``values``, one per run, ``_ABSENT`` where a run lacks it);
+    records its spread in ``spread[path]``."""
+    present = [v for v in values if v is not _ABSENT]
+    if present and all(isinstance(v, dict) for v in present):
+        keys = list(dict.fromkeys(k for v in present for k in v))
+        return {k: _merge(_join(path, k), [v.get(k, _ABSENT) if isinstance(v, dict) else _ABSENT for v in values],
+                          spread) for k in keys}
+    complete = len(present) == len(values)
+    if complete and all(isinstance(v, list) and v and all(isinstance(e, dict) for e in v) for v in values) \
+            and len({len(v) for v in values}) == 1:
+        return [_merge(f"{path}[{i}]", [v[i] for v in values], spread) for i in range(len(values[0]))]
+    if complete and all(_is_number(v) for v in values):
+        if all(math.isfinite(v) for v in values):
+            spread[path] = {"min": min(values), "median": statistics.median(values), "max": max(values),
+                            "runs": list(values)}
+            return spread[path]["median"]
+        spread[path] = {"runs": list(values)}  # a nan or inf in some run: no median; the first run's value
+        return values[0]
+    if complete and all(isinstance(v, list) and v and all(_is_number(e) and math.isfinite(e) for e in v)
+                        for v in values) and len({len(v) for v in values}) == 1:
+        return [statistics.median(col) for col in zip(*values)]  # a curve's points: the median point by point
+    if complete and all(v == values[0] for v in values):
+        return values[0]
+    spread[path] = {"runs": [None if v is _ABSENT else v for v in values]}  # differs in kind over the runs
+    return present[0]
+
+
+def _closest_run(values: list, median) -> int:
+    return min(range(len(values)), key=lambda k: abs(values[k] - median))
+
+
+def _rejudge(path: str, merged: dict, runs: list, problems: list, group: str = "") -> None:
+    """Judge every target declared in ``merged`` (and below it) on the median of its ``measured_X`` over ``runs``
+    (the runs' dicts at the same place): ``met_X`` becomes the median's verdict, ``note_X`` the note of the run
+    nearest the median."""
+    for key, value in list(merged.items()):
+        if isinstance(value, dict):
+            _rejudge(_join(path, key), value, [r.get(key) if isinstance(r, dict) else None for r in runs], problems,
+                     group)
+        elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            sub = [r.get(key) if isinstance(r, dict) else None for r in runs]
+            for i, item in enumerate(value):
+                _rejudge(f"{_join(path, key)}[{i}]", item,
+                         [s[i] if isinstance(s, list) and len(s) > i else None for s in sub], problems, group)
+        if not (key.startswith("target_") and isinstance(value, str)):
+            continue
+        name = key[len("target_"):]
+        label = _join(group, _join(path, name))
+        try:
+            parse_goal(value, label)
+        except InputError as exc:
+            problems.append(str(exc))
+            if f"met_{name}" in merged:
+                merged[f"met_{name}"] = NOT_UNDERSTOOD
+            continue
+        measured = [r.get(f"measured_{name}", _ABSENT) if isinstance(r, dict) else _ABSENT for r in runs]
+        met = [r.get(f"met_{name}") if isinstance(r, dict) else None for r in runs]
+        if all(_is_number(m) and math.isfinite(m) for m in measured):
+            verdict, remark = median_verdict(label, value, measured, met)
+            if f"met_{name}" in merged:
+                merged[f"met_{name}"] = verdict
+            if len(runs) > 1 and f"note_{name}" in merged:
+                best = runs[_closest_run(measured, statistics.median(measured))]
+                if isinstance(best.get(f"note_{name}"), str):
+                    merged[f"note_{name}"] = best[f"note_{name}"]
+            if remark:
+                merged[f"note_{name}"] = (str(merged.get(f"note_{name}") or "") + "; " + remark).lstrip("; ")
+        elif f"met_{name}" in merged and any(m != met[0] for m in met):
+            merged[f"met_{name}"] = "varies over the runs: " + ", ".join(
+                "absent" if m is _ABSENT else str(m) for m in measured)
+
+
+def combine_runs(runs: list[dict], group: str = "") -> tuple[dict, dict, list[str]]:
+    """One group's figures from its runs (each run's dict of figures, in order): ``(figures, spread, problems)``.
+
+    ``figures`` has the runs' shape with every numeric figure replaced by its median over the runs (a number where
+    readers expect one); a figure that is not a number takes the runs' common value, or where the runs differ the
+    first run's (its values are then in ``spread``); curve points are medians point by point.  ``spread`` maps each
+    figure's dotted name (as in the table, without the group) to ``{"min", "median", "max", "runs"}`` (numbers) or
+    ``{"runs"}`` (a figure that differs in kind over the runs).  Every declared target is judged on the median of
+    its measured value (:func:`~workbench.bench.targets.median_verdict`); ``problems`` are the one-line refusals
+    of goals that are not comparisons with a number (naming ``group`` and the target)."""
+    if not runs:
+        raise ValueError("combine_runs needs at least one run")
+    spread: dict = {}
+    problems: list[str] = []
+    merged = _merge("", list(runs), spread)
+    _rejudge("", merged, list(runs), problems, group)
+    return merged, spread, problems
+
+
 def flatten(prefix: str, value) -> list[tuple[str, object]]:
     """Nested figures as ``(dotted.name, value)`` rows; a list of dicts is indexed ``name[i]``.  A group's
     ``curves`` (the data of its figures) are one row saying how many there are."""
@@ -115,19 +279,55 @@ def _fmt(value) -> str:
     return str(value)
 
 
-def print_results(results: dict, quick: bool, out=print) -> None:
-    """The figures, one per line, then the target table."""
-    rows = [row for g, r in results.items() for row in flatten(g, r)]
-    width = max([len(name) for name, _ in rows] + [10])
-    out(f"{'figure'.ljust(width)}  value")
-    for name, value in rows:
-        out(f"{name.ljust(width)}  {_fmt(value)}")
+def machine_lines(machine: dict, repeats: int) -> list[str]:
+    """The header of the table: the machine, the repeats, and the load before and after each group's runs."""
+    lines = [f"machine: {machine.get('cpu_model', 'unknown')}, {machine.get('usable_cores', '?')} usable of "
+             f"{machine.get('logical_cores', '?')} cores; Python {machine.get('python', '?')}, NumPy "
+             f"{machine.get('numpy', '?')}, Numba {machine.get('numba', '?')}",
+             f"repeats: {repeats} run(s) per group, each in its own fresh process, one after another; figures are "
+             f"medians" + (" [min .. max] over the runs" if repeats > 1 else "")]
+    loads = machine.get("load_avg") or {}
+    if loads:
+        def one(v):
+            return "n/a" if not v else f"{v[0]:.2f}"
+        lines.append("load average (1 min) before -> after each group's runs: " + "; ".join(
+            f"{g} {one(v.get('before'))} -> {one(v.get('after'))}" for g, v in loads.items()))
+    return lines
+
+
+def print_results(results: dict, quick: bool, out=print, spread: dict | None = None, machine: dict | None = None,
+                  repeats: int = 1) -> None:
+    """The header (``machine``), the figures one per line (the median, and ``[min .. max]`` where the runs
+    differ), then the target table judged on the medians."""
+    spread = spread or {}
+    if machine is not None:
+        for line in machine_lines(machine, repeats):
+            out(line)
+        out("")
+    rows = [(g, name, value) for g, r in results.items() for name, value in flatten(g, r)]
+    width = max([len(name) for _, name, _ in rows] + [10])
+    out(f"{'figure'.ljust(width)}  value" + ("  [min .. max]" if repeats > 1 else ""))
+    for g, name, value in rows:
+        sp = (spread.get(g) or {}).get(name[len(g) + 1:]) or {}
+        extra = ""
+        if "min" in sp and sp["min"] != sp["max"]:
+            extra = f"  [{_fmt(sp['min'])} .. {_fmt(sp['max'])}]"
+        elif "runs" in sp and "min" not in sp:
+            extra = "  (differs over the runs: " + ", ".join(_fmt(v) for v in sp["runs"]) + ")"
+        out(f"{name.ljust(width)}  {_fmt(value)}{extra}")
     out("")
-    out(format_targets(collect_targets(results, quick), quick))
+    out(format_targets(collect_targets(results, quick, spread), quick))
 
 
 def run_bench(host, quick: bool, json_path: Path, only: list[str] | None = None, block: tuple[str, ...] = (),
-              arch: str = "cpu", plot_dir: Path | None = None) -> int:
+              arch: str = "cpu", plot_dir: Path | None = None, repeats: int | None = None) -> int:
+    """Run the groups (``repeats`` runs each, :func:`default_repeats` when ``None``), print the header, figures
+    and target table, write the JSON; 0 when every group ran and every goal was understood, 1 otherwise, 2 for an
+    unknown group."""
+    if repeats is None:
+        repeats = default_repeats(quick)
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise InputError(f"bench --repeats: expected a whole number >= 1, got {repeats!r}")
     groups = discover_groups(host)
     if only:
         unknown = set(only) - set(groups)
@@ -136,17 +336,35 @@ def run_bench(host, quick: bool, json_path: Path, only: list[str] | None = None,
                   file=sys.stderr)
             return 2
         groups = [g for g in groups if g in only]
-    results = {}
+    machine = machine_info()
+    machine["load_avg"] = {}
+    results, spread, problems = {}, {}, []
     for g in groups:
-        print(f"running benchmark group {g} ({'quick' if quick else 'full'}, kernels on {arch})...", file=sys.stderr,
-              flush=True)
-        results[g] = run_group(g, quick, block=tuple(block), arch=arch)
-    print_results(results, quick)
-    targets = [t.__dict__ for t in collect_targets(results, quick)]
+        before = load_average()
+        runs, error = [], None
+        for k in range(repeats):
+            print(f"running benchmark group {g} ({'quick' if quick else 'full'}, kernels on {arch}), run {k + 1} of "
+                  f"{repeats}...", file=sys.stderr, flush=True)
+            r = run_group(g, quick, block=tuple(block), arch=arch)
+            if "error" in r:
+                error = r["error"] + (f" (run {k + 1} of {repeats})" if repeats > 1 else "")
+                break
+            runs.append(r)
+        machine["load_avg"][g] = {"before": before, "after": load_average()}
+        if error is not None:
+            results[g], spread[g] = {"error": error}, {}
+            continue
+        results[g], spread[g], found = combine_runs(runs, g)
+        problems += found
+    print_results(results, quick, spread=spread, machine=machine, repeats=repeats)
+    targets = [t.__dict__ for t in collect_targets(results, quick, spread)]
     json_path = Path(json_path)
-    json_path.write_text(json.dumps({"quick": quick, "arch": arch, "groups": results, "targets": targets},
+    json_path.write_text(json.dumps({"quick": quick, "arch": arch, "repeats": repeats, "machine": machine,
+                                     "groups": results, "spread": spread, "targets": targets},
                                     indent=2, default=str))
     print(f"written: {json_path}")
+    for problem in problems:
+        print(f"workbench: error: {problem}", file=sys.stderr)
     if plot_dir is not None:
         from .plots import save_curves
 
@@ -154,7 +372,7 @@ def run_bench(host, quick: bool, json_path: Path, only: list[str] | None = None,
             print(f"written: {path} (+ .svg, .csv)")
     if arch == "cpu":
         print("note: kernels ran on the CPU; GPU figures need 'workbench bench --arch cuda' on a machine with a GPU")
-    return 1 if any("error" in r for r in results.values()) else 0
+    return 1 if problems or any("error" in r for r in results.values()) else 0
 
 
 def replot(json_path: Path, plot_dir: Path) -> int:
