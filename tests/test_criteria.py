@@ -1,8 +1,9 @@
 """The criterion record and the statistics that build it: verdicts from hand-made run data, exact binomial
-intervals against known values, bootstrap coverage, disjoint replications, and the old bool form."""
+intervals against known values, bootstrap coverage, disjoint replications; a bool verdict refused."""
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -27,24 +28,26 @@ from workbench.criteria import (
 )
 
 
-# -- the record: bool compatibility and quick-mode marking -------------------------------------------------
+# -- the record: verdict words only, and quick-mode marking --------------------------------------------------
 
-def test_old_bool_criteria_read_as_met_and_not_met_without_n_or_interval():
-    yes = Criterion("1", "mean MSE below 100", True, "worst 3.2")
-    no = Criterion("2", "ordering C < B < A", np.bool_(False), "B < C")
+def test_a_verdict_is_one_of_the_words_and_a_bool_is_refused_by_name():
+    yes = Criterion("1", "mean MSE below 100", "met", "worst 3.2")
+    no = Criterion("2", "ordering C < B < A", "not met", "B < C")
     assert (yes.verdict, yes.met, yes.detail) == ("met", True, "worst 3.2")
     assert (no.verdict, no.met) == ("not met", False)
-    assert yes.n is None and yes.interval is None and not yes.indicative
-    assert sum(c.met for c in (yes, no)) == 1
-    with pytest.raises(ValueError, match="verdict must be one of"):
-        Criterion("3", "x", "passed")
+    assert yes.n is None and yes.interval is None and not yes.indicative and yes.statistics == ""
+    for bad in (True, np.bool_(False), 1, None, "passed"):
+        with pytest.raises(ValueError, match=r"criterion '3': the verdict must be one of .*\(a string\)"):
+            Criterion("3", "x", bad)
+    with pytest.raises(ValueError, match="criterion '4': the verdict must be one of .* got True \\(bool\\)"):
+        Criterion("4", "x", True)
 
 
 def test_as_indicative_never_leaves_met_and_remembers_the_quick_verdict():
     met = Criterion("1", "x", "met", interval=(1.4, 1.6), n=4).as_indicative()
     assert (met.verdict, met.met, met.indicative, met.quick_verdict) == ("inconclusive", False, True, "met")
     assert met.interval == (1.4, 1.6) and met.n == 4
-    not_met = Criterion("2", "x", False).as_indicative()
+    not_met = Criterion("2", "x", "not met").as_indicative()
     assert (not_met.verdict, not_met.quick_verdict, not_met.met) == ("not met", "not met", False)
     assert met.as_indicative() == met  # marking twice keeps the first quick verdict
     assert Criterion("3", "x", "not attainable").as_indicative().verdict == "not attainable"
@@ -59,6 +62,29 @@ def test_to_dict_is_json_ready_and_round_trips():
     assert d["extra"] == {"quick_verdict": "inconclusive"}
     back = Criterion.from_dict(d)
     assert back == c and isinstance(back.interval, tuple) and back.replication == (41, 50)
+
+
+def test_the_numbers_travel_as_fields_through_json_and_the_sentence_is_made_from_them():
+    runs = criterion_from_runs("R", "mean >= 1", np.linspace(0.5, 2.5, 40), np.mean, 1.0, ">=", min_n=20,
+                               resamples=500, detail="forty runs")
+    counts = criterion_from_counts("K", "share >= 0.5", 30, 40, 0.5, ">=", min_n=20, detail="thirty of forty")
+    for c in (runs, counts):
+        d = json.loads(json.dumps(c.to_dict()))
+        assert d["statistics"] == c.statistics and d["detail"] == c.detail
+        back = Criterion.from_dict(d)  # "statistics" is derived, not read back
+        assert back == c and back.statistics == c.statistics
+    assert (runs.level, runs.resamples, runs.count) == (0.95, 500, None)
+    assert (counts.level, counts.resamples, counts.count) == (0.95, None, 30)
+    # the sentence follows the fields, not a copy of words: another threshold reads in it
+    assert replace(runs, threshold=">= 0.9").statistics.endswith("passes if >= 0.9; needs n >= 20")
+    # a summary.json written before the fields existed (its sentence inside the detail, a "statistics" string)
+    old = {"id": "2", "text": "t", "verdict": "met", "detail": "d; ours 1.5, ...", "statistics": "ours 1.5, ...",
+           "n": 30, "interval": [1.4, 1.6], "min_n": 20, "method": "percentile bootstrap, 2000 resamples"}
+    read = Criterion.from_dict(old)
+    assert (read.verdict, read.detail, read.level, read.statistics) == ("met", "d; ours 1.5, ...", None, "")
+    for bad in ({"level": 95}, {"count": 2.5}, {"resamples": -1}, {"count": True}, {"resamples": "2000"}):
+        with pytest.raises(ValueError, match="criterion 'X': "):
+            Criterion("X", "x", "met", **bad)
 
 
 # -- judge ------------------------------------------------------------------------------------------------
@@ -283,7 +309,11 @@ def test_criterion_from_runs_met_not_met_and_inconclusive():
     met = criterion_from_runs("2", "A/C >= 1.3", 1.5 + wiggle, np.mean, 1.3, ">=", min_n=20, published=1.9)
     assert (met.verdict, met.n, met.published, met.threshold) == ("met", 30, 1.9, ">= 1.3")
     assert met.ours == pytest.approx(1.5) and 1.49 <= met.interval[0] <= met.interval[1] <= 1.51
-    assert "n = 30" in met.detail and "needs n >= 20" in met.detail
+    # the numbers are the record's fields; the detail is left to the caller's words (none given here)
+    assert (met.min_n, met.level, met.resamples, met.count, met.detail) == (20, 0.95, 2000, None, "")
+    lo, hi = met.interval
+    assert met.statistics == (f"ours {met.ours:.4g}, 95 % interval [{lo:.4g}, {hi:.4g}] (percentile bootstrap over "
+                              "n = 30 runs, 2000 resamples); passes if >= 1.3; needs n >= 20")
 
     not_met = criterion_from_runs("2", "A/C >= 1.3", 1.0 + wiggle, np.mean, 1.3, ">=", min_n=20)
     assert not_met.verdict == "not met" and not not_met.met
@@ -299,8 +329,12 @@ def test_criterion_from_runs_met_not_met_and_inconclusive():
 def test_criterion_from_runs_on_a_paired_ratio_within_a_range():
     c = np.random.default_rng(11).exponential(200.0, 40)
     crit = criterion_from_runs("R", "A/C in 1.3..2.5", (1.8 * c, c), lambda a, c_: a.mean() / c_.mean(),
-                               (1.3, 2.5), "within", min_n=20, detail_fmt="{ours:.2f} [{lo:.2f}, {hi:.2f}] n={n}")
-    assert crit.verdict == "met" and crit.ours == pytest.approx(1.8) and crit.detail == "1.80 [1.80, 1.80] n=40"
+                               (1.3, 2.5), "within", min_n=20, detail="A and C on the same {40} runs")
+    # the explanation is kept as given (braces and all: it is not a format); the numbers are fields
+    assert crit.verdict == "met" and crit.ours == pytest.approx(1.8) and crit.detail == "A and C on the same {40} runs"
+    assert crit.interval == pytest.approx((1.8, 1.8)) and crit.n == 40
+    with pytest.raises(ValueError, match="detail is the explanation in words \\(a str\\), got int"):
+        criterion_from_runs("R", "x", c, np.mean, 1.0, ">=", min_n=20, detail=3)
     assert crit.threshold == "within [1.3, 2.5]"
 
 
@@ -308,7 +342,10 @@ def test_criterion_from_counts_uses_the_exact_interval():
     zero = criterion_from_counts("L", "lost runs <= 50 %", 0, 10, 0.5, "<=", min_n=10)
     assert zero.verdict == "met" and zero.interval == pytest.approx((0.0, 0.3085), abs=1e-4) and zero.ours == 0.0
     some = criterion_from_counts("L", "lost runs <= 50 %", 3, 10, 0.5, "<=", min_n=10)
-    assert some.verdict == "inconclusive" and some.detail.startswith("ours 3/10 = 0.3")
+    assert some.verdict == "inconclusive" and (some.count, some.n, some.level, some.detail) == (3, 10, 0.95, "")
+    lo, hi = binomial_interval(3, 10)
+    assert some.statistics == (f"ours 3/10 = 0.3, 95 % interval [{lo:.4g}, {hi:.4g}] (exact, Clopper-Pearson); "
+                               "passes if <= 0.5; needs n >= 10")
     many = criterion_from_counts("L", "lost runs <= 50 %", 9, 10, 0.5, "<=", min_n=10)
     assert many.verdict == "not met"
     assert criterion_from_counts("L", "x", 0, 5, 0.5, "<=", min_n=10).verdict == "inconclusive"
@@ -353,11 +390,11 @@ def test_a_failed_precondition_makes_every_verdict_not_judgeable():
     fails = Precondition("judged rows track", False, "lost runs A 20/20 (100 %)")
     holds = Precondition("reference converged", True, "1.001 [0.99, 1.01]")
     assert "not judgeable" in VERDICTS
-    for verdict in ("met", "not met", "inconclusive", "not attainable", True, False):
+    for verdict in ("met", "not met", "inconclusive", "not attainable"):
         c = Criterion("1", "x", verdict, preconditions=(holds, fails))
         assert c.verdict == "not judgeable" and not c.met
         assert c.failed_preconditions == (fails,)
-        assert c.verdict_if_judged == {True: "met", False: "not met"}.get(verdict, verdict)
+        assert c.verdict_if_judged == verdict
     # all preconditions hold: the verdict stands
     assert Criterion("1", "x", "met", preconditions=(holds,)).verdict == "met"
     # no path back to "met" while a precondition fails: a replaced verdict is overridden again
@@ -487,7 +524,9 @@ def test_tost_on_hand_made_samples_tie_difference_and_wide():
     assert criterion_equivalent("E", "x", _normal(10, 0.0, 0.2), np.mean, m, min_n=20).verdict == "inconclusive"
     # the record states the method, the margin and the 90 % level
     assert tie.method.startswith("equivalence (TOST, margin 0.3, 90 % interval)")
-    assert "equivalence (TOST, margin 0.3, 90 % interval" in tie.detail and "90 % interval [" in tie.detail
+    assert tie.level == pytest.approx(0.9) and tie.detail == ""
+    assert tie.statistics.startswith(f"ours {tie.ours:.4g}, 90 % interval [{tie.interval[0]:.4g}, ")
+    assert tie.statistics.endswith("; judged as equivalence (TOST, margin 0.3, 90 % interval, alpha = 0.05 per side)")
     assert tie.extra["equivalence"] == {"margin": 0.3, "ratio": False, "alpha": 0.05, "band": [-0.3, 0.3]}
     back = Criterion.from_dict(json.loads(json.dumps(tie.to_dict())))
     assert back.verdict == "met" and back.method == tie.method

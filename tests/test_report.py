@@ -129,44 +129,33 @@ def test_quick_report_declares_nothing_met_and_shows_n_interval_and_verdict(tmp_
     assert "<td>kf, ekf</td>" in published  # a tuple, joined readably
 
 
-def test_scoreboard_moves_the_statistics_sentence_into_its_columns(tmp_path, demo_host):
-    from dataclasses import replace
-
-    from workbench.criteria import RUNS_DETAIL, Criterion, criterion_from_counts, criterion_from_runs
-    from workbench.report.html import scoreboard_detail
+def test_scoreboard_shows_the_records_numbers_in_its_columns_and_its_detail_as_words(tmp_path, demo_host):
+    from workbench.criteria import Criterion, criterion_from_counts, criterion_from_runs
 
     runs = criterion_from_runs("a", "mean below 2", np.linspace(0.0, 2.0, 50), np.mean, 2.0, "<=", min_n=30,
-                               detail_fmt="paired runs; " + RUNS_DETAIL)
-    counts = criterion_from_counts("b", "share", 45, 50, 0.8, ">=", min_n=40,
-                                   detail_fmt="{k} of {n} held. ours {k}/{n} = {ours:.4g}, {pct:g} % interval "
-                                              "[{lo:.4g}, {hi:.4g}] (exact, Clopper-Pearson); passes if {threshold}; "
-                                              "needs n >= {min_n}. Runs 3 and 7 lost.")
-    # the record declares what the scoreboard shows in its columns: no sentence is parsed
-    assert (counts.min_n, counts.method) == (40, "exact, Clopper-Pearson")
-    assert (runs.min_n, runs.method) == (30, "percentile bootstrap, 2000 resamples")
-    text, method, min_n = scoreboard_detail(counts)
-    assert (text, method, min_n) == ("45 of 50 held. Runs 3 and 7 lost.", "exact, Clopper-Pearson", 40)
-    plain = Criterion("c", "a pass/fail check", "met", "no statistics here")
-    assert scoreboard_detail(plain) == ("no statistics here", None, None)
-    # a detail rewritten without the sentence keeps its words; the declared columns stay
-    reworded = replace(runs, detail="the paper's own wording")
-    assert scoreboard_detail(reworded) == ("the paper's own wording", "percentile bootstrap, 2000 resamples", 30)
-    # without an interval, a detail built around the default sentence says so instead of printing [nan, nan]
-    one = criterion_from_runs("d", "one run", np.array([1.0]), np.mean, 2.0, "<=", min_n=30,
-                              detail_fmt="one run only; " + RUNS_DETAIL)
-    assert "nan" not in one.detail and one.statistics in one.detail and one.method is None
-    assert scoreboard_detail(one) == ("one run only", None, 30)
+                               detail="paired runs")
+    counts = criterion_from_counts("b", "share", 45, 50, 0.8, ">=", min_n=40, detail="Runs 3 and 7 lost.")
+    # the record declares what the scoreboard shows in its columns: no sentence is parsed, none is cut
+    assert (counts.min_n, counts.method, counts.count, counts.detail) == (40, "exact, Clopper-Pearson", 45,
+                                                                         "Runs 3 and 7 lost.")
+    assert (runs.min_n, runs.method, runs.resamples, runs.detail) == (30, "percentile bootstrap, 2000 resamples",
+                                                                      2000, "paired runs")
+    # without an interval the record says so in its sentence instead of printing [nan, nan]
+    one = criterion_from_runs("d", "one run", np.array([1.0]), np.mean, 2.0, "<=", min_n=30, detail="one run only")
+    assert one.method is None and one.detail == "one run only"
+    assert one.statistics.startswith("ours 1 from n = 1 runs; no interval") and "nan" not in one.statistics
     # read back from summary.json, the record still declares them
-    assert scoreboard_detail(Criterion.from_dict(json.loads(json.dumps(runs.to_dict())))) == scoreboard_detail(runs)
+    back = Criterion.from_dict(json.loads(json.dumps(runs.to_dict())))
+    assert back == runs and back.statistics == runs.statistics
     # the demo paper's full report: the interval column names its method, the n column the runs needed, and the
-    # criterion column no longer repeats them
+    # criterion column shows the explanation only
     run_report(demo_host, tmp_path, papers=["demo"], size="full", seed=3, progress=False)
     index = _page(tmp_path)
     board = index[index.index("id='paperdemo-scoreboard'"):index.index("id='paperdemo-differs'")]
     crit = _criteria_by_id(json.loads((tmp_path / "summary.json").read_text()))
-    assert "passes if" in crit["2"]["detail"] and "passes if" not in board  # summary.json keeps it whole
-    assert "percentile bootstrap, 2000 resamples" in board and "needs &ge;" in board
-    assert runs.detail.startswith("paired runs; ours ") and scoreboard_detail(runs)[0] == "paired runs"
+    assert "passes if" in crit["2"]["statistics"] and "passes if" not in crit["2"]["detail"]
+    assert "passes if" not in board and "percentile bootstrap, 2000 resamples" in board and "needs &ge;" in board
+    assert crit["2"]["level"] == 0.95 and crit["2"]["resamples"] == 2000 and crit["2"]["min_n"] == 10
 
 
 def test_full_report_gives_firm_verdicts(tmp_path, demo_host):

@@ -53,8 +53,8 @@ import numpy as np
 
 __all__ = ["VERDICTS", "NOT_JUDGEABLE", "DIRECTIONS", "Criterion", "Precondition", "bootstrap_interval",
            "binomial_interval", "judge", "criterion_from_runs", "criterion_from_counts", "replication_rate",
-           "rows_track", "reference_converged", "RUNS_DETAIL", "COUNTS_DETAIL", "equivalence_band",
-           "judge_equivalent", "criterion_equivalent", "EQUIVALENCE_DETAIL", "DeclaredUnknown", "UnknownVerdict",
+           "rows_track", "reference_converged", "equivalence_band", "judge_equivalent", "criterion_equivalent",
+           "DeclaredUnknown", "UnknownVerdict",
            "judge_across", "where_it_holds", "Vectorised", "vectorised", "Confirmation", "confirm"]
 
 #: The verdict of a criterion whose precondition fails.
@@ -118,10 +118,11 @@ class Criterion:
     text : str
         The statement, as the brief gives it.
     verdict : str
-        One of :data:`VERDICTS`.  For older callers a bool is accepted and read as ``"met"`` / ``"not met"``
-        (such a criterion carries no interval; the report says so).
+        One of :data:`VERDICTS` (anything else, a bool included, is refused by name).
     detail : str
-        How ours was computed, and why the verdict is what it is.
+        How ours was computed, and why the verdict is what it is, in words: the human explanation only.  The
+        numbers the verdict was judged on are the record's own fields (``ours, n, interval, level, method,
+        threshold, min_n, count, resamples``); :attr:`statistics` puts them into one sentence.
     ours : float, str or None
         Our value of the judged statistic.
     published : float, str or None
@@ -140,10 +141,14 @@ class Criterion:
         The fewest runs from which the criterion may be decided (below it the verdict is inconclusive).
     method : str or None
         How ``interval`` was computed, e.g. ``"percentile bootstrap, 2000 resamples"``.
-    statistics : str
-        The statistics sentence :func:`criterion_from_runs` / :func:`criterion_from_counts` wrote (ours, the
-        interval and its method, the passing condition, the runs needed), which ``detail`` contains; a reader that
-        shows those numbers in columns of its own takes it out of ``detail`` (the report's scoreboard).
+    level : float or None
+        The confidence level of ``interval``, in (0, 1) (0.95; 0.9 for an equivalence judged by TOST at 5 %);
+        ``None`` where the record carries no interval of its own making.
+    count : int or None
+        For a proportion (:func:`criterion_from_counts`): the runs in which the event happened (ours is
+        ``count / n``).
+    resamples : int or None
+        For a bootstrap interval (:func:`criterion_from_runs`): the number of resamples it was computed from.
     extra : dict
         Further numbers of the recipe's own; ``"verdict_if_judged"`` holds the verdict the numbers gave when a
         precondition fails.
@@ -174,7 +179,9 @@ class Criterion:
     replication: tuple[int, int] | None = None
     min_n: int | None = None
     method: str | None = None
-    statistics: str = ""
+    level: float | None = None
+    count: int | None = None
+    resamples: int | None = None
     extra: dict = field(default_factory=dict)
     preconditions: tuple[Precondition, ...] = ()
     across: tuple["UnknownVerdict", ...] = ()
@@ -186,10 +193,9 @@ class Criterion:
         object.__setattr__(self, "across", tuple(
             a if isinstance(a, UnknownVerdict) else UnknownVerdict.from_dict(a) for a in (self.across or ())))
         verdict = self.verdict
-        if isinstance(verdict, (bool, np.bool_)):
-            verdict = "met" if bool(verdict) else "not met"
-        if verdict not in VERDICTS:
-            raise ValueError(f"criterion {self.id!r}: verdict must be one of {VERDICTS}, got {verdict!r}")
+        if not isinstance(verdict, str) or verdict not in VERDICTS:
+            raise ValueError(f"criterion {self.id!r}: the verdict must be one of {VERDICTS} (a string), got "
+                             f"{verdict!r} ({type(verdict).__name__})")
         pre = self.preconditions
         if isinstance(pre, (Precondition, Mapping)):
             pre = (pre,)
@@ -207,6 +213,63 @@ class Criterion:
         if self.interval is not None:
             lo, hi = (float(v) for v in self.interval)
             object.__setattr__(self, "interval", (lo, hi))
+        if self.level is not None:
+            level = float(self.level)
+            if not 0.0 < level < 1.0:
+                raise ValueError(f"criterion {self.id!r}: the interval's level must be in (0, 1), got {self.level!r}")
+            object.__setattr__(self, "level", level)
+        for name in ("count", "resamples"):
+            value = getattr(self, name)
+            if value is not None:
+                if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                        or not float(value).is_integer() or value < 0:
+                    raise ValueError(f"criterion {self.id!r}: {name} must be a whole number >= 0, got {value!r}")
+                object.__setattr__(self, name, int(value))
+
+    @property
+    def statistics(self) -> str:
+        """The numbers the verdict was judged on, in one sentence made from the record's fields (``""`` for a record
+        without an interval level, e.g. one built by hand, whose numbers are its columns and its detail).
+
+        A proportion: ``"ours K/N = V, 95 % interval [LO, HI] (exact, Clopper-Pearson); passes if ...; needs
+        n >= M"``; a bootstrap: ``"ours V, 95 % interval [LO, HI] (percentile bootstrap over n = N runs, R
+        resamples); passes if ...; needs n >= M"`` (``"no interval (...)"`` where none could be computed), followed
+        for an equivalence by how it was judged (TOST, margin, level, alpha per side).
+        """
+        if self.level is None:
+            return ""
+        pct = 100.0 * self.level
+        ours = self.ours if isinstance(self.ours, str) else f"{float(self.ours):.4g}" if self.ours is not None \
+            else "n/a"
+        interval = self.interval if self.interval is not None and not any(math.isnan(v) for v in self.interval) \
+            else None
+        if self.count is not None:
+            head = f"ours {self.count}/{self.n} = {ours}"
+        elif interval is None:
+            head = f"ours {ours} from n = {self.n} runs"
+        else:
+            head = f"ours {ours}"
+        if interval is None:
+            how = ("no interval (a bootstrap needs 2 runs or more and a finite statistic on every resample)"
+                   if self.count is None else "no interval")
+        else:
+            if self.count is not None:
+                source = self.method or "exact"
+            elif self.resamples is not None:
+                source = f"percentile bootstrap over n = {self.n} runs, {self.resamples} resamples"
+            else:
+                source = f"{self.method or 'interval'}, n = {self.n}"
+            how = f"{pct:g} % interval [{interval[0]:.4g}, {interval[1]:.4g}] ({source})"
+        text = f"{head}, {how}" if interval is not None else f"{head}; {how}"
+        if self.threshold:
+            text += f"; passes if {self.threshold}"
+        if self.min_n is not None:
+            text += f"; needs n >= {self.min_n}"
+        eq = self.extra.get("equivalence")
+        if isinstance(eq, Mapping):
+            text += (f"; judged as equivalence (TOST, margin {_margin_text(eq['margin'], eq['ratio'])}, {pct:g} % "
+                     f"interval, alpha = {float(eq['alpha']):g} per side)")
+        return text
 
     @property
     def met(self) -> bool:
@@ -250,13 +313,15 @@ class Criterion:
                        confirmation=None if self.confirmation is None else self.confirmation.as_indicative())
 
     def to_dict(self) -> dict:
-        """A JSON-ready dict of every field, plus ``met`` (bool) for older readers.
+        """A JSON-ready dict of every field, plus ``met`` (bool) for older readers and ``statistics`` (the sentence
+        :attr:`statistics` makes of the fields, for a human reader; :meth:`from_dict` reads the fields).
 
         Returns
         -------
         dict
             ``id, text, verdict, met, indicative, ours, published, n, interval, threshold, replication, min_n,
-            method, statistics, detail, extra, preconditions`` (each ``name, holds, detail, values``), ``across``
+            method, level, count, resamples, statistics, detail, extra, preconditions`` (each ``name, holds, detail,
+            values``), ``across``
             (each :meth:`UnknownVerdict.to_dict`), ``confirmation`` (:meth:`Confirmation.to_dict` or None); numpy
             scalars become Python numbers, tuples become lists.
         """
@@ -266,6 +331,7 @@ class Criterion:
         out["across"] = [a.to_dict() for a in self.across]
         out["confirmation"] = None if self.confirmation is None else self.confirmation.to_dict()
         out["met"] = bool(self.met)
+        out["statistics"] = self.statistics
         return out
 
     @classmethod
@@ -322,11 +388,6 @@ def _as_runs(samples: Any) -> tuple[tuple[np.ndarray, ...], bool]:
     if len(lengths) != 1:
         raise ValueError(f"paired samples must hold the same number of runs, got lengths {sorted(lengths)}")
     return arrays, paired
-
-
-def _runs_in(samples: Any) -> int:
-    arrays, _ = _as_runs(samples)
-    return int(arrays[0].shape[0])
 
 
 def _rng(rng: np.random.Generator | None, seed: int | None) -> np.random.Generator:
@@ -625,22 +686,9 @@ def _threshold_text(threshold: Any, direction: str) -> str:
     return f"{direction} {float(threshold):g}"
 
 
-#: The default ``detail_fmt`` of :func:`criterion_from_runs`.
-RUNS_DETAIL = ("ours {ours:.4g}, {pct:g} % interval [{lo:.4g}, {hi:.4g}] (percentile bootstrap over n = {n} "
-               "runs, {resamples} resamples); passes if {threshold}; needs n >= {min_n}")
-
-#: The ``detail`` of :func:`criterion_from_runs` with the default format when no interval could be computed.
-RUNS_DETAIL_NO_INTERVAL = ("ours {ours:.4g} from n = {n} runs; no interval (a bootstrap needs 2 runs or more and a "
-                           "finite statistic on every resample); passes if {threshold}; needs n >= {min_n}")
-
-#: The default ``detail_fmt`` of :func:`criterion_from_counts`.
-COUNTS_DETAIL = ("ours {k}/{n} = {ours:.4g}, {pct:g} % interval [{lo:.4g}, {hi:.4g}] (exact, Clopper-Pearson); "
-                 "passes if {threshold}; needs n >= {min_n}")
-
-
 def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..., float],
                         threshold: float | tuple[float, float], direction: str, *, min_n: int,
-                        published: Any = None, detail_fmt: str = RUNS_DETAIL, level: float = 0.95,
+                        published: Any = None, detail: str = "", level: float = 0.95,
                         resamples: int = 2000, seed: int | None = 0, threshold_text: str | None = None,
                         replication: tuple[int, int] | None = None,
                         preconditions: tuple[Precondition, ...] = ()) -> Criterion:
@@ -660,10 +708,10 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
         The fewest runs from which the criterion may be decided; with fewer the verdict is inconclusive.
     published : optional
         The paper's value, shown beside ours.
-    detail_fmt : str
-        Format of ``detail``; fields ``ours, lo, hi, n, min_n, pct, resamples, threshold, verdict``.  The record
-        also declares ``min_n``, the interval's ``method`` and its ``statistics`` sentence (:data:`RUNS_DETAIL`
-        formatted), which a ``detail_fmt`` built as ``prefix + RUNS_DETAIL`` contains.
+    detail : str
+        The human explanation (how ours was computed, what stands behind it), kept as it is.  The numbers are the
+        record's fields (``ours, n, interval, level, resamples, method, threshold, min_n``), not words in
+        ``detail``: :attr:`Criterion.statistics` makes the sentence of them.
     level, resamples, seed
         Passed to :func:`bootstrap_interval`.
     threshold_text : str, optional
@@ -685,20 +733,22 @@ def criterion_from_runs(id: str, text: str, samples: Any, statistic: Callable[..
     interval = bootstrap_interval(samples, statistic, level=level, resamples=resamples, seed=seed)
     verdict = judge(interval, threshold, direction, n=n, min_n=min_n)
     thr = threshold_text or _threshold_text(threshold, direction)
-    values = dict(ours=ours, lo=interval[0], hi=interval[1], n=n, min_n=min_n, pct=100 * level, resamples=resamples,
-                  threshold=thr, verdict=verdict)
     no_interval = math.isnan(interval[0])
-    if no_interval:  # the default sentence, alone or inside a caller's format, says there is no interval
-        detail_fmt = detail_fmt.replace(RUNS_DETAIL, RUNS_DETAIL_NO_INTERVAL)
-    statistics = (RUNS_DETAIL_NO_INTERVAL if no_interval else RUNS_DETAIL).format(**values)
-    return Criterion(id, text, verdict, detail_fmt.format(**values), ours=ours, published=published, n=n,
+    return Criterion(id, text, verdict, _explanation(detail), ours=ours, published=published, n=n,
                      interval=interval, threshold=thr, replication=replication, min_n=min_n,
-                     method=None if no_interval else f"percentile bootstrap, {resamples} resamples",
-                     statistics=statistics, preconditions=tuple(preconditions))
+                     method=None if no_interval else f"percentile bootstrap, {resamples} resamples", level=level,
+                     resamples=resamples, preconditions=tuple(preconditions))
+
+
+def _explanation(detail: Any) -> str:
+    """A constructor's ``detail``: the human explanation as given, refused by name where it is not text."""
+    if not isinstance(detail, str):
+        raise ValueError(f"detail is the explanation in words (a str), got {type(detail).__name__}: {detail!r}")
+    return detail
 
 
 def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float | tuple[float, float],
-                          direction: str, *, min_n: int, published: Any = None, detail_fmt: str = COUNTS_DETAIL,
+                          direction: str, *, min_n: int, published: Any = None, detail: str = "",
                           level: float = 0.95, threshold_text: str | None = None,
                           replication: tuple[int, int] | None = None,
                           preconditions: tuple[Precondition, ...] = ()) -> Criterion:
@@ -712,9 +762,9 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
         Runs in which the event happened, and runs in all.
     threshold, direction, min_n, published, level, threshold_text, replication, preconditions
         As in :func:`criterion_from_runs` (the threshold is a proportion in [0, 1]).
-    detail_fmt : str
-        Format of ``detail``; fields ``k, n, ours, lo, hi, min_n, pct, threshold, verdict``.  The record also
-        declares ``min_n``, ``method`` and its ``statistics`` sentence (:data:`COUNTS_DETAIL` formatted).
+    detail : str
+        The human explanation, kept as it is; the numbers are the record's fields (``count`` = ``k``, ``n``,
+        ``ours``, ``interval``, ``level``, ``method``, ``threshold``, ``min_n``; :attr:`Criterion.statistics`).
 
     Returns
     -------
@@ -725,12 +775,9 @@ def criterion_from_counts(id: str, text: str, k: int, n: int, threshold: float |
     ours = k / n if n else math.nan
     verdict = judge(interval, threshold, direction, n=n, min_n=min_n)
     thr = threshold_text or _threshold_text(threshold, direction)
-    values = dict(k=k, n=n, ours=ours, lo=interval[0], hi=interval[1], min_n=min_n, pct=100 * level, threshold=thr,
-                  verdict=verdict)
-    return Criterion(id, text, verdict, detail_fmt.format(**values), ours=ours, published=published, n=int(n),
+    return Criterion(id, text, verdict, _explanation(detail), ours=ours, published=published, n=int(n),
                      interval=interval, threshold=thr, replication=replication, min_n=min_n,
-                     method="exact, Clopper-Pearson", statistics=COUNTS_DETAIL.format(**values),
-                     preconditions=tuple(preconditions))
+                     method="exact, Clopper-Pearson", level=level, count=int(k), preconditions=tuple(preconditions))
 
 
 # -- equivalence (two one-sided tests) ------------------------------------------------------------------------
@@ -778,19 +825,9 @@ def judge_equivalent(interval: tuple[float, float] | None, margin: float, *, rat
     return judge(interval, equivalence_band(margin, ratio=ratio), "within", n=n, min_n=min_n)
 
 
-#: The sentence :func:`criterion_equivalent` puts after :data:`RUNS_DETAIL` in ``detail`` (fields ``margin_text,
-#: pct`` and ``alpha``), so that a reader taking the statistics sentence out of ``detail`` keeps it.
-EQUIVALENCE_DETAIL = ("; judged as equivalence (TOST, margin {margin_text}, {pct:g} % interval, alpha = {alpha:g} "
-                      "per side)")
-
-
-def _braced(text: str) -> str:
-    return text.replace("{", "{{").replace("}", "}}")
-
-
 def criterion_equivalent(id: str, text: str, samples: Any, statistic: Callable[..., float], margin: float, *,
                          ratio: bool = False, alpha: float = 0.05, min_n: int, published: Any = None,
-                         prefix: str = "", resamples: int = 2000, seed: int | None = 0,
+                         detail: str = "", resamples: int = 2000, seed: int | None = 0,
                          threshold_text: str | None = None, replication: tuple[int, int] | None = None,
                          preconditions: tuple[Precondition, ...] = ()) -> Criterion:
     """A :class:`Criterion` for an "about equal" claim, judged as equivalence by two one-sided tests (TOST).
@@ -812,9 +849,9 @@ def criterion_equivalent(id: str, text: str, samples: Any, statistic: Callable[.
         Whether the statistic is a ratio (equivalent to 1) rather than a difference (equivalent to 0).
     alpha : float, default 0.05
         The level of each one-sided test, in (0, 0.5); the interval's level is ``1 - 2 alpha``.
-    prefix : str
-        Words put before the statistics sentence in ``detail`` (the equivalence sentence :data:`EQUIVALENCE_DETAIL`
-        follows it).
+    detail : str
+        The human explanation, kept as it is; the numbers are the record's fields and ``extra["equivalence"]``
+        (:attr:`Criterion.statistics` says how it was judged).
 
     Returns
     -------
@@ -836,9 +873,8 @@ def criterion_equivalent(id: str, text: str, samples: Any, statistic: Callable[.
     mtext = _margin_text(margin, ratio)
     thr = threshold_text or (f"{100 * level:g} % interval within [{band[0]:.4g}, {band[1]:.4g}] (equivalent, "
                              f"margin {mtext})")
-    tail = EQUIVALENCE_DETAIL.format(margin_text=mtext, pct=100 * level, alpha=float(alpha))
     c = criterion_from_runs(id, text, samples, statistic, band, "within", min_n=min_n, published=published,
-                            detail_fmt=_braced(prefix) + RUNS_DETAIL + _braced(tail), level=level,
+                            detail=detail, level=level,
                             resamples=resamples, seed=seed,
                             threshold_text=thr, replication=replication, preconditions=preconditions)
     method = f"equivalence (TOST, margin {mtext}, {100 * level:g} % interval)" + (f"; {c.method}" if c.method else "")

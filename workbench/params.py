@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
-from .types import InputError
+from .types import InputError, memory_limit  # memory_limit: defined beside check_size, read here too
 from .units import DIMENSIONS, GENERIC_LIMIT, LIMITS, SI_LABELS, parse_quantity
 
 __all__ = ["Param", "AtLeast", "when_text", "when_example", "check_value", "check_values", "infer_params", "describe",
@@ -462,16 +462,6 @@ def _read_value(raw: str) -> Any:
         return tomllib.loads(f"v = {raw}")["v"]
     except Exception:  # noqa: BLE001 - not a TOML value: a bare string (a choice, or a quantity with a unit)
         return raw
-
-
-def memory_limit() -> float:
-    """Bytes of physical memory of this machine (8 GiB where the system does not say)."""
-    import os
-
-    try:
-        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
-        return 8.0 * 2 ** 30
 
 
 def check_footprint(params: Iterable[Param], values: Mapping[str, Any], batch: int, dim: int, who: str,

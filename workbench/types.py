@@ -106,6 +106,16 @@ def real_scalar(name: str, value) -> float:
     return float(value)
 
 
+def memory_limit() -> float:
+    """Bytes of physical memory of this machine (8 GiB where the system does not say)."""
+    import os
+
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+        return 8.0 * 2 ** 30
+
+
 def check_size(name: str, value, item_bytes: float = 8.0, minimum: int = 1, share: float = 0.5) -> int:
     """``value`` as a count (a batch, a number of steps, a dimension) that some call allocates ``item_bytes`` per
     unit of: a whole number ``>= minimum`` whose allocation fits in ``share`` of the machine's memory;
@@ -116,8 +126,6 @@ def check_size(name: str, value, item_bytes: float = 8.0, minimum: int = 1, shar
     count = int(value)
     if count < minimum:
         raise InputError(f"{name} must be >= {minimum}, got {count}")
-    from .params import memory_limit
-
     limit = share * memory_limit()
     if count * float(item_bytes) > limit:
         raise InputError(f"{name} = {count} needs about {count * float(item_bytes) / 2**30:.3g} GiB; this machine "

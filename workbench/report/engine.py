@@ -70,6 +70,7 @@ if TYPE_CHECKING:
     from ..references import FilterReference
 from .cache import (CacheEntryUnreadable, TaskCache, code_version, components_digest, save_arrays, task_key,
                     write_text_atomic)
+from .tables import TASK_STATUSES, _jsonable, _task_status, paper_time_table, task_time_table
 
 __all__ = ["resolve_filters", "resolve_trackers", "tracker_request", "tracker_papers", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
@@ -137,57 +138,6 @@ def judged_tasks(criteria: Callable[[Mapping], Sequence[Criterion]], results: Ma
     recorder = _ReadRecorder(results)
     judged = list(criteria(recorder))
     return judged, set(recorder.read)
-
-
-#: How a task of the time table got its result: run now, read from the cache (0 s), reused on the confirmation seed
-#: from the reported seed (a task declared ``seeded=False``: 0 s), or failed (its seconds were spent all the same).
-TASK_STATUSES = ("computed", "cached", "reused", "failed")
-
-
-def _task_status(entry: Mapping) -> str:
-    if entry.get("error"):
-        return "failed"
-    if entry.get("reused"):
-        return "reused"
-    return "cached" if entry.get("cached") else "computed"
-
-
-def _shares(seconds: Sequence[float]) -> list[float]:
-    """Percent shares of ``seconds`` in hundredths of a percent, by largest remainder: they sum to exactly 100 %
-    (in hundredths) when any second was spent, and every one is 0 when none was."""
-    total = float(sum(seconds))
-    if not total > 0.0:
-        return [0.0 for _ in seconds]
-    exact = [10_000.0 * s / total for s in seconds]
-    parts = [int(np.floor(e)) for e in exact]
-    for i in sorted(range(len(exact)), key=lambda i: (parts[i] - exact[i], i))[:10_000 - sum(parts)]:
-        parts[i] += 1
-    return [p / 100.0 for p in parts]
-
-
-def task_time_table(entries: Iterable[Mapping]) -> dict:
-    """The time table of a report's task entries (``PaperOutcome.tasks``: ``key, seconds, cached, error`` and, where
-    recorded, ``runs`` and ``reused``).
-
-    Returns ``{"computed_seconds", "counts", "rows"}``: ``rows`` holds one ``{task, runs, seconds, share_percent,
-    status}`` per entry, the largest first (ties in the entries' order); ``status`` is one of
-    :data:`TASK_STATUSES`.  A cached or reused task counts 0 s; the shares are of the seconds the tasks spent (the
-    computed and the failed ones), in hundredths of a percent, and sum to exactly 100 % (all 0 where every task was
-    cached).
-    """
-    entries = list(entries)
-    statuses = [_task_status(e) for e in entries]
-    seconds = [0.0 if st in ("cached", "reused") else max(float(e.get("seconds") or 0.0), 0.0)
-               for e, st in zip(entries, statuses)]
-    shares = _shares(seconds)
-    rows = [{"task": str(e.get("key")),
-             "runs": None if e.get("runs") is None else int(e["runs"]),
-             "seconds": s, "share_percent": sh, "status": st}
-            for e, st, s, sh in zip(entries, statuses, seconds, shares)]
-    order = sorted(range(len(rows)), key=lambda i: (-rows[i]["seconds"], i))
-    return {"computed_seconds": float(sum(seconds)),
-            "counts": {st: statuses.count(st) for st in TASK_STATUSES},
-            "rows": [rows[i] for i in order]}
 
 
 #: The formats every figure is saved in by default: PNG (shown on the paper's page) and SVG (linked from it).
@@ -434,19 +384,6 @@ class PaperOutcome:
     item_seconds: dict = field(default_factory=dict)
 
 
-def paper_time_table(outcome: PaperOutcome) -> dict:
-    """A paper's time table (:func:`task_time_table` of its tasks) with the paper's wall seconds and the seconds
-    spent outside the tasks: ``other_seconds`` by stage (figures and tables, criteria) and ``items``, each figure
-    and table with its seconds and their parts (``{what, seconds, parts}``, the largest first)."""
-    table = task_time_table(outcome.tasks)
-    table["paper_seconds"] = float(outcome.seconds)
-    table["other_seconds"] = {k: float(v) for k, v in outcome.stage_seconds.items()}
-    items = [{"what": str(k), "seconds": float(sum(parts.values())), "parts": {p: float(v) for p, v in parts.items()}}
-             for k, parts in outcome.item_seconds.items()]
-    table["items"] = sorted(items, key=lambda item: -item["seconds"])
-    return table
-
-
 @dataclass
 class ReportOutcome:
     """A report run: ``papers`` are the papers run now; ``saved`` the other papers found in ``out``."""
@@ -478,28 +415,6 @@ def _rel(path: Path | str | None, out: Path) -> str | None:
         return path.relative_to(out).as_posix()
     except ValueError:
         return str(path)
-
-
-def _jsonable(value, strict: bool = False):
-    """``value`` as plain JSON data (numpy scalars and arrays, tuples, paths converted; others as str).
-
-    With ``strict``, non-finite floats become ``None`` (standard JSON has no NaN or infinity).
-    """
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v, strict) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v, strict) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist(), strict)
-    if isinstance(value, np.generic):
-        return _jsonable(value.item(), strict)
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, float) and strict and not np.isfinite(value):
-        return None
-    if value is None or isinstance(value, (str, int, float, bool)):
-        return value
-    return str(value)
 
 
 def outcome_dict(outcome: PaperOutcome, out: Path) -> dict:

@@ -41,6 +41,7 @@ from markupsafe import Markup
 from ..criteria import VERDICTS, where_it_holds
 from ..plugins import PluginHost
 from .cache import distribution_versions, write_text_atomic
+from .tables import _jsonable, paper_time_table
 
 __all__ = ["write_index", "write_summary", "format_value", "human_value", "is_numeric_like", "page_name"]
 
@@ -247,24 +248,6 @@ def _tally(criteria) -> dict[str, int]:
     return counts
 
 
-def scoreboard_detail(c) -> tuple[str, str | None, int | None]:
-    """A criterion's detail for the scoreboard: ``(explanation, how the interval was computed, runs needed)``.
-
-    The scoreboard has columns for the numbers of the statistics sentence a criterion declares
-    (``Criterion.statistics``: ours, the interval and its method, the passing condition, the runs needed), so that
-    sentence is taken out of the detail (with a full stop right after it); ``method`` and ``min_n`` are the
-    record's own fields.  A detail that does not contain the sentence (or a record without one) comes back whole;
-    ``summary.json`` keeps every detail whole.
-    """
-    detail = c.detail or ""
-    if not c.statistics or c.statistics not in detail:
-        return detail, c.method, c.min_n
-    before, _, after = detail.partition(c.statistics)
-    after = after[1:] if after.startswith(".") else after
-    text = (before.rstrip(" ;") + (" " if before.strip() and after.strip() else "") + after.lstrip(" ;")).strip()
-    return text, c.method, c.min_n
-
-
 # -- sections ------------------------------------------------------------------------------------------------
 
 def published_number(v: Any) -> float | int | None:
@@ -321,8 +304,10 @@ def _scoreboard(p) -> Markup:
             verdict += "<br><span class='ind'>indicative (quick run)</span>"
             if c.quick_verdict == "met":
                 verdict += "<div class='would'>quick-run numbers pass</div>"
-        explanation, method, min_n = scoreboard_detail(c)
-        statement = _esc(c.text) + (f"<div class='detail'>{_esc(explanation)}</div>" if explanation else "")
+        # the record's fields fill the columns (n and the runs needed, the interval and its method, the threshold);
+        # its detail is the explanation in words
+        method, min_n = c.method, c.min_n
+        statement = _esc(c.text) + (f"<div class='detail'>{_esc(c.detail)}</div>" if c.detail else "")
         statement += "".join(
             f"<div class='pre {'ok' if p.holds else 'fail'}'>precondition {'holds' if p.holds else 'fails'}: "
             f"{_esc(p.name)}{f' ({_esc(p.detail)})' if p.detail else ''}</div>"
@@ -544,8 +529,6 @@ def _paper_page(p, out: Path, nav: dict) -> str:
 def _time_table(p) -> Markup:
     """The paper's time table, collapsed: each task (reported seed, unknowns' grid points, confirmation seed) with
     its runs, seconds, share of the paper's task compute and whether it was computed, cached, reused or failed."""
-    from .engine import paper_time_table
-
     table = paper_time_table(p)
     counts = table["counts"]
     errors = {str(t.get("key")): t.get("error", "") for t in p.tasks}
@@ -681,14 +664,14 @@ def _criterion_summary(c) -> dict:
 def write_summary(report, host: PluginHost) -> None:
     """Write ``report.out/summary.json`` (atomically): every paper's criteria, tables, figures and tasks.
 
-    Each paper carries ``task_times`` (:func:`workbench.report.engine.paper_time_table`: every task's runs,
+    Each paper carries ``task_times`` (:func:`workbench.report.tables.paper_time_table`: every task's runs,
     seconds, share of the paper's task compute and status).  Each criterion carries ``id, statement (and text),
-    ours, published, n, interval, threshold, verdict, indicative, met`` (bool, for older readers), ``replication``, ``detail``, ``extra`` and ``preconditions``
-    (each ``name, holds, detail, values``); a paper kept from an earlier run into the folder has
+    ours, published, n, interval, threshold, verdict, indicative, met`` (bool, for older readers), ``replication``,
+    the rest of its numbers as fields (``min_n, method, level, count, resamples``), ``statistics`` (the sentence
+    :attr:`~workbench.criteria.Criterion.statistics` makes of them), ``detail`` (the explanation in words), ``extra``
+    and ``preconditions`` (each ``name, holds, detail, values``); a paper kept from an earlier run into the folder has
     ``from_saved: true``.
     """
-    from .engine import _jsonable, paper_time_table
-
     summary = {
         "command": report.command,
         "seed": report.seed,

@@ -261,10 +261,9 @@ def builtin_trackers() -> dict:
     """The built-in trackers (distribution ``workbench``), by name: ``mofn``, ``gnn``, ``jipda``, ``jpda``,
     ``gm-phd``.  An installed third-party tracker is left out (the filter kit must not depend on what else is
     installed; a tracker has its own kit, :func:`workbench.testing.run_tracker_checks`)."""
-    from ..plugins import BUILTIN_DISTRIBUTION
-    from .kit import _host
+    from ..plugins import BUILTIN_DISTRIBUTION, load_host
 
-    host = _host()
+    host = load_host()
     return {name: spec for name, spec in host.trackers.items()
             if host.plugin_of("workbench_trackers", name).distribution == BUILTIN_DISTRIBUTION}
 

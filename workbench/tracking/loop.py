@@ -40,7 +40,21 @@ from ..models import MeasurementModel, MotionModel
 from ..specs import FilterSpec
 from ..types import Gaussian, InputError, Scan, Scans
 
-__all__ = ["Context", "Association", "Track", "run"]
+__all__ = ["Context", "Association", "Track", "run", "default_association"]
+
+#: The association :func:`run` uses where the caller names none, as a factory: registered by the module that defines
+#: it (:mod:`.single` registers :class:`~workbench.tracking.single.Direct` when it is imported, and the package
+#: imports it), so that the loop imports no role.
+_DEFAULT_ASSOCIATION: list[Callable[[], Any]] = []
+
+
+def default_association(factory: Callable[[], Any]) -> Callable[[], Any]:
+    """Register ``factory`` (called with no arguments, it returns an association) as :func:`run`'s default
+    association, replacing any earlier one; returns ``factory``."""
+    if not callable(factory):
+        raise InputError(f"a default association is registered as a factory (a class or callable), got {factory!r}")
+    _DEFAULT_ASSOCIATION[:] = [factory]
+    return factory
 
 
 @dataclass(frozen=True)
@@ -72,6 +86,8 @@ class Association(Protocol):
     # Optional: ``step(carry, motion, scan, k) -> carry``, predict and update at scan ``k`` through the filter's
     # fused ``FilterSpec.step``, the same records as ``predict`` then ``update``; :func:`run` calls it from scan 1 on
     # where the filter gives a step and the role has this method (:class:`~workbench.tracking.single.Direct`).
+    # Optional: ``single_target = True``, declaring that the filter's batch is the runs' (one item per run), which
+    # ``run(..., innovations=True)`` needs (:class:`~workbench.tracking.single.SingleTarget` declares it).
 
 
 @dataclass(frozen=True)
@@ -135,9 +151,10 @@ def run(filt: FilterSpec, scans: Scans, motion: MotionModel, model: MeasurementM
         and the association be a single-target one.
     """
     if association is None:
-        from .single import Direct
-
-        association = Direct()
+        if not _DEFAULT_ASSOCIATION:
+            raise InputError("run: no association given and none registered as the default (import "
+                             "workbench.tracking, whose single-target roles register Direct)")
+        association = _DEFAULT_ASSOCIATION[0]()
     if prior is not None and prior.batch != scans.batch:
         raise InputError(f"prior has batch {prior.batch} but the scans have batch {scans.batch}")
     if scans.cov is not None and "detection_covariance" not in filt.capabilities:
@@ -193,12 +210,11 @@ def _recording(filt: FilterSpec, association: Any, batch: int, steps: int, m: in
     import dataclasses
 
     from ..kalman_core import Innovations
-    from .single import SingleTarget
 
     if "innovations" not in filt.capabilities:
         raise InputError(f"filter {filt.name!r} does not record innovations (it lacks the innovations capability; "
                          f"the Kalman family and the IMM have it)")
-    if not isinstance(association, SingleTarget):
+    if getattr(association, "single_target", False) is not True:
         raise InputError(f"innovations=True needs a single-target association (Direct, Gated, NearestNeighbour), "
                          f"not {type(association).__name__}")
     record = Innovations(np.full((batch, steps, m), np.nan), np.full((batch, steps, m, m), np.nan),

@@ -26,7 +26,7 @@ import numpy as np
 from ..linalg import symmetrise
 from ..models import MeasurementModel, MotionModel
 from ..types import Gaussian, InputError, Scan
-from .loop import Context, Track
+from .loop import Context, Track, default_association
 
 __all__ = ["SingleTarget", "Carry", "RoleState", "GatedState", "NearestNeighbourState", "Direct", "Gated",
            "NearestNeighbour", "GATE_99", "radius_gate", "predicted_measurement", "nearest_candidate",
@@ -131,6 +131,9 @@ class SingleTarget:
 
     #: The class of this role's :class:`RoleState` (what :meth:`begin` must return, or a subclass of it).
     state_class: type[RoleState] = RoleState
+    #: Declared for :func:`~workbench.tracking.loop.run`: the filter's batch is the runs' (one item per run), so the
+    #: loop may record each update's innovations (``run(..., innovations=True)``).
+    single_target = True
 
     def record_shapes(self, ctx: Context, n: int) -> dict[str, tuple[tuple[int, ...], Any, Any]]:
         """``name -> (trailing shape, dtype, fill)`` of the role's per-step records."""
@@ -252,6 +255,10 @@ def radius_gate(scan: Scan, centre: np.ndarray, radius: float, dims: int | None 
                  pick(scan.snr), pick(scan.doppler), pick(scan.origin), time=scan.time, cov=cov,
                  clutter_density=pick(scan.clutter_density))
     return gated, keep
+
+
+#: :func:`~workbench.tracking.loop.run`'s default association (the loop imports no role).
+default_association(Direct)
 
 
 class Gated(SingleTarget):

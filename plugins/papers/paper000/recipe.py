@@ -858,13 +858,6 @@ def _fmt(values: Mapping[str, float]) -> str:
     return ", ".join(f"{k} {v:.0f}" for k, v in values.items())
 
 
-def _detail(prefix: str) -> str:
-    """A ``detail_fmt`` for :func:`criterion_from_runs`: ``prefix`` (literal) then the record's own statement."""
-    from workbench.criteria import RUNS_DETAIL
-
-    return prefix.replace("{", "{{").replace("}", "}}") + "; " + RUNS_DETAIL
-
-
 # Each statistic below is declared with its form over a batch of resamples (workbench.criteria.vectorised): the
 # same numbers, from the means over each resample's runs (given="means"), the resample counts ("counts") or the
 # resampled runs on axis 1 ("resamples"), so that the bootstrap evaluates its 2,000 resamples at once.
@@ -1152,21 +1145,21 @@ def _judged_criteria(results, rows, rcs: float, tag: str, where: str,
     out.append(criterion_from_runs(
         f"1{tag}", "Ordering C < B < A for both averages (mean over runs)" + where, six, _ordering, 1.0, ">",
         min_n=PROTOCOL_RUNS, published="C < B < A (221 < 291 < 332 m, 124 < 214 < 236 m)",
-        detail_fmt=_detail(means), threshold_text="min(B/C, A/B) > 1 for k = 1..100 and whole",
+        detail=means, threshold_text="min(B/C, A/B) > 1 for k = 1..100 and whole",
         replication=_replication(six, lambda *a: _ordering(*a) > 1.0), preconditions=(tracks,)))
     out.append(criterion_from_runs(
         f"2{tag}", "A/C >= 1.3 on the whole track" + where, (wa, wc), _a_over_c, 1.3, ">=", min_n=PROTOCOL_RUNS,
-        published=1.90, detail_fmt=_detail(f"whole: A {wa.mean():.0f} m, C {wc.mean():.0f} m; medians "
-                                           f"{np.median(wa):.0f} / {np.median(wc):.0f} m; lost A {lost['A']}, "
-                                           f"C {lost['C']}" + _with_ours(results, rcs, _a_over_c, "ac", rate)),
+        published=1.90, detail=(f"whole: A {wa.mean():.0f} m, C {wc.mean():.0f} m; medians "
+                                f"{np.median(wa):.0f} / {np.median(wc):.0f} m; lost A {lost['A']}, "
+                                f"C {lost['C']}" + _with_ours(results, rcs, _a_over_c, "ac", rate)),
         replication=_replication((wa, wc), lambda a, c: _a_over_c(a, c) >= 1.3), preconditions=(tracks_ac,)))
     out.append(criterion_from_runs(
         f"3{tag}", "Every method's k = 1..100 average is larger than its whole-track average" + where, six,
         _early_over_whole, 1.0, ">", min_n=PROTOCOL_RUNS, published="A 332/236, B 291/214, C 221/124 m",
-        detail_fmt=_detail(", ".join(f"{k}: {e.mean():.0f} vs {w.mean():.0f} m" for k, e, w in
-                                     (("A", ea, wa), ("B", eb, wb), ("C", ec, wc)))
-                           + "; statistic min over methods of (k=1..100 mean / whole mean)"
-                           + _with_ours(results, rcs, _early_over_whole, "six", rate)),
+        detail=(", ".join(f"{k}: {e.mean():.0f} vs {w.mean():.0f} m" for k, e, w in
+                          (("A", ea, wa), ("B", eb, wb), ("C", ec, wc)))
+                + "; statistic min over methods of (k=1..100 mean / whole mean)"
+                + _with_ours(results, rcs, _early_over_whole, "six", rate)),
         threshold_text="min over A, B, C of early / whole > 1",
         replication=_replication(six, lambda *a: _early_over_whole(*a) > 1.0), preconditions=(tracks,)))
     return out
@@ -1183,11 +1176,11 @@ def _method_c_criteria(results, rcs: float, tag: str, where: str) -> list[Criter
             f"4{tag}", f"N sweep non-increasing within noise (2 standard errors) and N_conv (within 5 % of "
             f"N = {int(ns[-1])}) in 300..800" + where, tuple(per_n), stat, (300.0, 800.0), "within",
             min_n=PROTOCOL_RUNS, published="N_conv ~ 600",
-            detail_fmt=_detail("E_avg (mean over runs): " + ", ".join(f"N={n}: {x.mean():.0f}" for n, x in
-                                                                        zip(ns, per_n))
-                               + "; medians: " + ", ".join(f"{np.median(x):.0f}" for x in per_n)
-                               + f"; the statistic is N_conv, {NOT_MONOTONE} when the sweep is not monotone within "
-                                 "noise; the sweep is run on the paper's protocol only (no replications)"),
+            detail=("E_avg (mean over runs): " + ", ".join(f"N={n}: {x.mean():.0f}" for n, x in
+                                                             zip(ns, per_n))
+                    + "; medians: " + ", ".join(f"{np.median(x):.0f}" for x in per_n)
+                    + f"; the statistic is N_conv, {NOT_MONOTONE} when the sweep is not monotone within "
+                      "noise; the sweep is run on the paper's protocol only (no replications)"),
             threshold_text="N_conv in [300, 800] and monotone"))
     elif primary:
         out.append(Criterion("4", "N sweep converges by N_conv in 300..800", "inconclusive", "no particle-count sweep"))
@@ -1201,9 +1194,9 @@ def _method_c_criteria(results, rcs: float, tag: str, where: str) -> list[Criter
             f"5{tag}", "|E_avg(R=2.5) - E_avg(R=1)| / E_avg(R=1) < 15 % and R = 2.5 km takes longer" + where,
             (w25, w1), _radius_difference, 0.15, "<", min_n=PROTOCOL_RUNS, published="negligible difference; 2.5 km "
             "costs more",
-            detail_fmt=_detail(f"whole E_avg {w25.mean():.0f} vs {w1.mean():.0f} m (medians {np.median(w25):.0f} / "
-                               f"{np.median(w1):.0f} m, lost {int(r25['lost'].sum())} / {int(r1['lost'].sum())}); "
-                               f"gated per scan {g25:.1f} vs {g1:.1f}; the replications judge the accuracy part"),
+            detail=(f"whole E_avg {w25.mean():.0f} vs {w1.mean():.0f} m (medians {np.median(w25):.0f} / "
+                    f"{np.median(w1):.0f} m, lost {int(r25['lost'].sum())} / {int(r1['lost'].sum())}); "
+                    f"gated per scan {g25:.1f} vs {g1:.1f}; the replications judge the accuracy part"),
             replication=_replication((w25, w1), lambda a, b: _radius_difference(a, b) < 0.15))
         out.append(_with_timing(crit, results))
         e25, m25 = np.asarray(r25["error"]), np.asarray(r25["m_error"])
@@ -1213,9 +1206,9 @@ def _method_c_criteria(results, rcs: float, tag: str, where: str) -> list[Criter
             f"6{tag}", "E_error < M_error at almost every k (>= 90 % of the scans with gated detections; N = 600)"
             + where, (e25, m25, e1, m1), _below_measurement, 0.9, ">=", min_n=PROTOCOL_RUNS,
             published="E_error below M_error throughout (Fig. 10)",
-            detail_fmt=_detail(f"fraction of scans with E < M (both curves means over runs): min over R = 2.5, 1 km "
-                               f"= {frac:.2f}; whole-track E_avg {w25.mean():.0f} / {w1.mean():.0f} m (50-400 m "
-                               "acceptable)"),
+            detail=(f"fraction of scans with E < M (both curves means over runs): min over R = 2.5, 1 km "
+                    f"= {frac:.2f}; whole-track E_avg {w25.mean():.0f} / {w1.mean():.0f} m (50-400 m "
+                    "acceptable)"),
             replication=_replication((e25, m25, e1, m1), lambda *a: _below_measurement(*a) >= 0.9)))
     else:
         for cid in ("5", "6"):

@@ -40,7 +40,7 @@ from typing import Mapping
 
 import numpy as np
 
-from workbench.criteria import RUNS_DETAIL, COUNTS_DETAIL, DeclaredUnknown, Precondition, binomial_interval, \
+from workbench.criteria import DeclaredUnknown, Precondition, binomial_interval, \
     bootstrap_interval, criterion_from_counts, criterion_from_runs, judge_across, replication_rate, vectorised
 from workbench.metrics import track_gospa
 
@@ -1574,10 +1574,6 @@ TABLES = (
 # -- criteria ---------------------------------------------------------------------------------------
 
 
-def _detail(prefix: str, fmt: str) -> str:
-    return prefix.replace("{", "{{").replace("}", "}}") + "; " + fmt
-
-
 def _replication(samples, holds) -> tuple[int, int] | None:
     n = np.asarray(samples[0] if isinstance(samples, tuple) else samples).shape[0]
     if n < 2 * PROTOCOL_RUNS:
@@ -1623,7 +1619,7 @@ def c1_criterion(before_false: np.ndarray, after_false: np.ndarray, post: np.nda
                                     f"{min_false}", {"needs": min_false, "has": total})
     crit = criterion_from_runs(
         "1", "mean false-track removal rate in simulation is in 60-95 % (paper 78 %)", sums, _removal_ratio,
-        (0.60, 0.95), "within", min_n=MIN_RUNS["1"], published="78 %", detail_fmt=_detail(text, RUNS_DETAIL),
+        (0.60, 0.95), "within", min_n=MIN_RUNS["1"], published="78 %", detail=text,
         threshold_text="removal rate (ratio of sums) within [0.60, 0.95]",
         replication=_replication(sums, _c1_holds), preconditions=(population_holds,))
     extra = dict(crit.extra, false_per_ping_before=mean if np.isfinite(mean) else None,
@@ -1701,15 +1697,14 @@ def _judge(b: TrackCounts, a: TrackCounts, post: np.ndarray, label: str, others:
     out.append(criterion_from_counts(
         "2", "after removal the target holds a confirmed track for >= 80 % of the pings after initiation in >= 90 % "
              "of runs", s["held80_after"], s["runs"], 0.90, ">=", min_n=MIN_RUNS["2"], published=">= 90 % of runs",
-        detail_fmt=_detail(f"{label}; before removal {_share_text(s['held80_before'], s['runs'])}" + cap + others[1],
-                           COUNTS_DETAIL),
+        detail=f"{label}; before removal {_share_text(s['held80_before'], s['runs'])}" + cap + others[1],
         threshold_text="share of runs >= 0.90", replication=_replication(cont, _c2_holds)))
     sq = (s["sq_before"], s["sq_after"])
     out.append(criterion_from_runs(
         "3", "target-track RMSE after removal <= RMSE before", sq, _rmse_diff, 0.0, "<=", min_n=MIN_RUNS["3"],
         published="after <= before",
-        detail_fmt=_detail(f"{label}; RMSE after minus before on the {s['pairs']} (run, ping) pairs "
-                           f"held in both ({_f(s['rmse_after'])} vs {_f(s['rmse_before'])})" + others[2], RUNS_DETAIL),
+        detail=f"{label}; RMSE after minus before on the {s['pairs']} (run, ping) pairs "
+               f"held in both ({_f(s['rmse_after'])} vs {_f(s['rmse_before'])})" + others[2],
         threshold_text="RMSE after - RMSE before <= 0", replication=_replication(sq, _c3_holds)))
     return out
 

@@ -736,11 +736,8 @@ def _replicate(samples: tuple, statistic, holds) -> tuple[int, int]:
 
 
 def _criterion(cid, text, samples, statistic, threshold, direction, holds, detail_extra="", **kw) -> Criterion:
-    crit = criterion_from_runs(cid, text, samples, statistic, threshold, direction, min_n=MIN_RUNS,
-                               replication=_replicate(samples, statistic, holds), **kw)
-    if detail_extra:
-        crit = replace(crit, detail=f"{crit.detail}. {detail_extra}")
-    return crit
+    return criterion_from_runs(cid, text, samples, statistic, threshold, direction, min_n=MIN_RUNS,
+                               replication=_replicate(samples, statistic, holds), detail=detail_extra, **kw)
 
 
 def _judge_map(res: Mapping[str, np.ndarray], filt: str, gated: str, restart: int, prefix: str = "",

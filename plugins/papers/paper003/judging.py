@@ -49,6 +49,7 @@ import numpy as np
 from workbench.criteria import Criterion, Precondition, bootstrap_interval, criterion_from_runs, \
     equivalence_band, judge, judge_across, judge_equivalent, reference_converged, vectorised
 
+from .reading import REFERENCE, delta_key, diag, filters_in, mc
 from .scenario import DELTA, LEVELS, NOMINAL, READINGS, case_name
 
 __all__ = ["criteria", "checks", "MIN_RUNS", "MIN_REF_RUNS", "MIN_TIMED_RUNS", "MIN_REPEATS", "DEGENERATE_RATIO",
@@ -80,12 +81,6 @@ CRPF_PARTICLES = np.array([100.0, 300.0, 500.0])
 SR_PAIRS = (("ukf", "sr-ukf"), ("cdkf", "sr-cdkf"))
 
 
-def _recipe():
-    from . import recipe  # the reading helpers live with the tasks that write the results
-
-    return recipe
-
-
 def _suffix(reading: str) -> str:
     return "" if reading == "rad" else f"-{reading}"
 
@@ -96,14 +91,14 @@ def _unevaluable(cid: str, text: str, why: str) -> Criterion:
 
 def _runs(results, reading: str, names, level: str | None = None) -> list[np.ndarray] | np.ndarray:
     """Per-run time-averaged MSE ``(runs, len(names))`` of the mismatched runs, per level (a list) or one level."""
-    r = _recipe()
     levels = [level] if level is not None else list(LEVELS)
-    out = [np.stack([r.mc(results, case_name(reading, lv), n)["run_mse"] for n in names], axis=1) for lv in levels]
+    out = [np.stack([mc(results, case_name(reading, lv), n)["run_mse"] for n in names], axis=1) for lv in levels]
     return out[0] if level is not None else out
 
 
 def _with_detail(c: Criterion, text: str) -> Criterion:
-    return replace(c, detail=f"{text} {c.detail}")
+    """``c`` with ``text`` put before its explanation (the numbers stay the record's fields)."""
+    return replace(c, detail=" ".join(t for t in (text, c.detail) if t))
 
 
 # The statistics are declared with their form over a batch of resamples (workbench.criteria.vectorised): the same
@@ -139,7 +134,7 @@ _monotone_levels = vectorised(_monotone_levels_one, _monotone_levels_many, given
 
 def _c1(results, reading: str) -> Criterion:
     cid, text = "C1" + _suffix(reading), f"MSE(L1) < MSE(L2) < MSE(L3) for every filter ({reading} reading, mismatched)"
-    names = _recipe().filters_in(results, reading)
+    names = filters_in(results, reading)
     if not names:
         return _unevaluable(cid, text, "no filter ran at every level")
     levels = _runs(results, reading, names)
@@ -199,7 +194,7 @@ def _c2(results, reading: str) -> Criterion:
     cid = "C2" + _suffix(reading)
     text = (f"min(MSE_CDKF, MSE_SR-CDKF) <= MSE_UKF-family <= MSE_EKF at >= 2 of 3 levels, 5 % margin "
             f"({reading} reading)")
-    have = _recipe().filters_in(results, reading)
+    have = filters_in(results, reading)
     miss = [n for n in KALMAN_TYPE if n not in have]
     if miss:
         return _unevaluable(cid, text, "missing " + ", ".join(miss))
@@ -280,16 +275,15 @@ def _c2(results, reading: str) -> Criterion:
 def _check_sr(results, reading: str) -> dict:
     """The brief's criterion 3 as a check: the SR forms' MSE equals the full forms' (relative difference < 1e-6
     with no fallbacks, else < 1 %), on the same runs at every level."""
-    r = _recipe()
-    have = r.filters_in(results, reading)
+    have = filters_in(results, reading)
     names = ("ukf", "sr-ukf", "cdkf", "sr-cdkf")
     check = "SR-X vs X relative MSE difference < 1e-6 with no fallbacks, otherwise < 1 %"
     miss = [n for n in names if n not in have]
     if miss:
         return {"check": check, "reading": reading, "value": None, "limit": None, "holds": None, "events": None,
                 "detail": "not evaluable: missing " + ", ".join(miss)}
-    events = sum(r.diag(r.mc(results, case_name(reading, lv), sr), "downdate_fallbacks")
-                 + r.diag(r.mc(results, case_name(reading, lv), base), "cholesky_jitter")
+    events = sum(diag(mc(results, case_name(reading, lv), sr), "downdate_fallbacks")
+                 + diag(mc(results, case_name(reading, lv), base), "cholesky_jitter")
                  for lv in LEVELS for base, sr in SR_PAIRS)
     limit = 1e-6 if events == 0 else 1e-2
     worst, where = 0.0, ""
@@ -321,8 +315,7 @@ def checks(results: Mapping) -> list[dict]:
 def _c4_level(results, reading: str, level: str) -> Criterion:
     cid = f"C4-{level}" + _suffix(reading)
     text = f"MSE_CRPF-100 <= the best Kalman-type MSE at {level} ({reading} reading, mismatched)"
-    r = _recipe()
-    have = r.filters_in(results, reading)
+    have = filters_in(results, reading)
     miss = [n for n in ("crpf-100",) + KALMAN_TYPE if n not in have]
     if miss:
         return _unevaluable(cid, text, "missing " + ", ".join(miss))
@@ -399,7 +392,8 @@ def _c4_level(results, reading: str, level: str) -> Criterion:
               f"(the reference's own verdict: {ref_verdict}); CRPF-100 on the same runs {crpf_same:.4g}.{why}")
     if not preconditions:  # the verdict does not rest on the reference: its convergence is told, not required
         detail += f" Reference convergence (not needed for this verdict): {converged.text()}."
-    return replace(c, verdict=verdict, detail=f"{detail} {c.detail}", preconditions=preconditions,
+    return replace(c, verdict=verdict, detail=" ".join(t for t in (detail, c.detail) if t),
+                   preconditions=preconditions,
                    extra={**c.extra, "reference": {"ratio": ref_ratio, "interval": list(ref_interval), "n": R,
                                                    "verdict": ref_verdict, "interval90": list(ref_iv90),
                                                    "equivalent": ref_equivalent,
@@ -408,8 +402,7 @@ def _c4_level(results, reading: str, level: str) -> Criterion:
 
 def _converged(results, case: str, ref_runs: np.ndarray) -> Precondition:
     """The precondition "reference converged" at ``case``: the reference against its 4N run on the same runs."""
-    r = _recipe()
-    particles = int(r.REFERENCE["configure"]["particles"])
+    particles = int(REFERENCE["configure"]["particles"])
     check = results.get(f"reference4n/{case}")
     if check is None:
         return Precondition("reference converged", False, f"no run of the reference with 4N = {4 * particles} "
@@ -423,7 +416,7 @@ def _converged(results, case: str, ref_runs: np.ndarray) -> Precondition:
 def _c4_n(results, reading: str) -> Criterion:
     cid = "C4-N" + _suffix(reading)
     text = f"MSE decreases from N = 100 to 300 to 500 at every level ({reading} reading)"
-    have = _recipe().filters_in(results, reading)
+    have = filters_in(results, reading)
     miss = [n for n in CRPF_FILTERS if n not in have]
     if miss:
         return _unevaluable(cid, text, "missing " + ", ".join(miss))
@@ -547,7 +540,7 @@ class _AtDelta(abc.Mapping):
         parts = key.split("/")
         if (parts[0] == "mc" and len(parts) == 4 and parts[1] in self._cases and parts[2] in CRPF_FILTERS
                 and parts[3] == "mismatched" and self._value != DELTA.primary):
-            sweep = self._results[_recipe().delta_key(self._reading, self._value, parts[2])]
+            sweep = self._results[delta_key(self._reading, self._value, parts[2])]
             prefix = parts[1] + ":"
             return _first_runs({k[len(prefix):]: v for k, v in sweep.items() if k.startswith(prefix)}, self._k)
         res = self._results[key]
@@ -565,7 +558,7 @@ class _AtDelta(abc.Mapping):
 def delta_runs(results: Mapping, reading: str) -> int | None:
     """The runs the grid of delta was judged on for ``reading`` (from the ``delta/`` tasks), or None where a grid
     value's CRPF rows are missing (the report then judges no criterion across delta)."""
-    names = [n for n in _recipe().filters_in(results, reading) if n in CRPF_FILTERS]
+    names = [n for n in filters_in(results, reading) if n in CRPF_FILTERS]
     if not names:
         return None
     runs = set()
@@ -573,7 +566,7 @@ def delta_runs(results: Mapping, reading: str) -> int | None:
         if value == DELTA.primary:
             continue
         for n in names:
-            res = results.get(_recipe().delta_key(reading, value, n))
+            res = results.get(delta_key(reading, value, n))
             if res is None:
                 return None
             runs |= {int(res[f"{case_name(reading, lv)}:runs"]) for lv in LEVELS}
@@ -588,7 +581,7 @@ def _across_delta(results: Mapping, reading: str, judged: list[Criterion]) -> li
         return judged
     suffix = _suffix(reading)
     ids = {cid + suffix for cid in DELTA_CRITERIA}
-    main_runs = len(_runs(results, reading, ("crpf-100",), "L1")) if "crpf-100" in _recipe().filters_in(
+    main_runs = len(_runs(results, reading, ("crpf-100",), "L1")) if "crpf-100" in filters_in(
         results, reading) else None
     at: dict[float, dict[str, Criterion]] = {}
     for value in DELTA.grid:

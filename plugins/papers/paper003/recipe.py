@@ -38,6 +38,8 @@ from workbench.models import random_walk_velocity
 from workbench.types import InputError, Scans, Truth
 
 from . import judging
+from .reading import (REFERENCE, REFERENCE_4N, cases_of, delta_key, filters_in, mc,  # noqa: F401 - read here
+                      mse, timing)
 from .judging import CRPF_FILTERS, KALMAN_TYPE, SR_PAIRS  # noqa: F401 - the filter groups the criteria use
 from .scenario import (DELTA, DT, LEVELS, LOST_FACTOR, NOMINAL, P0, PAPER, READINGS, SENSOR, STREAM, X0,  # noqa: F401
                        XHAT0, case_name, filter_models, level_sigmas, lost_threshold, make_case, no_measurement_rms,
@@ -50,11 +52,6 @@ GRID_SIGMA_A = LEVELS[NOMINAL][2]  # the grid varies the measurement noise only 
 DEFAULT_FILTERS = ("ekf", "ukf", "cdkf", "sr-ukf", "sr-cdkf", "crpf-100", "crpf-300", "crpf-500")
 CRPF_PARTICLES = (100, 300, 500)
 
-#: The near-optimal reference: the built-in bootstrap PF with 5,000 particles and the level's true models.
-REFERENCE = {"label": "pf-5000 (true noise)", "filter": "sir", "configure": {"particles": 5000}}
-#: The reference's convergence check: the same PF with 4 x the particles, on the same runs (common random numbers).
-REFERENCE_4N = {"label": "pf-20000 (true noise)", "filter": "sir",
-                "configure": {"particles": 4 * REFERENCE["configure"]["particles"]}}
 #: The levels at which criterion 4 reads the reference, hence where its convergence is checked.
 REFERENCE_CHECK_LEVELS = ("L2", "L3")
 #: The previous reconstruction of the CRPF (fixed sigma^2 = kappa / N^(2/n) with the dwna shape, the plain norm,
@@ -334,11 +331,6 @@ def tuning_label(sigma0: float, delta: float) -> str:
     return f"crpf-100 sigma0={sigma0:g} delta={delta:g}"
 
 
-def delta_key(reading: str, value: float, name: str) -> str:
-    """The task key of ``name`` (a CRPF) with delta = ``value`` on the first ``delta_runs`` runs of ``reading``."""
-    return f"delta/{reading}/{value:g}/{name}"
-
-
 GRID_CASES = tuple(make_case(grid_case(st, sr), (st, sr, GRID_SIGMA_A)) for st in GRID_THETA for sr in GRID_R)
 CASES = {reading: reading_cases(reading) for reading in READINGS}
 
@@ -408,47 +400,6 @@ def tasks(options: RecipeOptions) -> list[Task]:
 
 
 # -- reading results ------------------------------------------------------------------------------------
-
-
-def cases_of(reading: str) -> list[str]:
-    return [case_name(reading, lv) for lv in LEVELS]
-
-
-def filters_in(results: Mapping, reading: str = "rad") -> list[str]:
-    """Filter names with a mismatched result at every level of ``reading``, in task order."""
-    names = []
-    for key in results:
-        parts = key.split("/")
-        if parts[0] == "mc" and len(parts) == 4 and parts[3] == "mismatched" and parts[2] not in names:
-            names.append(parts[2])
-    return [n for n in names if all(f"mc/{c}/{n}/mismatched" in results for c in cases_of(reading))]
-
-
-def mc(results: Mapping, case: str, name: str, variant: str = "mismatched") -> Mapping[str, np.ndarray]:
-    """A filter's summaries on a case; ``variant="matched"`` falls back to the mismatched result where the two
-    coincide (L2, or a filter that reads no noise statistics)."""
-    if variant == "matched" and not case.endswith(NOMINAL):
-        res = results.get(f"mc/{case}/{name}/matched")
-        if res is not None and "same_as_mismatched" not in res:
-            return res
-    return results[f"mc/{case}/{name}/mismatched"]
-
-
-def mse(results, case, name, variant="mismatched") -> float:
-    return float(np.mean(mc(results, case, name, variant)["mse_t"]))
-
-
-def diag(res: Mapping, key: str) -> float:
-    names = [str(n) for n in res.get("diag_names", [])]
-    return float(res["diag_values"][names.index(key)]) if key in names else 0.0
-
-
-def timing(results, name) -> tuple[float, float]:
-    """(un-batched median seconds per run, batched median seconds per run) of the warmed-up timing task."""
-    res = results.get(f"timing/{name}")
-    if res is None:
-        return np.nan, np.nan
-    return float(np.median(res["per_run_s"])), float(np.median(res["batched_per_run_s"]))
 
 
 def _size(results) -> str:
