@@ -169,15 +169,21 @@ def neighbours(rows: np.ndarray, cols: np.ndarray, grid: HoughGrid, half_rho: in
     row ``n_rho - 1 - row`` of the last column; likewise column ``n_theta`` is column 0 flipped.
     Shapes: ``(C,) -> (C, (2 half_rho + 1) (2 half_theta + 1))``.
     """
+    return _neighbour_cells(rows, cols, grid.n_rho, grid.n_theta, half_rho, half_theta)
+
+
+def _neighbour_cells(rows: np.ndarray, cols: np.ndarray, n_rho: int, n_theta: int, half_rho: int,
+                     half_theta: int) -> np.ndarray:
+    """:func:`neighbours` on a grid of ``n_rho x n_theta`` cells."""
     dr, dc = np.meshgrid(np.arange(-half_rho, half_rho + 1), np.arange(-half_theta, half_theta + 1), indexing="ij")
     r = rows[:, None] + dr.ravel()[None, :]
     c = cols[:, None] + dc.ravel()[None, :]
-    wrap = (c < 0) | (c >= grid.n_theta)
+    wrap = (c < 0) | (c >= n_theta)
     # (rho, theta) == (-rho, theta +- pi): flip the row, shift the column by n_theta
-    r = np.where(wrap, grid.n_rho - 1 - r, r)
-    c = np.mod(c, grid.n_theta)
-    inside = (r >= 0) & (r < grid.n_rho)
-    return np.where(inside, r * grid.n_theta + c, -1)
+    r = np.where(wrap, n_rho - 1 - r, r)
+    c = np.mod(c, n_theta)
+    inside = (r >= 0) & (r < n_rho)
+    return np.where(inside, r * n_theta + c, -1)
 
 
 def _max_rows(values: np.ndarray, half: int) -> np.ndarray:
@@ -209,6 +215,18 @@ def peak_cells(support: np.ndarray, votes: np.ndarray, v_min: int) -> np.ndarray
     if votes.size == 0:
         return np.zeros(0, dtype=np.intp)
     top = int(votes.max()) + 1
+    n_rho, n_theta = support.shape
+    cand = np.flatnonzero(support >= v_min)  # the only cells that can be peaks
+    if 36 * cand.size <= support.size:
+        # few candidates: each compared with its 3 x 3 neighbourhood (:func:`neighbours`, the seam and the rows
+        # outside the grid as the dense filter below treats them), the same decisions without a pass over
+        # the grid
+        nb = _neighbour_cells(*np.divmod(cand, n_theta), n_rho, n_theta, 1, 1)
+        nb = np.where(nb >= 0, nb, cand[:, None])  # outside the grid: the cell itself, never above itself
+        s_flat, v_flat = support.ravel(), votes.ravel()
+        key = s_flat[nb].astype(np.int64) * top + v_flat[nb].astype(np.int64)
+        own = s_flat[cand].astype(np.int64) * top + v_flat[cand].astype(np.int64)
+        return cand[own >= key.max(axis=1)]
     dtype = np.min_scalar_type(int(support.max()) * top + top)
     # score = support + votes / (max votes + 1), ordered as support * (max votes + 1) + votes
     key = support.astype(dtype)
@@ -238,6 +256,13 @@ def similar_cells(flat_b: np.ndarray, flat_a: np.ndarray, grid: HoughGrid, half_
     """:func:`similar_to` on flat cell indices ``(len(b),) -> (len(b),)`` bool."""
     if len(flat_a) == 0 or len(flat_b) == 0:
         return np.zeros(len(flat_b), dtype=bool)
+    width = (2 * int(half_rho) + 1) * (2 * int(half_theta) + 1)
+    if int(half_theta) < grid.n_theta and 4 * len(flat_b) * width <= grid.n_rho * grid.n_theta:
+        # few b cells: look their neighbourhoods up among the a cells (:func:`neighbours`: the same cells as
+        # the dilation below, across the seam), without a pass over the grid
+        rows_b, cols_b = np.divmod(np.asarray(flat_b, dtype=np.intp), grid.n_theta)
+        nb = neighbours(rows_b, cols_b, grid, int(half_rho), int(half_theta))
+        return (_in_sorted(nb, _sorted_unique(np.asarray(flat_a, dtype=np.intp))) & (nb >= 0)).any(axis=1)
     mark = np.zeros(grid.n_rho * grid.n_theta, dtype=bool)
     mark[flat_a] = True
     near = _max_cols_seam(_max_rows(mark.reshape(grid.shape), int(half_rho)), min(int(half_theta), grid.n_theta))

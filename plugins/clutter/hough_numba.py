@@ -217,12 +217,12 @@ def add_votes(counts, rows, which, n_theta, add):
 
 @numba.njit(cache=True)
 def accumulate(n_pings, votes, counts):
-    """``n_pings += counts > 0``, ``votes += counts`` in one pass (flat arrays)."""
+    """``n_pings += counts > 0``, ``votes += counts`` in one pass (flat arrays; branch-free, so that the loop
+    vectorises: adding 0 where a cell has no vote changes nothing)."""
     for c in range(counts.shape[0]):
         v = counts[c]
-        if v:
-            n_pings[c] += 1
-            votes[c] += v
+        n_pings[c] += v > 0
+        votes[c] += v
 
 
 @numba.njit(cache=True)

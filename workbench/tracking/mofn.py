@@ -39,7 +39,11 @@ Every step is vectorised across the live tracks: gating (dense below ``dense_lim
 pairs from a grid over the measurement space with each track's exact gate bounding box,
 :func:`gated_pairs`), the assignment (:func:`greedy_assign`, rounds of mutually cheapest pairs), the M-of-N
 state machine (:func:`mofn_step`, bit histories) and the filter states (one ``take`` and one ``join`` per
-ping and run).
+ping and run).  Where the filter draws no random numbers, the assignment is the greedy one and the scans carry no
+covariances of their own (:meth:`MofN.batched`), the runs are batched too: every run's live tracks are one filter
+batch (one ``predict``, ``update`` and ``init`` per ping for all runs) and gating, assignment and initiation take
+all runs' pairs at once, never a pair across runs, so each run's numbers are those of :func:`tracker_step` on its
+own, bit for bit.
 
 The tracker never sees ``origin``; metrics (:mod:`workbench.metrics`) compare its log with the truth
 afterwards.  Every Monte Carlo run keeps its own tracks and its own random stream (track management is per
@@ -65,10 +69,11 @@ from ..rng import generator
 from ..specs import FilterSpec
 from ..types import Gaussian, InputError, Scan, Scans
 from .assign import greedy_assign
-from .gate import detection_covariance, gated_pairs, measurement_covariance, measurement_view
-from .initiation import initial_state, initiate, mofn_step
+from .gate import (_whiten, detection_covariance, gate_covariance, gated_pairs, measurement_covariance,
+                   measurement_view, position_covariance)
+from .initiation import initial_state, initiate, mofn_step, rectangular_pairs, speed_course_prior, two_point_prior
 from .loop import Context
-from .records import PingTracks, TrackerConfig, TrackerState, TrackLog, TrackTable
+from .records import CONFIRMED, TENTATIVE, PingTracks, TrackerConfig, TrackerState, TrackLog, TrackTable
 
 __all__ = ["tracker_step", "MofN", "track_runs", "run_tracker", "Assigner"]
 
@@ -166,14 +171,116 @@ def tracker_step(st: TrackerState, positions: np.ndarray, filt: FilterSpec, moti
                         None if init_cov is None else init_cov[~used]), out
 
 
+def _same_run_pairs(run_a: np.ndarray, run_b: np.ndarray, B: int, limit: int):
+    """The pairs ``(i, j)`` of items of the same run, ``run_a[i] == run_b[j]`` (both sorted by run), in blocks of
+    whole runs of at most about ``max(limit, 2^20)`` pairs each; a run with more than ``limit`` pairs of its own
+    comes alone, flagged (``big``), for the caller's spatial-grid path.  Yields ``i, j, big``."""
+    na, nb = np.bincount(run_a, minlength=B), np.bincount(run_b, minlength=B)
+    start_a, start_b = np.cumsum(na) - na, np.cumsum(nb) - nb
+    size = na * nb
+    block = max(int(limit), 1 << 20)
+    lo = 0
+    while lo < B:
+        if size[lo] > limit:
+            yield (np.arange(start_a[lo], start_a[lo] + na[lo]), np.arange(start_b[lo], start_b[lo] + nb[lo]),
+                   True)
+            lo += 1
+            continue
+        hi, total = lo, 0
+        while hi < B and size[hi] <= limit and total + size[hi] <= block:
+            total += size[hi]
+            hi += 1
+        hi = max(hi, lo + 1)
+        a = np.arange(start_a[lo], start_a[hi - 1] + na[hi - 1])
+        per = nb[run_a[a]]
+        i = np.repeat(a, per)
+        j = np.repeat(start_b[run_a[a]] - (np.cumsum(per) - per), per) + np.arange(i.size)
+        yield i, j, False
+        lo = hi
+
+
+def _gated_pairs_runs(est: Gaussian, track_run: np.ndarray, positions: np.ndarray, det_run: np.ndarray,
+                      zm: np.ndarray, model: MeasurementModel, config: TrackerConfig, B: int):
+    """:func:`gated_pairs` of every run at once, tracks and detections grouped by run (``track_run``,
+    ``det_run``), pairs only within a run: the same pairs and ``d2`` as one call per run (the dense formula for a
+    run of at most ``dense_limit`` pairs, :func:`gated_pairs` itself for a larger one).  Indices are global."""
+    K, M = est.batch, zm.shape[0]
+    e = np.zeros(0, dtype=np.intp)
+    if K == 0 or M == 0:
+        return e, e, np.zeros(0)
+    zhat = model.h(est.mean)
+    S, _ = gate_covariance(est, model, config)
+    chol = np.linalg.cholesky(S)
+    out_r, out_c, out_d = [], [], []
+    for i, j, big in _same_run_pairs(track_run, det_run, B, config.dense_limit):
+        if i.size == 0 or j.size == 0:
+            continue
+        if big:  # one run of many pairs: the spatial grid of gated_pairs
+            r, c, d2 = gated_pairs(Gaussian.trusted(est.mean[i], est.cov[i]), positions[j], zm[j], model, config)
+            out_r.append(i[r])
+            out_c.append(j[c])
+            out_d.append(d2)
+            continue
+        # the dense computation of gated_pairs, pair by pair: nu = wrap(z - h(x-)), w = L^-1 nu, d2 = |w|^2
+        nu = model.residual(zm[j], zhat[i])
+        w = _whiten(chol[i], nu)
+        d2 = np.einsum("pi,pi->p", w, w)
+        inside = d2 <= config.gate
+        out_r.append(i[inside])
+        out_c.append(j[inside])
+        out_d.append(d2[inside])
+    if not out_r:
+        return e, e, np.zeros(0)
+    return np.concatenate(out_r), np.concatenate(out_c), np.concatenate(out_d)
+
+
+def _rectangular_pairs_runs(a: np.ndarray, run_a: np.ndarray, b: np.ndarray, run_b: np.ndarray, box: float,
+                            dense_limit: int, B: int):
+    """:func:`rectangular_pairs` of every run at once (``a``, ``b`` grouped by run), pairs only within a run:
+    the same pairs and Chebyshev distances; indices are global."""
+    e = np.zeros(0, dtype=np.intp)
+    out_i, out_j, out_d = [], [], []
+    for i, j, big in _same_run_pairs(run_a, run_b, B, dense_limit):
+        if i.size == 0 or j.size == 0:
+            continue
+        if big:
+            ii, jj, d = rectangular_pairs(a[i], b[j], box, dense_limit)
+            out_i.append(i[ii])
+            out_j.append(j[jj])
+            out_d.append(d)
+            continue
+        d = np.max(np.abs(a[i] - b[j]), axis=-1)
+        inside = d <= box
+        out_i.append(i[inside])
+        out_j.append(j[inside])
+        out_d.append(d[inside])
+    if not out_i:
+        return e, e, np.zeros(0)
+    return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_d)
+
+
+@dataclass
+class _Runs:
+    """Every run's live tracks in one table (the filter's batch), grouped by run, each run's tracks in the order
+    :func:`tracker_step` keeps them; and every run's initiation candidates, grouped by run likewise."""
+
+    run: np.ndarray  # (K,) each track's run
+    table: TrackTable
+    candidates: np.ndarray  # (P, 2)
+    candidate_run: np.ndarray  # (P,)
+    next_id: np.ndarray  # (B,) each run's next free identity
+    predicted: Any = None  # the live tracks' filter state predicted to the coming ping, or None
+
+
 @dataclass
 class _MofNCarry:
     ctx: Context
-    states: list  # per run: its TrackerState
+    states: list  # per run: its TrackerState (the per-run path)
     predicted: list  # per run: its live tracks' filter state predicted to the coming ping, or None
     rngs: list
     rows: dict
     motion: MotionModel
+    runs: _Runs | None = None  # every run at once (the batched path, see MofN.batched)
 
 
 class MofN:
@@ -202,17 +309,149 @@ class MofN:
         _check_filter(ctx.filter, self.config, own_cov=first.cov is not None)
         rows: dict[str, list] = {"run": [], "ping": [], "track_id": [], "status": [], "hit": [], "mean": [],
                                  "cov": []}
-        return _MofNCarry(ctx, [initial_state(ctx.motion.dim) for _ in range(ctx.batch)], [None] * ctx.batch,
-                          [generator(self.seed, *self.key, b) for b in range(ctx.batch)], rows, ctx.motion)
+        carry = _MofNCarry(ctx, [initial_state(ctx.motion.dim) for _ in range(ctx.batch)], [None] * ctx.batch,
+                           [generator(self.seed, *self.key, b) for b in range(ctx.batch)], rows, ctx.motion)
+        if self.batched(ctx.filter, first):
+            empty = initial_state(ctx.motion.dim)
+            carry.runs = _Runs(np.zeros(0, dtype=np.int64), empty.table, empty.candidates,
+                               np.zeros(0, dtype=np.int64), np.zeros(ctx.batch, dtype=np.int64))
+        return carry
+
+    def batched(self, filt: FilterSpec, first: Scan) -> bool:
+        """Whether every run's tracks go through the filter as one batch (one predict, update and init call per
+        ping for all runs, gating and assignment of all runs at once, pairs never across runs): for a filter that
+        draws no random numbers (a stochastic one draws from each run's own stream, so its runs stay apart), the
+        greedy assignment (a subclass's own ``assign`` keeps the per-run path) and scans without their own
+        covariances.  The numbers are those of the per-run path, bit for bit (``tests/test_mofn_batched.py``)."""
+        return ("stochastic" not in filt.capabilities and first.cov is None
+                and getattr(type(self).assign, "__func__", type(self).assign) is MofN.assign)
 
     def predict(self, carry: _MofNCarry, motion: MotionModel, k: int) -> _MofNCarry:
         carry.motion = motion
+        if carry.runs is not None:
+            table = carry.runs.table
+            carry.runs.predicted = (carry.ctx.filter.predict(table.state, motion, carry.ctx.rng) if table.size
+                                    else None)
+            return carry
         carry.predicted = [_predict_tracks(st, carry.ctx.filter, motion, carry.rngs[b])
                            for b, st in enumerate(carry.states)]
         return carry
 
+    def _update_runs(self, carry: _MofNCarry, scan: Scan, k: int) -> _MofNCarry:
+        """One ping of every run at once (see :meth:`batched`): :func:`tracker_step` with the live tracks of all
+        runs as one batch, gating, assignment and initiation pairs within each run only."""
+        ctx, R, config = carry.ctx, carry.runs, self.config
+        filt, model, motion, B = ctx.filter, ctx.model, carry.motion, ctx.batch
+        det_run = np.nonzero(scan.valid)[0]  # run-major: each run's detections in their order
+        positions = np.asarray(scan.z[scan.valid], dtype=float).reshape(-1, 2)
+        if not np.all(np.isfinite(positions)):
+            raise InputError(f"tracker: ping {k} holds a non-finite detection position")
+        n = motion.dim
+        if n != 4:
+            raise InputError(f"tracker: the state must be [x, y, vx, vy] (n = 4), got a motion model with n = {n}")
+        _check_filter(filt, config)
+        table, run = R.table, R.run
+        K, M = table.size, positions.shape[0]
+        zm = measurement_view(model, positions, n) if M else np.zeros((0, model.dim))
+        near = np.zeros(M, dtype=bool)
+        if K:
+            state = R.predicted if R.predicted is not None else filt.predict(table.state, motion, ctx.rng)
+            pred = filt.estimate(state)
+            rows, cols, d2 = _gated_pairs_runs(pred, run, positions, det_run, zm, model, config, B)
+            near[cols] = True
+            a_rows, a_cols = greedy_assign(rows, cols, d2)  # runs never share a pair: each run's own assignment
+            hit = np.zeros(K, dtype=bool)
+            hit[a_rows] = True
+            z = np.zeros((K, 1, model.dim))
+            z[a_rows, 0] = zm[a_cols]
+            cov = None
+            if config.detection_sigma is not None:
+                cov = np.broadcast_to(np.eye(model.dim), (K, 1, model.dim, model.dim)).copy()
+                cov[a_rows, 0] = detection_covariance(model, positions[a_cols], n, config.detection_sigma)
+            state = filt.update(state, Scan(z, hit[:, None], cov=cov), model, ctx.rng)
+            est = filt.estimate(state)
+            mean = est.mean
+            slow = None if config.min_speed is None else np.hypot(mean[:, 2], mean[:, 3]) < config.min_speed
+            history, misses, age, status, delete = mofn_step(table.history, table.misses, table.age, table.status,
+                                                             hit, config, slow)
+            keep = np.flatnonzero(~delete)
+            run = run[keep]
+            table = TrackTable(table.ids[keep], status[keep], history[keep], misses[keep], age[keep], mean[keep],
+                               filt.take_items(state, keep) if keep.size else None, np.asarray(est.cov)[keep])
+            hits_out = hit[keep]
+        else:
+            hits_out = np.zeros(0, dtype=bool)
+        # initiation from the unclaimed detections of this ping and the last, pairs within each run
+        init_pos, init_run = positions[~near], det_run[~near]
+        pi, ci, dist = _rectangular_pairs_runs(R.candidates, R.candidate_run, init_pos, init_run,
+                                               config.v_max * motion.dt, config.dense_limit, B)
+        a_p, a_c = greedy_assign(pi, ci, dist)
+        next_id = R.next_id.copy()
+        if a_c.size:
+            order = np.argsort(a_c)  # new tracks in detection order (runs in order)
+            a_p, a_c = a_p[order], a_c[order]
+            p_prev, p_cur = R.candidates[a_p], init_pos[a_c]
+            if config.detection_sigma is not None:
+                cov_cur = np.broadcast_to(config.detection_sigma**2 * np.eye(2), (a_c.size, 2, 2))
+                cov_prev = cov_cur
+            else:
+                cov_cur = position_covariance(model, p_cur, n)
+                cov_prev = position_covariance(model, p_prev, n) if config.prior == "two-point" else None
+            if config.prior == "two-point":
+                prior = two_point_prior(p_prev, p_cur, motion.dt, cov_prev, cov_cur)
+            else:
+                prior = speed_course_prior(p_prev, p_cur, motion.dt, cov_cur, config.sigma_v, config.sigma_c)
+            new_state = filt.init(prior, ctx.rng)
+            filt.require_batch_contract(new_state, self.who)
+            new_est = filt.estimate(new_state)
+            new_mean = new_est.mean
+            Kn = a_c.size
+            new_run = init_run[a_c]
+            per_run = np.bincount(new_run, minlength=B)
+            first = np.cumsum(per_run) - per_run
+            ids = next_id[new_run] + (np.arange(Kn) - first[new_run])  # each run's own identities, in order
+            next_id += per_run
+            h0 = config.initiation_hits
+            status0 = CONFIRMED if h0 >= config.confirm_hits else TENTATIVE
+            if status0 == CONFIRMED and config.min_speed is not None:
+                status0 = np.where(np.hypot(new_mean[:, 2], new_mean[:, 3]) < config.min_speed, TENTATIVE,
+                                   CONFIRMED)
+            # each run's kept tracks, then its new ones
+            joined = new_state if table.size == 0 else filt.join_items([table.state, new_state])
+            all_run = np.concatenate([run, new_run])
+            perm = np.argsort(all_run, kind="stable")
+            in_order = bool(np.all(perm == np.arange(perm.size)))
+            pick = (lambda a: a) if in_order else (lambda a: a[perm])
+            table = TrackTable(pick(np.concatenate([table.ids, ids])),
+                               pick(np.concatenate([table.status, np.broadcast_to(status0, (Kn,)).astype(np.int8)])),
+                               pick(np.concatenate([table.history, np.full(Kn, (1 << h0) - 1, dtype=np.int64)])),
+                               pick(np.concatenate([table.misses, np.zeros(Kn, dtype=np.int64)])),
+                               pick(np.concatenate([table.age, np.full(Kn, h0, dtype=np.int64)])),
+                               pick(np.concatenate([table.mean, new_mean])),
+                               joined if in_order else filt.take_items(joined, perm),
+                               pick(np.concatenate([table.cov, new_est.cov])))
+            hits_out = pick(np.concatenate([hits_out, np.ones(Kn, dtype=bool)]))
+            run = all_run[perm]
+        used = np.zeros(init_pos.shape[0], dtype=bool)
+        used[a_c] = True
+        carry.runs = _Runs(run, table, init_pos[~used], init_run[~used], next_id)
+        rows = carry.rows
+        rows["run"].append(run)
+        rows["ping"].append(np.full(table.size, k))
+        rows["track_id"].append(table.ids.copy())
+        rows["status"].append(table.status.copy())
+        rows["hit"].append(hits_out)
+        rows["mean"].append(table.mean.copy())
+        if self.keep_cov:
+            rows["cov"].append(table.cov.copy())
+        return carry
+
     def update(self, carry: _MofNCarry, scan: Scan, k: int) -> _MofNCarry:
         ctx = carry.ctx
+        if carry.runs is not None:
+            if scan.cov is not None:
+                raise InputError("tracker: a scan carries its own covariances (Scan.cov) but the first did not")
+            return self._update_runs(carry, scan, k)
         for b in range(ctx.batch):
             st, out = tracker_step(carry.states[b], scan.z[b][scan.valid[b]], ctx.filter, carry.motion, ctx.model,
                                    self.config, carry.rngs[b], predicted=carry.predicted[b],

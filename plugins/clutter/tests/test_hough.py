@@ -373,3 +373,38 @@ def test_compiled_helpers_equal_their_numpy_twins():
     hough_numba.accumulate(n_pings, votes, counts)
     np.testing.assert_array_equal(n_pings, 2 * (counts > 0))
     np.testing.assert_array_equal(votes, 2 * counts.astype(np.uint32))
+
+
+def test_sparse_peaks_and_similar_cells_equal_the_grid_filters():
+    """Few candidate cells take the neighbourhood look-up instead of the pass over the grid: held to the same
+    references as the dense filters (the maximum filter with the seam, the closed-form similarity)."""
+    grid = make_grid(1.0, 1.0, 60.0)  # 180 columns
+    rng = generator(9, "sparse-peaks")
+    for _ in range(10):
+        support = np.zeros(grid.shape, dtype=np.int16)
+        votes = np.zeros(grid.shape, dtype=np.int32)
+        cells = rng.integers(0, support.size, 150)
+        support.ravel()[cells] = rng.integers(1, 6, cells.size)
+        votes.ravel()[cells] = support.ravel()[cells] + rng.integers(0, 3, cells.size)
+        # clusters across the seam and at the rho edges
+        for r, c in ((5, 0), (grid.n_rho - 1, 179), (0, 1), (grid.n_rho - 6, 179)):
+            support[r, c], votes[r, c] = 4, 7
+        support[grid.n_rho - 1 - 5, 179], votes[grid.n_rho - 1 - 5, 179] = 4, 8  # beats (5, 0) across the seam
+        assert 36 * np.count_nonzero(support >= 3) <= support.size  # the sparse path
+        rows, cols = find_peaks(support, votes, 3, grid)
+        score = support + votes / (votes.max() + 1.0)
+        ref = (support >= 3) & (score >= _reference_max3(score))
+        got = np.zeros(grid.shape, dtype=bool)
+        got[rows, cols] = True
+        assert np.array_equal(got, ref) and not got[5, 0] and got[grid.n_rho - 6, 179]
+    ra, ca = rng.integers(0, grid.n_rho, 40), rng.integers(0, grid.n_theta, 40)
+    rb, cb = rng.integers(0, grid.n_rho, 20), rng.integers(0, grid.n_theta, 20)
+    ca[:10] = np.arange(10) % 3  # a in columns 0 .. 2, b in column 179 with rho negated: across the seam
+    rb[:10], cb[:10] = grid.n_rho - 1 - ra[:10], grid.n_theta - 1
+    ra[10:14], ca[10:14] = rng.integers(5, grid.n_rho - 5, 4), rng.integers(5, grid.n_theta - 5, 4)
+    rb[10:14], cb[10:14] = ra[10:14] + 3, ca[10:14] - 3  # exactly on the tolerances
+    got = similar_to(rb, cb, ra, ca, grid, 3, 3)
+    rho, theta = grid.rho, grid.theta
+    ref = lines_similar(rho[ra], theta[ca], rho[rb], theta[cb], 3.0, np.deg2rad(3.0) + 1e-9).any(axis=0)
+    assert 4 * rb.size * 49 <= grid.n_rho * grid.n_theta  # the sparse path
+    assert np.array_equal(got, ref) and got[:14].all()
