@@ -60,6 +60,15 @@ __all__ = [
     "dtv_reference_spectrum",
     "frame_signals",
     "eca",
+    "cleaning_weights",
+    "CLEANING_ROW_STEP",
+    "usable_cores",
+    "cleaning_filter",
+    "clean_reference",
+    "DEMANDING_ECA_TAPS",
+    "DEMANDING_CLUTTER_MAX",
+    "DEMANDING_CPI",
+    "DEMANDING_CLEANING",
     "remove_pilot",
     "pilot_spectral",
     "caf_batches",
@@ -75,8 +84,16 @@ __all__ = [
 ]
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the platform tells it, else ``os.cpu_count``)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
 def _workers() -> int:
-    return max(1, min(os.cpu_count() or 1, 8))
+    return max(1, min(usable_cores(), 8))
 
 
 def fast_length(n: int) -> int:
@@ -100,12 +117,16 @@ class PCLConfig:
 
     ``batch_length`` is the batch length ``M`` of the batches algorithm: the Doppler grid spacing is
     ``f_s / (M B) = 1 / CPI`` and the unambiguous span ``+-f_s / (2 M)`` (500 Hz at the defaults, far
-    beyond the +-117 Hz of +-50 m/s).  ``eca_taps`` (``K``, at most the number of range bins) zero-Doppler
-    taps are cancelled; ``eca_loading`` is the diagonal loading of the ECA normal equations relative to their
-    mean diagonal (the single-precision Gram matrix cannot resolve eigenvalues below about 1e-7 of the largest;
-    the reference channel's out-of-band noise sits there).  ``pilot_hz``: the frequency of a pilot carrier of
-    the illuminator (8-VSB: ``-R_s / 4`` from the channel centre), removed from the reference batches before
-    the correlation; ``None`` for a waveform without one.
+    beyond the +-117 Hz of +-50 m/s).  ``eca_taps`` (``K``, at most ``batch_length``) zero-Doppler taps are
+    cancelled (``K`` may exceed the map's range bins: clutter beyond the map's edge is cancelled too);
+    ``eca_loading`` is the diagonal loading of the ECA normal equations relative to their mean diagonal (the
+    single-precision Gram matrix cannot resolve eigenvalues below about 1e-7 of the largest; the reference
+    channel's out-of-band noise sits there).  ``pilot_hz``: the frequency of a pilot carrier of the illuminator
+    (8-VSB: ``-R_s / 4`` from the channel centre), removed from the reference batches before the correlation
+    where ``pilot_removal`` (and known to the cleaning stage either way); ``None`` for a waveform without one.
+    ``cleaning_taps`` (``K_c``, 0: no cleaning), ``cleaning_delay`` (``D``) and ``cleaning_loading``: the
+    reference-cleaning stage (:func:`cleaning_weights`), a delayed linear predictor over lags
+    ``D .. D + K_c - 1`` fitted on the CPI and applied to it.
     """
 
     sample_rate: float = 10e6
@@ -119,6 +140,10 @@ class PCLConfig:
     eca_taps: int = 16
     eca_loading: float = 1e-6
     pilot_hz: float | None = None
+    pilot_removal: bool = True
+    cleaning_taps: int = 0
+    cleaning_delay: int = 8
+    cleaning_loading: float = 1e-3
     pfa: float = 1e-4
     guard: tuple[int, int] = (2, 2)  # (range, Doppler) guard cells on each side of the cell under test
     train: tuple[int, int] = (8, 8)  # training cells beyond the guard cells, on each side
@@ -135,9 +160,15 @@ class PCLConfig:
                              f"{self.batch_length}")
         if self.doppler_window not in ("hamming", "none"):
             raise InputError(f"PCLConfig: doppler_window must be 'hamming' or 'none', got {self.doppler_window!r}")
-        if not 0 <= self.eca_taps <= self.lags:
-            raise InputError(f"PCLConfig: eca_taps must be in 0..{self.lags} (the range bins of the map), "
+        if not 0 <= self.eca_taps <= self.batch_length:
+            raise InputError(f"PCLConfig: eca_taps must be in 0..{self.batch_length} (the batch length), "
                              f"got {self.eca_taps}")
+        if self.cleaning_taps < 0 or self.cleaning_delay < 1 or self.cleaning_loading < 0:
+            raise InputError(f"PCLConfig: cleaning_taps must be >= 0, cleaning_delay >= 1 and cleaning_loading "
+                             f">= 0, got {self.cleaning_taps}, {self.cleaning_delay}, {self.cleaning_loading}")
+        if self.cleaning_memory > self.batch_length:
+            raise InputError(f"PCLConfig: the cleaning filter's span cleaning_delay + cleaning_taps - 1 = "
+                             f"{self.cleaning_memory} exceeds the batch length {self.batch_length}")
         if self.eca_loading < 0:
             raise InputError(f"PCLConfig: eca_loading must be >= 0, got {self.eca_loading}")
 
@@ -149,6 +180,16 @@ class PCLConfig:
     @property
     def batches(self) -> int:
         return int(round(self.sample_rate * self.cpi)) // self.batch_length
+
+    @property
+    def cleaning_memory(self) -> int:
+        """``Q = D + K_c - 1``: how far back the cleaning filter reaches (0 without cleaning)."""
+        return self.cleaning_delay + self.cleaning_taps - 1 if self.cleaning_taps else 0
+
+    def span(self, taps: int | None = None) -> int:
+        """``max(L, K)``: the lags the surveillance segments of the folded chain must reach (the map's ``L`` for
+        the correlation, ``K`` for the ECA normal equations)."""
+        return max(self.lags, self.eca_taps if taps is None else int(taps))
 
     @property
     def range_bin(self) -> float:
@@ -183,10 +224,12 @@ class PCLConfig:
         return self.doppler_bin * np.arange(-self.doppler_half, self.doppler_half + 1)
 
     def fft_length(self, taps: int | None = None) -> int:
-        """Per-batch FFT length of the folded chain: :func:`fast_length` of ``M + L + K - 2`` (10240 at the
-        defaults for any ``K <= L``)."""
-        k = self.eca_taps if taps is None else taps
-        return fast_length(self.batch_length + self.lags + max(k, 1) - 2)
+        """Per-batch FFT length of the folded chain: :func:`fast_length` of ``M + max(L, K) + K - 2 + 2 Q``
+        (``Q``: :attr:`cleaning_memory`; 10240 at the defaults for any ``K <= L``, 12288 for the demanding
+        scene's 600 taps and 64 cleaning taps)."""
+        k = self.eca_taps if taps is None else int(taps)
+        # 2 Q: the segments of the cleaning stage reach Q further back, and their autocorrelation is read to lag Q
+        return fast_length(self.batch_length + self.span(k) + max(k, 1) - 2 + 2 * self.cleaning_memory)
 
     @property
     def cells(self) -> int:
@@ -201,7 +244,10 @@ class SignalScene:
     The static clutter patches are zero-Doppler reflectors at the given bistatic ranges.  ``waveform`` is the
     illuminator: ``"noise"`` (band-limited complex Gaussian, the brief's surrogate) or ``"atsc"`` (ATSC 8-VSB,
     :mod:`.atsc`, at ``symbol_rate``: A/53's by default, a scaled one for small test configurations);
-    ``reference_snr_db`` is the reference channel's signal-to-noise ratio.
+    ``reference_snr_db`` is the reference channel's signal-to-noise ratio.  ``reference_multipath_ranges`` (m of
+    excess path) and ``reference_multipath_db`` (dB relative to the reference channel's direct signal): delayed
+    copies of the transmitted signal that the reference antenna receives besides the direct one (the
+    surveillance channel's echoes are copies of the transmitted signal, not of the received reference).
     """
 
     target_db: float = -20.0
@@ -211,10 +257,18 @@ class SignalScene:
     reference_snr_db: float = 40.0
     waveform: str = "noise"
     symbol_rate: float = atsc.SYMBOL_RATE
+    reference_multipath_ranges: tuple[float, ...] = ()
+    reference_multipath_db: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if len(self.clutter_ranges) != len(self.clutter_db):
             raise InputError("SignalScene: clutter_ranges and clutter_db must have the same length")
+        if len(self.reference_multipath_ranges) != len(self.reference_multipath_db):
+            raise InputError("SignalScene: reference_multipath_ranges and reference_multipath_db must have the same "
+                             "length")
+        if any(r <= 0 for r in self.reference_multipath_ranges):
+            raise InputError(f"SignalScene: reference_multipath_ranges must be > 0 m, got "
+                             f"{self.reference_multipath_ranges}")
         if self.waveform not in ("noise", "atsc"):
             raise InputError(f"SignalScene: waveform must be 'noise' or 'atsc', got {self.waveform!r}")
 
@@ -223,23 +277,40 @@ class SignalScene:
 BENIGN_SCENE = SignalScene()
 
 _DEMANDING_RANGES = (30.0, 90.0, 180.0, 300.0, 450.0, 650.0, 900.0, 1200.0, 1500.0, 1800.0, 2100.0, 2400.0, 2700.0,
-                     2950.0)
-#: A demanding scene: ATSC 8-VSB illuminator, direct path +60 dB, 14 clutter patches from 30 m to 2.95 km whose
-#: clutter-to-noise ratio falls linearly from +50 dB to +30 dB, a reference channel at 70 dB SNR.
+                     2950.0, 3600.0, 4800.0, 6500.0, 8500.0, 10500.0, 12500.0, 14500.0, 16000.0, 17500.0)
+#: How far the demanding scene's clutter reaches (m of bistatic range).
+DEMANDING_CLUTTER_MAX = 17_500.0
+#: The demanding scene's ECA span: zero-Doppler taps 0 .. 17.96 km at 10 MHz, past the farthest clutter.
+DEMANDING_ECA_TAPS = 600
+#: The demanding scene's coherent interval: the detection level's 0.5 s.
+DEMANDING_CPI = 0.5
+#: The reference-cleaning predictor of the demanding scene: lags 8 .. 135 (240 m - 4 km of excess path: the
+#: multipath and its first multiples, which the inverse of the reference channel holds).
+DEMANDING_CLEANING = {"cleaning_taps": 128, "cleaning_delay": 8}
+#: A demanding scene: ATSC 8-VSB illuminator, direct path +60 dB, 23 clutter patches from 30 m to 17.5 km (the
+#: map shows 0-3 km; the clutter beyond it reaches the surveillance channel all the same) whose clutter-to-noise
+#: ratio falls linearly with range from +50 dB to +30 dB, a reference channel at 70 dB SNR that also receives the
+#: transmitter over three longer paths (300 m, 750 m and 1.5 km of excess path at -10, -14 and -18 dB).
 DEMANDING_SCENE = SignalScene(
     direct_path_db=60.0,
     clutter_ranges=_DEMANDING_RANGES,
-    clutter_db=tuple(round(50.0 - 20.0 * (r - 30.0) / (2950.0 - 30.0), 2) for r in _DEMANDING_RANGES),
+    clutter_db=tuple(round(50.0 - 20.0 * (r - 30.0) / (DEMANDING_CLUTTER_MAX - 30.0), 2) for r in _DEMANDING_RANGES),
     reference_snr_db=70.0,
     waveform="atsc",
+    reference_multipath_ranges=(300.0, 750.0, 1500.0),
+    reference_multipath_db=(-10.0, -14.0, -18.0),
 )
 
 
-def demanding_config(base: PCLConfig = PCLConfig(), scene: SignalScene = DEMANDING_SCENE) -> PCLConfig:
-    """The processing for :data:`DEMANDING_SCENE`: as ``base``, with ECA taps over every range bin of the map
-    (the rule: clutter may sit anywhere on the map, so cancel every zero-Doppler lag the map shows, ``K = L``)
-    and the 8-VSB pilot (nominally ``-R_s / 4`` from the channel centre) removed from the reference."""
-    return replace(base, eca_taps=base.lags, pilot_hz=atsc.pilot_offset_hz(scene.symbol_rate))
+def demanding_config(base: PCLConfig = PCLConfig(), scene: SignalScene = DEMANDING_SCENE, *,
+                     taps: int = DEMANDING_ECA_TAPS, cpi: float = DEMANDING_CPI, cleaning: bool = True) -> PCLConfig:
+    """The processing for :data:`DEMANDING_SCENE`: as ``base``, with a CPI of ``cpi`` (the detection level's 0.5 s),
+    ``taps`` zero-Doppler ECA taps (600: 0 - 17.96 km at 10 MHz, past the farthest clutter; the rule: cancel
+    every lag at which the scene holds clutter, on the map or beyond it), the reference cleaned
+    (:data:`DEMANDING_CLEANING`, :func:`cleaning_weights`) and the 8-VSB pilot (nominally ``-R_s / 4`` from the
+    channel centre) removed from the reference."""
+    extra = DEMANDING_CLEANING if cleaning else {"cleaning_taps": 0}
+    return replace(base, cpi=cpi, eca_taps=int(taps), pilot_hz=atsc.pilot_offset_hz(scene.symbol_rate), **extra)
 
 
 @dataclass(frozen=True)
@@ -341,7 +412,9 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
     ``targets (K, 2)`` holds ``[R, Rdot]`` (m, m/s) of each moving echo.  Each echo is the reference
     delayed by ``R / c`` (fractional delays applied exactly in the frequency domain on a band-limited
     signal with enough history) and multiplied by ``exp(+j 2 pi f_D n / f_s)`` with ``f_D = -Rdot / lambda``.
-    The direct path (delay 0) and the static clutter patches share one inverse FFT.
+    The direct path (delay 0) and the static clutter patches share one inverse FFT.  The reference channel
+    receives the transmitted signal directly and, when the scene has reference multipath, delayed copies of it
+    (one more inverse FFT), plus its own noise.
 
     Returns ``ref (N,)`` and ``surv (N,)`` complex64 (surveillance noise of unit power).
     """
@@ -349,7 +422,8 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
     n = config.samples
     fs = config.sample_rate
     clutter_tau = np.asarray(scene.clutter_ranges, dtype=float) / SPEED_OF_LIGHT
-    delays = np.concatenate([targets[:, 0] / SPEED_OF_LIGHT, clutter_tau])
+    multipath_tau = np.asarray(scene.reference_multipath_ranges, dtype=float) / SPEED_OF_LIGHT
+    delays = np.concatenate([targets[:, 0] / SPEED_OF_LIGHT, clutter_tau, multipath_tau])
     if np.any(delays < 0):
         raise InputError("frame_signals: bistatic ranges must be >= 0")
     pad = int(np.ceil(delays.max(initial=0.0) * fs)) + 64  # history so that delayed copies are causal
@@ -368,7 +442,12 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
     def delayed(gain: np.ndarray) -> np.ndarray:
         return sfft.ifft(spec * gain, workers=w)[pad:pad + n]
 
-    r = sfft.ifft(spec, workers=w)[pad:pad + n]
+    if scene.reference_multipath_ranges:
+        # the reference antenna's channel: 1 + sum_p a_p exp(-j 2 pi f tau_p)
+        r = delayed(_static_gain(total, fs, 0.0, tuple(map(float, scene.reference_multipath_ranges)),
+                                 tuple(map(float, scene.reference_multipath_db))))
+    else:
+        r = sfft.ifft(spec, workers=w)[pad:pad + n]
     # static part: direct path (delay 0) + zero-Doppler clutter, a_dp + sum_c a_c exp(-j 2 pi f tau_c)
     surv = delayed(_static_gain(total, fs, float(scene.direct_path_db), tuple(map(float, scene.clutter_ranges)),
                                 tuple(map(float, scene.clutter_db))))
@@ -418,8 +497,95 @@ def eca(surv: np.ndarray, ref: np.ndarray, taps: int, loading: float = 0.0) -> t
     return (surv - fit).astype(surv.dtype), weights
 
 
-def pilot_spectral(R: np.ndarray, batch_length: int, pilot_hz: float, sample_rate: float, half: int = 16
-                   ) -> tuple[np.ndarray, float, np.ndarray]:
+def _cleaning_segments(ref: np.ndarray, config: PCLConfig, taps: int) -> tuple[np.ndarray, int, int]:
+    """The raw reference segments the cleaning stage filters, transformed: row ``b`` holds
+    ``x[bM - back - Q .. bM - back + length)`` (zero outside ``[0, N)``), ``back, length = K - 1, M + Ls + K - 2``
+    with ``K = taps > 0`` (the extended segments of the folded ECA) or ``0, M`` (the batches).
+    Returns ``X (B, F)`` complex64, ``back`` and ``length``."""
+    M, B, K, Q = config.batch_length, config.batches, int(taps), config.cleaning_memory
+    back, length = (K - 1, M + config.span(K) + K - 2) if K > 0 else (0, M)
+    X = _segments(np.asarray(ref, dtype=np.complex64), B, M, length + Q, back + Q, config.fft_length(K))
+    return sfft.fft(X, axis=1, workers=_workers(), overwrite_x=True), back, length
+
+
+#: The cleaning stage's autocorrelation reads every ``CLEANING_ROW_STEP``-th segment of the CPI (125 of the
+#: demanding scene's 500: 1.4 M samples, ample for 128 taps, at a quarter of the cost of a pass over all).
+CLEANING_ROW_STEP = 4
+
+
+def _cleaning_weights_from(X: np.ndarray, seglen: int, config: PCLConfig) -> np.ndarray:
+    """:func:`cleaning_weights` from the raw segments' spectra ``X (B, F)`` (segments of ``seglen`` samples)."""
+    K, D = config.cleaning_taps, config.cleaning_delay
+    rows = np.ascontiguousarray(X[::CLEANING_ROW_STEP]) if X.shape[0] >= 2 * CLEANING_ROW_STEP else X
+    # c[d] = sum_b sum_t x_b[t + d] conj(x_b[t]): the segments' autocorrelations (F >= seglen + Q: no wrap)
+    power, _ = normal_sums(rows, rows, None)
+    c = sfft.ifft(power)[:D + K]
+    if config.pilot_hz is not None:
+        # the carrier's amplitude and frequency from all rows (its refinement reads the advance between rows)
+        a, omega, _ = pilot_spectral(X, config.batch_length, config.pilot_hz, config.sample_rate, length=seglen)
+        d = np.arange(D + K)
+        # the carrier's share in the rows read: sum_b (seglen - d) |a_b|^2 exp(j w d)
+        c = c - (seglen - d) * np.sum(np.abs(a[::CLEANING_ROW_STEP] if rows is not X else a) ** 2) * np.exp(1j * omega * d)
+    column = c[:K].copy()
+    column[0] = c[0].real * (1.0 + config.cleaning_loading)
+    return slinalg.solve_toeplitz((column, np.conj(column)), c[D:D + K])
+
+
+def cleaning_weights(ref: np.ndarray, config: PCLConfig, taps: int | None = None) -> np.ndarray:
+    """The reference-cleaning stage's weights: a delayed linear predictor of the reference from its own past.
+
+    The reference antenna receives ``x[n] = d[n] + sum_p a_p d[n - tau_p]`` (the transmitted signal ``d`` and
+    multipath) + noise.  For a minimum-phase channel (the direct path dominates: ``sum |a_p| < 1``) the inverse
+    filter is causal, ``d[n] = x[n] - sum_{l >= 1} v_l x[n - l]``, and where ``d``'s own correlation has died out
+    beyond ``D - 1`` samples the least-squares predictor of ``x[n]`` from ``x[n - D .. n - D - K_c + 1]``
+    estimates it blindly (what it cannot predict is ``d[n]``): the multiple-step (delayed) linear prediction of
+    Kinoshita, Delcroix, Nakatani and Miyoshi, "Suppression of late reverberation effect on speech signal using
+    long-term multiple-step linear prediction", IEEE Trans. ASLP 17(4), 2009, here a short LS equaliser of the
+    reference of a passive radar.  Multipath shorter than ``D`` samples (240 m at 10 MHz with ``D = 8``) only
+    colours the reference spectrum and is left; an 8-VSB signal is not white (its band edges keep it correlated
+    over tens of samples), so the predictor also takes a little of ``d`` (``cleaning_loading`` limits it).
+
+    ``v = (C + delta I)^-1 c_D`` with ``C[i, j] = c[i - j]``, ``c_D[i] = c[D + i]`` and ``c[d]`` the reference's
+    autocorrelation summed over the segments that :func:`batch_spectra` transforms anyway (``taps`` as there;
+    every :data:`CLEANING_ROW_STEP`-th of them, spread over the CPI), ``delta = cleaning_loading * c[0]``.  The 8-VSB pilot is a perfectly predictable carrier: with
+    ``config.pilot_hz`` its share (amplitude and frequency from :func:`pilot_spectral` on the same segments) is
+    taken out of ``c`` first, so that the predictor spends its taps on the multipath, not on the carrier (the
+    filter passes the carrier scaled, and the later stages fit it wherever it is).
+
+    Shapes: ``ref (N,)`` -> ``(K_c,)`` complex128 (empty without cleaning).
+    """
+    if config.cleaning_taps < 1:
+        return np.zeros(0, dtype=complex)
+    K = config.eca_taps if taps is None else int(taps)
+    X, _, length = _cleaning_segments(ref, config, K)
+    return _cleaning_weights_from(X, length + config.cleaning_memory, config)
+
+
+def cleaning_filter(weights: np.ndarray, config: PCLConfig) -> np.ndarray:
+    """The cleaning filter's impulse response ``h = [1, 0 .. 0, -v_0 .. -v_{K_c - 1}]`` (``-v_i`` at lag ``D + i``).
+    Shapes: ``(Q + 1,)`` complex128, ``Q = config.cleaning_memory``."""
+    h = np.zeros(config.cleaning_memory + 1, dtype=complex)
+    h[0] = 1.0
+    h[config.cleaning_delay:] = -np.asarray(weights)
+    return h
+
+
+def clean_reference(ref: np.ndarray, config: PCLConfig, taps: int | None = None) -> np.ndarray:
+    """The reference after the cleaning stage, ``e[n] = x[n] - sum_i v_i x[n - D - i]`` (``x[n < 0] = 0``) with
+    the weights of :func:`cleaning_weights` (``taps`` as there); one full-length FFT convolution in the input's precision (the
+    twin of the folded form in :func:`batch_spectra`).  Shapes: ``(N,)`` -> ``(N,)``; the input without cleaning."""
+    if config.cleaning_taps < 1:
+        return ref
+    h = cleaning_filter(cleaning_weights(ref, config, taps), config)
+    n = ref.shape[0]
+    nfft = sfft.next_fast_len(n + h.size)
+    w = _workers()
+    out = sfft.ifft(sfft.fft(ref, nfft, workers=w) * sfft.fft(h.astype(ref.dtype), nfft), workers=w)[:n]
+    return out.astype(ref.dtype, copy=False)
+
+
+def pilot_spectral(R: np.ndarray, batch_length: int, pilot_hz: float, sample_rate: float, half: int = 16,
+                   length: int | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """The amplitude of a carrier in every reference batch, from the batch spectra, with its frequency refined.
 
     With ``p[m] = exp(j w m)``, ``m < M``, and ``P`` its spectrum zero-padded to ``F`` (its energy lies within a
@@ -431,10 +597,13 @@ def pilot_spectral(R: np.ndarray, batch_length: int, pilot_hz: float, sample_rat
     one, ``w = w_0 + arg(exp(-j w_0 M) sum_b a_{b+1} conj(a_b)) / M`` (unambiguous for offsets under
     ``f_s / (2M)``, 500 Hz at the defaults): a receiver's oscillator is never exactly on the nominal frequency.
 
+    ``length``: the rows' segment length when it differs from ``batch_length`` (rows that start ``batch_length``
+    apart and hold ``length`` samples, as the reference-cleaning stage's segments).
+
     Shapes: ``R (B, F)`` -> ``a (B,)`` complex128, ``w`` (rad/sample), ``P (F,)`` complex64.
     """
     B, F = R.shape
-    m = np.arange(batch_length)
+    m = np.arange(batch_length if length is None else int(length))
 
     def fit(omega: float) -> tuple[np.ndarray, np.ndarray]:
         P = sfft.fft(np.exp(1j * omega * m), F)
@@ -460,7 +629,7 @@ def remove_pilot(ref: np.ndarray, config: PCLConfig) -> np.ndarray:
     here in the input's precision.  Shapes: ``ref (N,)`` -> ``(N,)``.  Without ``config.pilot_hz`` the input is
     returned.
     """
-    if config.pilot_hz is None:
+    if config.pilot_hz is None or not config.pilot_removal:
         return ref
     B, M = config.batches, config.batch_length
     batches = ref.reshape(B, M)
@@ -559,35 +728,75 @@ def batch_spectra(surv: np.ndarray, ref: np.ndarray, config: PCLConfig = PCLConf
                   ) -> BatchSpectra:
     """Stage 1 of the folded chain: the FFTs of the surveillance segments, reference batches and extended
     reference segments, and the pilot amplitudes (:func:`pilot_spectral`; see :class:`BatchSpectra`).  Single
-    precision."""
-    n, M, B, L = config.samples, config.batch_length, config.batches, config.lags
+    precision.
+
+    With ``K`` taps the segments reach ``Ls = max(L, K)`` lags (:meth:`PCLConfig.span`).  With the cleaning stage
+    (``config.cleaning_taps``) the reference is the cleaned ``e`` of :func:`clean_reference`: the raw extended
+    segments reach ``Q`` samples further back, their spectra times ``H`` (the cleaning filter, shifted by ``-Q``
+    so that output sample ``t`` is ``e[bM - K + 1 + t]``: exact over the segment, the circular wrap falls on
+    samples no later stage reads) are the extended segments of ``e``; one inverse FFT of them gives ``e``'s
+    batches for the reference spectra; the last segment's ``e[n >= N]`` (the filter's spill past the CPI, where
+    the twin's reference is zero) is taken out of its spectrum.  Two more ``B x F`` transforms than without
+    cleaning.
+    """
+    n, M, B = config.samples, config.batch_length, config.batches
     K = config.eca_taps if taps is None else int(taps)
     if surv.shape != (n,) or ref.shape != (n,):
         raise InputError(f"batch_spectra: expected signals of {n} samples, got {surv.shape} and {ref.shape}")
-    if not 0 <= K <= L:
-        raise InputError(f"batch_spectra: taps must be in 0..{L}, got {K}")
+    if not 0 <= K <= M:
+        raise InputError(f"batch_spectra: taps must be in 0..{M} (the batch length), got {K}")
     surv = np.asarray(surv, dtype=np.complex64)
     ref = np.asarray(ref, dtype=np.complex64)
     nfft = config.fft_length(K)
+    Ls = config.span(K)
     w = _workers()
-    # surveillance segments s[bM .. bM + M + L - 1) (zero past N), zero-padded to F, transformed in place
-    S = _segments(surv, B, M, M + L - 1, 0, nfft)
+    # surveillance segments s[bM .. bM + M + Ls - 1) (zero past N), zero-padded to F, transformed in place
+    S = _segments(surv, B, M, M + Ls - 1, 0, nfft)
     S = sfft.fft(S, axis=1, workers=w, overwrite_x=True)  # in place
-    batches = ref.reshape(B, M)
-    R = np.empty((B, nfft), dtype=np.complex64)
-    R[:, :M] = batches
-    R[:, M:] = 0
-    R = sfft.fft(R, axis=1, workers=w, overwrite_x=True)
     E = None
-    if K > 0:
-        # extended reference segments r[bM - K + 1 .. bM + M + L - 1) (zero outside [0, N))
-        E = _segments(ref, B, M, M + L + K - 2, K - 1, nfft)
-        E = sfft.fft(E, axis=1, workers=w, overwrite_x=True)
+    Q = config.cleaning_memory
+    if Q:
+        # raw segments x[bM - back - Q .. bM - back + length) (zero outside [0, N)), transformed
+        X, back, length = _cleaning_segments(ref, config, K)
+        h = cleaning_filter(_cleaning_weights_from(X, length + Q, config), config)
+        g = np.zeros(nfft, dtype=np.complex128)
+        g[(np.arange(Q + 1) - Q) % nfft] = h  # h_l at (l - Q) mod F: output t = e[bM - back + t]
+        X *= sfft.fft(g).astype(np.complex64)
+        seg = np.empty_like(X)
+        np.copyto(seg, X)
+        seg = sfft.ifft(seg, axis=1, workers=w, overwrite_x=True)  # e[bM - back + t], t < length (exact)
+        tail = seg[-1, back + M - (K - 1):back + M].copy() if K > 1 else np.zeros(0, np.complex64)
+        if K > 0:
+            # e[n >= N] of the last segment (t >= M + back): the twin's reference is zero there
+            spill = np.zeros(nfft, dtype=np.complex64)
+            stop = min(length, M + back + Q)
+            spill[M + back:stop] = seg[-1, M + back:stop]
+            X[-1] -= sfft.fft(spill)
+            E = X
+        # the reference batches e[bM .. bM + M): the window [back, back + M) of each row, moved to the start by a
+        # phase ramp on its spectrum (cheaper than copying the window out)
+        seg[:, :back] = 0
+        seg[:, back + M:] = 0
+        R = sfft.fft(seg, axis=1, workers=w, overwrite_x=True)
+        if back:
+            # exp(+j 2 pi k back / F), the phase reduced exactly (k back mod F) before the float
+            R *= np.exp(2j * np.pi * ((np.arange(nfft) * back) % nfft) / nfft).astype(np.complex64)
+        del seg
+    else:
+        batches = ref.reshape(B, M)
+        R = np.empty((B, nfft), dtype=np.complex64)
+        R[:, :M] = batches
+        R[:, M:] = 0
+        R = sfft.fft(R, axis=1, workers=w, overwrite_x=True)
+        if K > 0:
+            # extended reference segments r[bM - K + 1 .. bM + M + Ls - 1) (zero outside [0, N))
+            E = _segments(ref, B, M, M + Ls + K - 2, K - 1, nfft)
+            E = sfft.fft(E, axis=1, workers=w, overwrite_x=True)
+        tail = ref[n - K + 1:].copy() if K > 1 else np.zeros(0, np.complex64)
     pilot, omega, P = (None, 0.0, None)
-    if config.pilot_hz is not None:
+    if config.pilot_hz is not None and config.pilot_removal:
         pilot, omega, P = pilot_spectral(R, M, config.pilot_hz, config.sample_rate)
-    return BatchSpectra(S, R, E, ref[n - K + 1:].copy() if K > 1 else np.zeros(0, np.complex64), K,
-                        pilot, omega, P)
+    return BatchSpectra(S, R, E, tail, K, pilot, omega, P)
 
 
 def eca_weights(spec: BatchSpectra, loading: float = 1e-6, backend: str = "auto") -> np.ndarray:
@@ -638,8 +847,8 @@ def caf_folded(spec: BatchSpectra, weights: np.ndarray, config: PCLConfig = PCLC
     if K > 1:
         # the fit past the end of the CPI, f[N + i] = sum_{j > i} w_j r[N + i - j], added back to the last batch
         # (the surveillance there is zero padding)
-        tail = spec.ref_tail.astype(complex)
-        spill = np.array([np.dot(weights[i + 1:], tail[::-1][:K - 1 - i]) for i in range(K - 1)])
+        # spill[i] = sum_{j > i} w_j tail[K - 1 + i - j]: the full convolution of w and the tail, from K - 1 on
+        spill = np.convolve(weights, spec.ref_tail.astype(complex))[K - 1:2 * K - 2]
         e = np.zeros(F, dtype=np.complex128)
         e[M:M + K - 1] = spill
         ref_last = spec.ref[-1] if P is None else spec.ref[-1] - spec.pilot[-1] * P
@@ -734,7 +943,7 @@ def cfar_candidates(caf: CAFMap, config: PCLConfig = PCLConfig()) -> tuple[Candi
 
 def process_frame(ref: np.ndarray, surv: np.ndarray, config: PCLConfig = PCLConfig(), cancel: bool = True,
                   method: str = "folded", backend: str = "auto") -> tuple[CAFMap, Candidates, np.ndarray]:
-    """ECA (optional) -> CAF -> CFAR candidates for one CPI.
+    """Reference cleaning (with ``config.cleaning_taps``) -> ECA (optional) -> CAF -> CFAR candidates for one CPI.
 
     ``method="folded"``: :func:`batch_spectra`, :func:`eca_weights`, :func:`caf_folded` (single precision);
     ``"reference"``: :func:`eca` + :func:`caf_batches` in the input's precision (the twin).
@@ -745,6 +954,7 @@ def process_frame(ref: np.ndarray, surv: np.ndarray, config: PCLConfig = PCLConf
         weights = eca_weights(spec, config.eca_loading, backend)
         caf = caf_folded(spec, weights, config, backend)
     elif method == "reference":
+        ref = clean_reference(ref, config, taps)
         if taps:
             surv, _ = eca(surv, ref, taps, config.eca_loading)
         caf = caf_batches(surv, ref, config)

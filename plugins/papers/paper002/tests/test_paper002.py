@@ -22,7 +22,8 @@ from workbench.specs import RecipeOptions, TaskContext
 from workbench_papers.paper002 import atsc, fold
 from workbench_papers.paper002 import recipe as p2
 from workbench_papers.paper002.signal import (DEMANDING_SCENE, PCLConfig, SignalScene, batch_spectra, box_sum,
-                                              ca_cfar, caf_batches, demanding_config, eca, eca_weights,
+                                              ca_cfar, caf_batches, clean_reference, cleaning_weights,
+                                              demanding_config, eca, eca_weights,
                                               fast_length, frame_signals, pilot_spectral, process_frame,
                                               remove_pilot, simulate_scans_multi)
 
@@ -98,7 +99,13 @@ SMALL = PCLConfig(sample_rate=1e6, cpi=0.05, bandwidth=0.8e6, range_max=6000.0, 
 #: direct path +60 dB, clutter out to 5.7 km (beyond the 4 taps' 900 m).
 SMALL_VSB = replace(DEMANDING_SCENE, target_db=-15.0, symbol_rate=atsc.SYMBOL_RATE / 10,
                     clutter_ranges=(300.0, 1200.0, 2400.0, 3600.0, 4800.0, 5700.0),
-                    clutter_db=(50.0, 46.0, 42.0, 38.0, 34.0, 30.0))
+                    clutter_db=(50.0, 46.0, 42.0, 38.0, 34.0, 30.0),
+                    reference_multipath_ranges=(), reference_multipath_db=())
+
+
+def _small_demanding(scene=SMALL_VSB, **kw):
+    """:func:`demanding_config` on SMALL with taps over the map, SMALL's CPI and no cleaning unless told."""
+    return demanding_config(SMALL, scene, **{"taps": SMALL.lags, "cpi": SMALL.cpi, "cleaning": False, **kw})
 
 
 def test_fast_length_prefers_the_fastest_pocketfft_lengths():
@@ -207,7 +214,7 @@ def test_cfar_candidates_exclude_zero_doppler_and_refine_off_grid_targets():
 def test_folded_single_precision_chain_matches_the_float64_reference(backend):
     """The folded ECA + CAF (complex64, batch spectra) against its NumPy twin (complex128, whole-CPI ECA):
     every cell within -40 dB of the noise floor, the same candidates, and the target found."""
-    cfg = demanding_config(SMALL, SMALL_VSB)
+    cfg = _small_demanding()
     target = _echo(9, -3)
     ref, surv = frame_signals(target, generator(11, "fold"), cfg, SMALL_VSB)
     caf, cands, _ = process_frame(ref, surv, cfg, backend=backend)
@@ -237,6 +244,95 @@ def test_folded_last_batch_equals_the_zero_padded_reference_with_any_taps():
         twin = caf_batches(clean, r.astype(np.complex128), cfg)
         scale = np.sqrt(np.median(twin.power))
         assert np.max(np.abs(caf.chi - twin.chi)) < 1e-3 * scale, taps
+
+
+def test_folded_cleaning_and_long_eca_equal_the_float64_twin():
+    """The reference cleaned inside the batch spectra (raw segments reaching Q further back, times the filter's
+    spectrum, the spill past the CPI taken out) and ECA taps beyond the map (K > L) give the twin's map: the
+    reference cleaned by a full-length convolution, whole-CPI ECA, the batches CAF, in float64."""
+    scene = replace(SMALL_VSB, reference_multipath_ranges=(1500.0, 4200.0), reference_multipath_db=(-8.0, -14.0),
+                    clutter_ranges=(300.0, 2400.0, 9000.0, 15000.0), clutter_db=(50.0, 42.0, 34.0, 30.0))
+    base = replace(_small_demanding(scene), cleaning_taps=16, cleaning_delay=3)
+    ref, surv = frame_signals(_echo(11, -3), generator(19, "clean-fold"), base, scene)
+    for taps in (0, 1, 2, SMALL.lags + 38):
+        cfg = replace(base, eca_taps=taps)
+        caf = process_frame(ref, surv, cfg)[0]
+        twin = process_frame(ref.astype(np.complex128), surv.astype(np.complex128), cfg, method="reference")[0]
+        k = np.arange(twin.doppler_hz.size) - cfg.doppler_half
+        floor = np.median(twin.power[:, k != 0])
+        assert 10 * np.log10(np.max(np.abs(caf.chi - twin.chi) ** 2) / floor) < -60.0, taps
+
+
+def test_cleaning_removes_a_single_echo_multipath_to_the_least_squares_residual():
+    """Closed form.  A white reference d (unit power) received as x[n] = d[n] + a d[n - tau]: a predictor of x[n]
+    from x[n - l], l in a set holding tau, 2 tau, .., m tau, leaves e - d (orthogonal to d[n], so the LS fit
+    minimises E|e - d|^2) with E|e - d|^2 = |a|^2 - r^H G^-1 r, G the m x m Toeplitz matrix of x's
+    autocorrelation at the multiples of tau (1 + |a|^2 on the diagonal, a and conj(a) beside it) and r = (a, 0, ..,
+    0); for m = 1 that is |a|^4 / (1 + |a|^2), and never above the truncated inverse filter's |a|^(2 (m + 1))."""
+    rng = np.random.default_rng(20)
+    n, tau, a = 200_000, 5, 0.6 * np.exp(0.9j)
+    d = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2.0)
+    x = d.copy()
+    x[tau:] += a * d[:-tau]
+    cfg = PCLConfig(sample_rate=1e6, cpi=n / 1e6, bandwidth=0.8e6, range_max=3000.0, batch_length=1000, eca_taps=0,
+                    cleaning_loading=0.0)
+
+    def residual(e):
+        return float(np.mean(np.abs(e - d)[1000:] ** 2))
+
+    assert residual(x) == pytest.approx(abs(a) ** 2, rel=0.02)
+    for taps, m in ((1, 1), (3 * tau - 4, 3)):  # lags tau .. tau + taps - 1: m multiples of tau
+        e = clean_reference(x, replace(cfg, cleaning_taps=taps, cleaning_delay=tau))
+        G = np.diag(np.full(m, 1 + abs(a) ** 2)).astype(complex)
+        G[np.arange(m - 1), np.arange(1, m)] = np.conj(a)
+        G[np.arange(1, m), np.arange(m - 1)] = a
+        r = np.zeros(m, complex)
+        r[0] = a
+        want = abs(a) ** 2 - float(np.real(np.conj(r) @ np.linalg.solve(G, r)))
+        if m == 1:
+            assert want == pytest.approx(abs(a) ** 4 / (1 + abs(a) ** 2))
+        assert want <= abs(a) ** (2 * (m + 1))
+        assert residual(e) == pytest.approx(want, rel=0.1), (taps, residual(e), want)
+    # the weights: the single-lag predictor is c[tau] / c[0] = a / (1 + |a|^2)
+    one = replace(cfg, cleaning_taps=1, cleaning_delay=tau)
+    assert cleaning_weights(x, one)[0] == pytest.approx(a / (1 + abs(a) ** 2), abs=0.01)
+    # a pilot carrier (-3 dB) through the same channel: declared, its share is taken out of the autocorrelation
+    # and the weight is the data's; undeclared, the predictor chases the carrier
+    f_p = 123_456.0
+    pilot = np.sqrt(0.5) * np.exp(2j * np.pi * f_p / 1e6 * np.arange(n))
+    xp = x + pilot * (1 + a * np.exp(-2j * np.pi * f_p / 1e6 * tau))
+    assert cleaning_weights(xp, replace(one, pilot_hz=f_p))[0] == pytest.approx(a / (1 + abs(a) ** 2), abs=0.01)
+    assert abs(cleaning_weights(xp, one)[0] - a / (1 + abs(a) ** 2)) > 0.05
+
+
+def test_eca_with_600_taps_cancels_clutter_at_15_km():
+    """Closed form.  A white reference r (unit power), a direct path at +60 dB and a clutter patch at lag 500
+    (14.99 km at 10 MHz) at +30 dB over unit noise, s[n] = a0 r[n] + a1 r[n - 500] + w[n] (r[n < 0] = 0): 600 taps
+    (0 - 17.96 km) leave the noise less its share in the K fitted dimensions, E|s - Xw|^2 / N = (N - K) / N
+    (within 3 %); 500 taps (to 14.96 km) leave the clutter whole, 1 + |a1|^2 (within 3 %).  (ECA's normal
+    equations are the autocorrelation method's: the fit runs on past the CPI into zero padding, which biases the
+    clutter's weight by about lag / N and adds about |a1|^2 (lag / N)^2 = 0.002 here.)  The folded chain gives the
+    twin's map with 600 taps (K > L) on a frame of the demanding scene's kind."""
+    rng = np.random.default_rng(21)
+    n, lag = 400_000, 500
+    r = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2.0)
+    w = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2.0)
+    s = 1e3 * r + w
+    s[lag:] += np.sqrt(1e3) * r[:-lag]
+    clean, _ = eca(s, r, 600)
+    assert np.mean(np.abs(clean) ** 2) == pytest.approx((n - 600) / n, rel=0.03)
+    short, _ = eca(s, r, 500)
+    assert np.mean(np.abs(short[lag:]) ** 2) == pytest.approx(1.0 + 1e3, rel=0.03)
+    # the folded chain against the twin, 600 taps on a 102-bin map, clutter at 15 km (a fractional lag)
+    cfg = PCLConfig(cpi=0.02, eca_taps=600)
+    scene = SignalScene(direct_path_db=60.0, clutter_ranges=(300.0, 15_000.0), clutter_db=(50.0, 40.0),
+                        reference_snr_db=70.0)
+    ref, surv = frame_signals(np.array([[600.0, -10.0]]), generator(21, "eca600"), cfg, scene)
+    caf = process_frame(ref, surv, cfg)[0]
+    twin = process_frame(ref.astype(np.complex128), surv.astype(np.complex128), cfg, method="reference")[0]
+    k = np.arange(twin.doppler_hz.size) - cfg.doppler_half
+    floor = np.median(twin.power[:, k != 0])
+    assert 10 * np.log10(np.max(np.abs(caf.chi - twin.chi) ** 2) / floor) < -40.0
 
 
 def test_fused_kernels_match_their_numpy_twin():
@@ -297,7 +393,7 @@ def test_demanding_scene_needs_taps_over_the_whole_map_and_pilot_removal():
     """The scaled demanding scene: the brief's short ECA leaves the far clutter and loses the target; taps over the
     whole map find it, with the pilot removed.  (The pilot's ridge needs the full-size integration gain to stand
     out of the target's own sidelobe floor: the recipe test checks it on the full-size frame.)"""
-    full = demanding_config(SMALL, SMALL_VSB)
+    full = _small_demanding()
     target = _echo(11, 4)
     ref, surv = frame_signals(target, generator(16, "demanding"), full, SMALL_VSB)
 
@@ -333,7 +429,15 @@ def test_signal_chain_rejects_bad_input():
     from workbench.types import InputError
 
     with pytest.raises(InputError, match="eca_taps"):
-        PCLConfig(eca_taps=200)
+        PCLConfig(eca_taps=10_001)  # beyond the batch length
+    with pytest.raises(InputError, match="cleaning_delay"):
+        PCLConfig(cleaning_taps=4, cleaning_delay=0)
+    with pytest.raises(InputError, match="span"):
+        PCLConfig(cleaning_taps=10_000, cleaning_delay=8)
+    with pytest.raises(InputError, match="reference_multipath"):
+        SignalScene(reference_multipath_ranges=(300.0,), reference_multipath_db=())
+    with pytest.raises(InputError, match="reference_multipath_ranges"):
+        SignalScene(reference_multipath_ranges=(0.0,), reference_multipath_db=(-10.0,))
     with pytest.raises(InputError, match="waveform"):
         SignalScene(waveform="ofdm")
     with pytest.raises(InputError, match="does not fit"):
@@ -477,7 +581,7 @@ def test_ablation_statistic_and_its_sign():
 # -- the report recipe ---------------------------------------------------------------------------------
 
 
-SIZE = {"runs": 200, "frames": 120, "signal_frames": 3, "tuning_runs": 80}
+SIZE = {"runs": 200, "frames": 120, "signal_frames": 3, "demanding_frames": 2, "tuning_runs": 80}
 
 
 @pytest.fixture(scope="module")
@@ -640,15 +744,17 @@ def test_report_figures_hold_the_papers_content(quick_results):
     mid = 0.5 * (nis["edges"][1:] + nis["edges"][:-1])
     mean_gate = np.sum(mid * nis["rr-gate/density"] * width)
     assert mean_gate == pytest.approx(2.0, abs=0.3)
-    # fig5, the demanding scene: with 16 taps the target is lost under the clutter, with 102 taps it is the peak
+    # fig5, the demanding scene: with 16 taps or taps to the map's edge (102) the target is lost under the clutter
+    # (out to 17.5 km), with 600 taps it is the peak
     dem = data["fig5"]
-    assert tuple(dem["taps"]) == (0, 16, 102)
-    assert not dem["detected"][0] and dem["detected"][1]
+    assert tuple(dem["taps"]) == (0, 16, 102, 600) and float(dem["clutter_max"]) == 17_500.0
+    assert not dem["detected"][0] and not dem["detected"][1] and dem["detected"][2]
     full = dem["caf_full_db"]
     li, di = np.unravel_index(np.argmax(np.where(np.abs(dem["doppler_hz"]) > 2.0, full, -np.inf)), full.shape)
     assert abs(dem["range_m"][li] - dem["true_range"]) <= 30.0 and abs(dem["doppler_hz"][di] - dem["true_doppler"]) <= 4
-    assert np.median(dem["caf_brief_db"]) > np.median(full) + 30  # the floor under the uncancelled clutter
-    assert dem["caf_raw_db"][0, zero] > 100  # the direct path, +60 dB plus 64 dB of integration
+    assert np.median(dem["caf_edge_db"]) > np.median(full) + 30  # the floor under the clutter beyond the map
+    zero_dem = dem["doppler_hz"].size // 2  # 119 Doppler bins at the demanding scene's 0.5 s CPI
+    assert dem["caf_raw_db"][0, zero_dem] > 100  # the direct path, +60 dB plus 67 dB of integration
     assert np.any((np.abs(dem["full/det_range"] - dem["true_range"]) < 45) &
                   (np.abs(dem["full/det_doppler"] - dem["true_doppler"]) < 6))
 
@@ -746,14 +852,19 @@ def test_report_tables_are_computed_from_the_runs(quick_results):
     on_brief = next(r for r in brief if r[0].startswith("diagnostic (C1's"))
     assert on_brief[3] < on_ours[3]
     scene = {r[0]: r for r in recipe.tables[1].make(results).rows}
-    assert scene["demanding scene, one frame: target detected with 16 / 102 ECA taps"][1] == "False / True"
+    assert scene["demanding scene, one 0.5 s frame: target detected with 16 / 102 / 600 ECA taps"][1] == \
+        "False / False / True"
     assert scene["folded single-precision ECA + CAF vs the float64 reference: worst cell error over the noise floor "
                  "(dB); same candidates"][1].endswith("True")
     dem = results["signal-demanding"]
     assert float(dem["accuracy/max_err_db"]) < -40 and bool(dem["accuracy/same_candidates"])
     assert int(dem["nopilot/candidates"]) > 5
-    assert np.mean(dem["series/full/detected"]) > np.mean(dem["series/brief/detected"])
-    assert any(k.startswith("demanding scene (102 taps), 1 run x 3 frames") for k in scene)
+    assert np.mean(dem["series/full/detected"]) > np.mean(dem["series/edge/detected"])
+    assert any(k.startswith("demanding scene (600 taps), 1 run x 2 frames") for k in scene)
+    # the reference multipath: a ghost near the path's level without the cleaning, 20+ dB lower with it
+    ghost_clean, ghost_raw = dem["ghost_db"]
+    assert -14.0 < ghost_raw < -8.0 and ghost_clean < ghost_raw - 20.0
+    assert float(dem["floor_rise_db"][2]) > 5.0  # ECA with an uncleaned reference leaves more of the clutter
     assert any(k.startswith("benign scene, 1 run x 3 frames") for k in scene)
     assert recipe.notes and "f_D = -Rdot / lambda" in recipe.notes and str(p2.TUNING_SEED) in recipe.notes
 
