@@ -55,7 +55,7 @@ from .linalg import joseph_update, psd_solve, symmetrise
 from .models import MeasurementModel, MotionModel, require_jacobian, require_linear
 from .types import Gaussian, InputError, Scan
 
-__all__ = ["linear_predict", "extended_predict", "linearised", "linear_update", "kalman_update", "kf_update", "ekf_update",
+__all__ = ["cached_angle_mask", "linear_predict", "extended_predict", "linearised", "linear_update", "kalman_update", "kf_update", "ekf_update",
            "measurement_covariance", "last_backend", "backend_counts", "Innovations", "gaussian_innovations"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -148,8 +148,9 @@ def _present_any(present: np.ndarray) -> bool:
 _ANGLES: dict = {}
 
 
-def _angle_mask(model: MeasurementModel) -> np.ndarray:
-    """``model.angle_mask``, one array per declared ``angular`` tuple (read, never written, by the loops)."""
+def cached_angle_mask(model: MeasurementModel) -> np.ndarray:
+    """``model.angle_mask``, one shared array per declared ``angular`` tuple (read, never written, by the compiled
+    loops): built once instead of at every call of a one-track update."""
     mask = _ANGLES.get(model.angular)
     if mask is None:
         mask = _ANGLES.setdefault(model.angular, np.array(model.angular, dtype=bool))
@@ -278,7 +279,7 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
     if B < SMALL_BATCH and (fast := _compiled()) is not None:
         m = z.shape[1]
         hx = np.ascontiguousarray(model.h(state.mean), dtype=float)
-        angular = _angle_mask(model)
+        angular = cached_angle_mask(model)
         if type(model).residual is not MeasurementModel.residual or hx.shape != (B, m) or angular.shape != (m,):
             # the model's own residual (or an h of another shape, which the NumPy code then reports): nu itself,
             # as z with h = 0 and no angle (z - 0 is z exactly)

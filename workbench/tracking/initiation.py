@@ -19,7 +19,7 @@ from .assign import greedy_assign
 from .gate import box_pairs, position_covariance
 from .records import CONFIRMED, TENTATIVE, TrackerConfig, TrackerState, TrackTable
 
-__all__ = ["two_point_prior", "speed_course_prior", "rectangular_pairs", "mofn_step", "initial_state", "initiate"]
+__all__ = ["two_point_prior", "speed_course_prior", "new_track_prior", "rectangular_pairs", "mofn_step", "initial_state", "initiate"]
 
 
 def two_point_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, cov_prev: np.ndarray,
@@ -66,6 +66,24 @@ def speed_course_prior(p_prev: np.ndarray, p_cur: np.ndarray, dt: float, pos_cov
     cov[:, :2, :2] = pos_cov
     cov[:, 2:, 2:] = 0.5 * (pv + np.swapaxes(pv, -1, -2))
     return Gaussian(np.concatenate([p_cur, vel], axis=1), cov)
+
+
+def new_track_prior(config, model: MeasurementModel, motion: MotionModel, p_prev: np.ndarray, p_cur: np.ndarray,
+                    n: int, cov_prev: np.ndarray | None = None, cov_cur: np.ndarray | None = None) -> Gaussian:
+    """The prior of the new tracks started from the position pairs ``p_prev, p_cur (K, 2)`` one step apart, by
+    ``config.prior``: :func:`two_point_prior` or :func:`speed_course_prior`.  The positions' covariances are
+    ``cov_prev, cov_cur (K, 2, 2)`` where given (the detections' own), else ``config.detection_sigma`` (isotropic)
+    where set, else the model's (:func:`~workbench.tracking.gate.position_covariance`)."""
+    if cov_cur is None:
+        if config.detection_sigma is not None:
+            cov_cur = np.broadcast_to(config.detection_sigma**2 * np.eye(2), (p_cur.shape[0], 2, 2))
+            cov_prev = cov_cur
+        else:
+            cov_cur = position_covariance(model, p_cur, n)
+            cov_prev = position_covariance(model, p_prev, n) if config.prior == "two-point" else None
+    if config.prior == "two-point":
+        return two_point_prior(p_prev, p_cur, motion.dt, cov_prev, cov_cur)
+    return speed_course_prior(p_prev, p_cur, motion.dt, cov_cur, config.sigma_v, config.sigma_c)
 
 
 def rectangular_pairs(a: np.ndarray, b: np.ndarray, box: float, dense_limit: int = 250_000):
@@ -153,16 +171,9 @@ def initiate(st: TrackerState, table: TrackTable, init_pos: np.ndarray, init_cov
             cov_cur = init_cov[a_c]
             cov_prev = (st.candidate_cov[a_p] if st.candidate_cov is not None
                         else position_covariance(model, p_prev, n))
-        elif config.detection_sigma is not None:
-            cov_cur = np.broadcast_to(config.detection_sigma**2 * np.eye(2), (a_c.size, 2, 2))
-            cov_prev = cov_cur
+            prior = new_track_prior(config, model, motion, p_prev, p_cur, n, cov_prev, cov_cur)
         else:
-            cov_cur = position_covariance(model, p_cur, n)
-            cov_prev = position_covariance(model, p_prev, n) if config.prior == "two-point" else None
-        if config.prior == "two-point":
-            prior = two_point_prior(p_prev, p_cur, motion.dt, cov_prev, cov_cur)
-        else:
-            prior = speed_course_prior(p_prev, p_cur, motion.dt, cov_cur, config.sigma_v, config.sigma_c)
+            prior = new_track_prior(config, model, motion, p_prev, p_cur, n)
         new_state = filt.init(prior, rng)
         filt.require_batch_contract(new_state, who)
         new_est = filt.estimate(new_state)

@@ -70,8 +70,8 @@ from ..specs import FilterSpec
 from ..types import Gaussian, InputError, Scan, Scans
 from .assign import greedy_assign
 from .gate import (_whiten, detection_covariance, gate_covariance, gated_pairs, measurement_covariance,
-                   measurement_view, position_covariance)
-from .initiation import initial_state, initiate, mofn_step, rectangular_pairs, speed_course_prior, two_point_prior
+                   measurement_view)
+from .initiation import initial_state, initiate, mofn_step, new_track_prior, rectangular_pairs
 from .loop import Context
 from .records import CONFIRMED, TENTATIVE, PingTracks, TrackerConfig, TrackerState, TrackLog, TrackTable
 
@@ -390,17 +390,7 @@ class MofN:
         if a_c.size:
             order = np.argsort(a_c)  # new tracks in detection order (runs in order)
             a_p, a_c = a_p[order], a_c[order]
-            p_prev, p_cur = R.candidates[a_p], init_pos[a_c]
-            if config.detection_sigma is not None:
-                cov_cur = np.broadcast_to(config.detection_sigma**2 * np.eye(2), (a_c.size, 2, 2))
-                cov_prev = cov_cur
-            else:
-                cov_cur = position_covariance(model, p_cur, n)
-                cov_prev = position_covariance(model, p_prev, n) if config.prior == "two-point" else None
-            if config.prior == "two-point":
-                prior = two_point_prior(p_prev, p_cur, motion.dt, cov_prev, cov_cur)
-            else:
-                prior = speed_course_prior(p_prev, p_cur, motion.dt, cov_cur, config.sigma_v, config.sigma_c)
+            prior = new_track_prior(config, model, motion, R.candidates[a_p], init_pos[a_c], n)
             new_state = filt.init(prior, ctx.rng)
             filt.require_batch_contract(new_state, self.who)
             new_est = filt.estimate(new_state)

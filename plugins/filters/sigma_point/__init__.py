@@ -40,6 +40,7 @@ import numpy as np
 
 from workbench import hookimpl
 from workbench.filtering import keep_where, require_finite, single_measurement
+from workbench.kalman_core import cached_angle_mask
 from workbench.kernels.backend import BackendRecord, runs_numba
 from workbench.linalg import cholupdate, safe_cholesky, symmetrise, tria
 from workbench.models import MeasurementModel, MotionModel
@@ -223,17 +224,6 @@ def _compiled(weights: SigmaWeights):
     return _LOOPS[0]
 
 
-_ANGLES: dict = {}
-
-
-def _angle_mask(model: MeasurementModel) -> np.ndarray:
-    """``model.angle_mask``, one array per declared ``angular`` tuple (read, never written, by the loops)."""
-    mask = _ANGLES.get(model.angular)
-    if mask is None:
-        mask = _ANGLES.setdefault(model.angular, np.array(model.angular, dtype=bool))
-    return mask
-
-
 def _compiled_points(fast, x: np.ndarray, P: np.ndarray, spread: float) -> np.ndarray | None:
     """The sigma points ``X`` from the compiled loops ``fast``, or ``None`` (no compiled loops, or some ``P`` not
     positive definite)."""
@@ -288,7 +278,7 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
     if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
         Y = np.ascontiguousarray(model.h(X), dtype=float)
         m = z.shape[1]
-        angular = _angle_mask(model)
+        angular = cached_angle_mask(model)
         if Y.shape == (B, 2 * n + 1, m) and model.R.shape == (m, m) and angular.shape == (m,):  # the loop's indices
             mean, cov = np.empty(x.shape), np.empty(P.shape)
             # declined (False) for a Pyy that is not positive definite or a present z that is not finite
