@@ -22,11 +22,7 @@ TESTS = Path(__file__).parent
 @pytest.fixture(scope="module")
 def worker_path(tmp_path_factory):
     """Workers are new processes: they find the demo plugin through an entry point on PYTHONPATH."""
-    site = tmp_path_factory.mktemp("site")
-    info = site / "demo_fixture-1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-fixture\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[workbench]\ndemo = fixtures.demo_plugin\n")
+    site = demo_plugin.write_entry_point_site(tmp_path_factory.mktemp("site"))
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("PYTHONPATH", os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))
         yield site

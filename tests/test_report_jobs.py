@@ -31,11 +31,7 @@ def installed_host(tmp_path_factory):
     process and the worker processes (PYTHONPATH) both see, so that a worker's ``load_host()`` builds this host."""
     from workbench.plugins import load_host
 
-    site = tmp_path_factory.mktemp("site")
-    info = site / "demo_fixture-1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: demo-fixture\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[workbench]\ndemo = fixtures.demo_plugin\n")
+    site = demo_plugin.write_entry_point_site(tmp_path_factory.mktemp("site"))
     with pytest.MonkeyPatch.context() as mp:
         mp.syspath_prepend(str(site))
         mp.setenv("PYTHONPATH", os.pathsep.join([str(site), str(TESTS), os.environ.get("PYTHONPATH", "")]))

@@ -485,13 +485,19 @@ UKF_CT_TARGET, PF_CT_TARGET = 100.0, 10.0
 STONESOUP_ORDER = (0, 2, 1, 3, 4)
 
 
+def ct_motion():
+    """The ct-rate model of group ``motion`` over 1 s steps (sigma_a, sigma_omega as :data:`CT_SIGMA_A`,
+    :data:`CT_SIGMA_OMEGA`)."""
+    from workbench.models import coordinated_turn_rate
+
+    return coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)
+
+
 def ct_problem(batch: int, steps: int, seed: int = 0):
     """Truth (sampled from the ct-rate model itself), scans, prior and models of group ``motion`` for ``batch``
     runs: ``(truth, scans, prior, motion, model)``."""
-    from workbench.models import coordinated_turn_rate
-
     rng = generator(seed, "bench", "motion", batch, steps)
-    motion = coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)
+    motion = ct_motion()
     model = range_bearing(CT_SIGMA_R, CT_SIGMA_THETA)
     truth = sample_motion(np.tile(CT_X0, (batch, 1)), motion, steps, rng)
     z = model.h(truth.states) + rng.standard_normal((batch, steps, 2)) @ np.linalg.cholesky(model.R).T
@@ -633,9 +639,8 @@ def kernel_figures(repeats: int) -> dict:
     sides of 0): the NumPy twins against the policy's path (the compiled loops where it runs Numba), timed
     alternately, ns per state, and the speed-up (median of the per-pair ratios)."""
     from workbench.kernels.backend import resolve
-    from workbench.models import coordinated_turn_rate
 
-    model = coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)
+    model = ct_motion()
     backend = resolve("auto")
     out: dict = {"ct_rate_backend": "numba" if backend == "numba" else f"numpy (the policy's {backend})"}
     rng = generator(0, "bench", "motion", "kernel")
@@ -705,10 +710,7 @@ def bench_motion(quick: bool = False) -> dict:
     pf_problem = ct_problem(1, pf_steps)
     pf, pf_rmse = _problem_runner(sir_every_step(host, N), pf_problem, 0, "motion-sir")
     # the step's one compiled pass (turn, noise, likelihood), as the model declares it and the policy runs Numba
-    from workbench.models import coordinated_turn_rate
-
-    ct_motion = coordinated_turn_rate(1.0, CT_SIGMA_A, CT_SIGMA_OMEGA)  # the model of ct_problem
-    fused = out["pf_backend"] == "numba" and ct_motion.fused_particle_propagator("range-bearing") is not None
+    fused = out["pf_backend"] == "numba" and ct_motion().fused_particle_propagator("range-bearing") is not None
     key = "sir_ct_speedup_vs_stonesoup"
     out[f"target_{key}"] = f">= {PF_CT_TARGET:g}"
     if version is not None:

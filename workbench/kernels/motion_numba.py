@@ -107,6 +107,17 @@ _SIGNS = np.array([1.0, -1.0])
 
 
 @numba.njit(inline="always", error_model="numpy")
+def _first_box(r):
+    """The ziggurat's reading of one 64-bit word ``r``: ``(idx, rabs, x)``, its box, its 52-bit magnitude and the
+    candidate value with its sign (NumPy's ``random_standard_normal``), the draw accepted where ``rabs <
+    ki_double[idx]``."""
+    idx = np.intp(r & numba.uint64(0xFF))
+    r >>= numba.uint64(8)
+    rabs = (r >> numba.uint64(1)) & numba.uint64(0x000FFFFFFFFFFFFF)
+    return idx, rabs, (np.int64(rabs) * wi_double[idx]) * _SIGNS[np.intp(r & numba.uint64(1))]
+
+
+@numba.njit(inline="always", error_model="numpy")
 def _pcg_normal(hi, lo, inc_hi, inc_lo):
     """NumPy's ``random_standard_normal`` (its ziggurat, with the tables Numba copies from it) on PCG64 whose state
     ``(hi, lo)`` the caller keeps in locals: ``(value, hi, lo)``, the number ``Generator.standard_normal`` gives
@@ -114,10 +125,7 @@ def _pcg_normal(hi, lo, inc_hi, inc_lo):
     pointer and keeping its state in memory; here the 99.3 % of draws that take the first box are straight-line
     code (no branch on the sign) and the rest go to :func:`_pcg_normal_rest`, out of line."""
     r, hi, lo = _pcg_next64(hi, lo, inc_hi, inc_lo)
-    idx = np.intp(r & numba.uint64(0xFF))
-    r >>= numba.uint64(8)
-    rabs = (r >> numba.uint64(1)) & numba.uint64(0x000FFFFFFFFFFFFF)
-    x = (np.int64(rabs) * wi_double[idx]) * _SIGNS[np.intp(r & numba.uint64(1))]
+    idx, rabs, x = _first_box(r)
     if rabs < ki_double[idx]:
         return x, hi, lo
     return _pcg_normal_rest(idx, rabs, x, hi, lo, inc_hi, inc_lo)
@@ -143,10 +151,7 @@ def _pcg_normal_rest(idx, rabs, x, hi, lo, inc_hi, inc_lo):
             if (fi_double[idx - 1] - fi_double[idx]) * u + fi_double[idx] < np.exp(-0.5 * x * x):
                 return x, hi, lo
         r, hi, lo = _pcg_next64(hi, lo, inc_hi, inc_lo)
-        idx = np.intp(r & numba.uint64(0xFF))
-        r >>= numba.uint64(8)
-        rabs = (r >> numba.uint64(1)) & numba.uint64(0x000FFFFFFFFFFFFF)
-        x = (np.int64(rabs) * wi_double[idx]) * _SIGNS[np.intp(r & numba.uint64(1))]
+        idx, rabs, x = _first_box(r)
         if rabs < ki_double[idx]:
             return x, hi, lo
 
