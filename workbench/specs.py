@@ -749,6 +749,11 @@ class Task:
     ``seeded``: False for a task whose result does not depend on the report's seed (a tuning task that draws from
     its own fixed tuning seed): the confirmation seed reuses its result on the reported seed instead of running it
     again.  Declared by the recipe, never guessed; a task that reads ``ctx.seed`` must leave it True.
+    ``sensitivity``: True for a task computed only at a non-primary grid value of a declared unknown (it feeds a
+    criterion's ``across``, never its verdict at the primary values).  The confirmation seed judges the primary
+    values only, so it does not run such a task again: the re-judged criteria read the reported seed's result, and
+    only their discarded ``across`` depends on it.  Declared by the recipe (its tests check that the primary
+    verdicts read no such task).
     """
 
     key: str
@@ -756,6 +761,7 @@ class Task:
     run: Callable[[TaskContext], Mapping[str, np.ndarray]]
     runs: int | None = None
     seeded: bool = True
+    sensitivity: bool = False
 
     def __post_init__(self) -> None:
         if self.runs is not None and (isinstance(self.runs, bool) or not isinstance(self.runs, (int, np.integer))
@@ -763,6 +769,8 @@ class Task:
             raise InputError(f"task {self.key!r}: runs is a whole number >= 1 or None, got {self.runs!r}")
         if not isinstance(self.seeded, bool):
             raise InputError(f"task {self.key!r}: seeded is True or False, got {self.seeded!r}")
+        if not isinstance(self.sensitivity, bool):
+            raise InputError(f"task {self.key!r}: sensitivity is True or False, got {self.sensitivity!r}")
 
 
 #: Results of a recipe's tasks: task key -> that task's arrays.

@@ -33,7 +33,8 @@ judge the reported seed's results), with that seed in place of the report's, jud
 and records, per criterion, the verdict there and whether it agrees
 (:class:`workbench.criteria.Confirmation`); the confirmation tasks are cached under their own seed like any other.
 A task declared ``seeded=False`` (:class:`workbench.specs.Task`: a tuning task on its own fixed tuning seed) is not
-run again: the confirmation reuses its result on the reported seed.  A quick report runs no confirmation (its verdicts
+run again: the confirmation reuses its result on the reported seed; nor is a task declared ``sensitivity=True`` (a
+non-primary grid value of a declared unknown), since the confirmation judges the primary values only.  A quick report runs no confirmation (its verdicts
 are indications already).
 
 The time table: every task the report runs (on the reported seed, at the declared unknowns' grid points, on the
@@ -616,25 +617,34 @@ def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, o
     (cached under it), the criteria judged again unchanged on those results (the other tasks' results are the
     reported seed's, which the criteria do not read).  A task they read that is declared ``seeded=False`` is not
     rerun: its result on the reported seed is the result on any seed, and is reused (where the reported seed's
-    task with that key had the same parameters and finished)."""
+    task with that key had the same parameters and finished).  Nor is a task declared ``sensitivity=True`` (a
+    non-primary grid value of a declared unknown): the confirmation records the verdicts at the primary values only
+    (:func:`workbench.criteria.confirm`), which such a task does not feed; the re-judged criteria read the reported
+    seed's result for it, and their ``across`` is discarded."""
     again_options = dataclasses.replace(options, seed=seed)
     reported = reported or {}
 
-    def reusable(task: Task) -> bool:
+    def why_reused(task: Task) -> str:
+        """Why ``task`` is not run again on the confirmation seed ('' where it is)."""
         before = reported.get(task.key)
-        return (not task.seeded and before is not None and not before.seeded and task.key in results
-                and dict(before.params) == dict(task.params))
+        if before is None or task.key not in results:
+            return ""
+        if not task.seeded and not before.seeded and dict(before.params) == dict(task.params):
+            return "the reported seed's result (seeded=False)"
+        if task.sensitivity and before.sensitivity:
+            return "the reported seed's result (sensitivity point: the confirmation judges the primary values)"
+        return ""
 
     wanted = [t for t in recipe.tasks(again_options) if t.key in read]
-    reused = [t for t in wanted if reusable(t)]
-    tasks = [t for t in wanted if not reusable(t)]
+    reused = [(t, why_reused(t)) for t in wanted if why_reused(t)]
+    tasks = [t for t in wanted if not why_reused(t)]
     note = PaperOutcome(recipe.paper, recipe.title, options.size, options.filters, "", {})
     fresh = _run_tasks(recipe, tasks, host, cache, run, note, seed=seed, size=options.size, arch=options.arch,
                        version=version, progress=progress, on_task=on_task,
                        label=f"paper {recipe.paper} ({options.size}, confirmation seed {seed})", previous=previous)
-    for task in reused:
+    for task, why in reused:
         outcome.tasks.append({"key": f"confirmation/{task.key}", "seconds": 0.0, "cached": False, "error": "",
-                              "runs": task.runs, "seed": seed, "reused": "the reported seed's result (seeded=False)"})
+                              "runs": task.runs, "seed": seed, "reused": why})
     for entry in note.tasks:
         outcome.tasks.append({**entry, "key": f"confirmation/{entry['key']}", "seed": seed})
     outcome.warnings.extend(note.warnings)
