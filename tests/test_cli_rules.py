@@ -63,14 +63,14 @@ def _error(capsys, argv) -> str:
     ("ekf,kalman-filter", "--filters 'kalman-filter': no filter named 'kalman-filter' is installed"),
 ])
 def test_a_bad_filter_request_is_refused_before_any_paper_runs(capsys, no_report, tmp_path, request_, expected):
-    message = _error(capsys, ["report", "--out", str(tmp_path), "--no-progress", f"--filters={request_}"])
+    message = _error(capsys, ["report", "--quick", "--out", str(tmp_path), "--no-progress", f"--filters={request_}"])
     assert message.startswith(expected), message
 
 
 def test_a_filter_configured_with_its_own_defaults_is_the_plain_filter(capsys, no_report, tmp_path):
     # sir's default particle count, written out, configures nothing: it is the same filter as 'sir'
     particles = load_host().filter("sir").params["particles"]
-    message = _error(capsys, ["report", "--out", str(tmp_path), f"--filters=sir,sir(particles={particles})"])
+    message = _error(capsys, ["report", "--quick", "--out", str(tmp_path), f"--filters=sir,sir(particles={particles})"])
     assert message == f"--filters: the same filter is listed twice: 'sir' and 'sir(particles={particles})' " \
                       f"(both sir)"
 
@@ -86,7 +86,7 @@ def test_filters_are_matched_by_what_they_are_not_how_they_are_spelled():
 
 
 def test_the_wrong_kind_names_what_it_is_and_the_installed_filters(capsys, no_report, tmp_path):
-    message = _error(capsys, ["report", "--out", str(tmp_path), "--filters", "range-bearing(sigma_theta=0.1)"])
+    message = _error(capsys, ["report", "--quick", "--out", str(tmp_path), "--filters", "range-bearing(sigma_theta=0.1)"])
     assert "no filter named" not in message  # the old, misleading message: the name is installed, as a sensor
     installed = re.search(r"installed filters: (.*)\)$", message).group(1).split(", ")
     assert installed == sorted(load_host().filters)
@@ -94,7 +94,7 @@ def test_the_wrong_kind_names_what_it_is_and_the_installed_filters(capsys, no_re
 
 def test_filters_given_twice_is_refused(capsys, no_report, tmp_path):
     with pytest.raises(SystemExit) as info:
-        main(["report", "--out", str(tmp_path), "--filters", "kf", "--filters", "ekf"])
+        main(["report", "--quick", "--out", str(tmp_path), "--filters", "kf", "--filters", "ekf"])
     assert info.value.code == 2
     assert "--filters is given twice ('kf' and 'ekf')" in capsys.readouterr().err
 
@@ -106,7 +106,7 @@ def test_filters_given_twice_is_refused(capsys, no_report, tmp_path):
     ([""], "--paper '': no paper '' is installed (installed: "),
 ])
 def test_a_bad_paper_request_is_refused_before_any_paper_runs(capsys, no_report, tmp_path, papers, expected):
-    argv = ["report", "--out", str(tmp_path)] + [f"--paper={p}" for p in papers]
+    argv = ["report", "--quick", "--out", str(tmp_path)] + [f"--paper={p}" for p in papers]
     message = _error(capsys, argv)
     assert message.startswith(expected), message
     if "installed" in expected:
@@ -167,7 +167,7 @@ def test_a_scenario_file_and_the_command_line_give_the_same_message(capsys, no_r
     if names == '["ss-ukf"]' and "ss-ukf" in load_host().filters:
         pytest.skip("Stone Soup is installed: ss-ukf is a good filter here")
     from_file = _error(capsys, ["run", str(path), "--out", str(out)])
-    from_cli = _error(capsys, ["report", "--out", str(out), f"--filters={request_}"])
+    from_cli = _error(capsys, ["report", "--quick", "--out", str(out), f"--filters={request_}"])
     # only the place named before the first ': ' differs (the file and key, or the option and the entry)
     where_file = re.match(re.escape(f"{path}: [filters] names") + r"(\[\d+\])?: ", from_file)
     where_cli = re.match(r"--filters( '[^']*')?: ", from_cli)
@@ -247,7 +247,7 @@ def test_building_a_stonesoup_filter_without_stonesoup_is_a_named_error(no_stone
 
 
 @pytest.mark.parametrize("argv, where", [
-    (["report", "--filters", "kf,+ss-ukf"], "--filters 'ss-ukf': the filter 'ss-ukf' needs Stone Soup"),
+    (["report", "--quick", "--filters", "kf,+ss-ukf"], "--filters 'ss-ukf': the filter 'ss-ukf' needs Stone Soup"),
     (["check-plugin", "ss-pf"], "the filter 'ss-pf' needs Stone Soup"),
     (["plugins", "ss-ekf"], "the filter 'ss-ekf' needs Stone Soup"),
 ])

@@ -78,7 +78,7 @@ def host(monkeypatch):
 
 
 def _report(tmp_path, *args):
-    return main(["report", "--paper", "t01", "--out", str(tmp_path / "r"), "--no-progress", *args])
+    return main(["report", "--quick", "--paper", "t01", "--out", str(tmp_path / "r"), "--no-progress", *args])
 
 
 def test_report_trackers_adds_to_the_recipe_s_defaults(host, tmp_path, capsys):
@@ -126,7 +126,7 @@ def test_report_trackers_mistakes_are_one_line_exit_2_before_anything_runs(host,
 
 
 def test_report_trackers_for_a_paper_that_compares_none_is_refused_by_name(host, tmp_path, capsys):
-    code = main(["report", "--paper", "t01", "--paper", "demo", "--out", str(tmp_path / "r"), "--no-progress",
+    code = main(["report", "--quick", "--paper", "t01", "--paper", "demo", "--out", str(tmp_path / "r"), "--no-progress",
                  "--trackers", "+gm-phd"])
     err = capsys.readouterr().err
     assert code == 2

@@ -106,7 +106,7 @@ def test_an_unreachable_scheduler(tmp_path, capsys, monkeypatch):
 
     # the connection is refused at once, and Dask retries it until the timeout: a shorter one names the same fault
     monkeypatch.setattr(engine, "CONNECT_TIMEOUT", "1s")
-    code = main(["report", "--paper", "003", "--out", str(tmp_path), "--no-progress", "--scheduler", "tcp://127.0.0.1:9"])
+    code = main(["report", "--quick", "--paper", "003", "--out", str(tmp_path), "--no-progress", "--scheduler", "tcp://127.0.0.1:9"])
     assert code == EXIT["network"]
     _one_error_line(capsys, "cannot reach the Dask scheduler tcp://127.0.0.1:9")
 
@@ -120,7 +120,7 @@ def test_a_cluster_that_loses_its_workers_mid_report_is_a_network_failure(tmp_pa
         raise engine.DaskClusterLost("tcp://10.0.0.1:8786", 3, 7, 30.0)
 
     monkeypatch.setattr(engine, "run_report", lost)
-    code = main(["report", "--paper", "003", "--out", str(tmp_path), "--no-progress"])
+    code = main(["report", "--quick", "--paper", "003", "--out", str(tmp_path), "--no-progress"])
     assert code == EXIT["network"]
     _one_error_line(capsys, "tcp://10.0.0.1:8786", "no worker for 30 s while 3 of 7 tasks wait")
 
@@ -218,7 +218,7 @@ def test_run_writes_every_finished_filter_and_names_the_failed_one(tmp_path, cap
 
 def test_workers_below_one_is_refused(capsys):
     with pytest.raises(SystemExit) as info:
-        main(["report", "--workers", "-1"])
+        main(["report", "--quick", "--workers", "-1"])
     assert info.value.code == 2 and "expected a whole number >= 1" in capsys.readouterr().err
 
 
@@ -235,7 +235,7 @@ def test_filters_minus_name_can_be_typed_and_removing_the_last_is_an_error(tmp_p
     from workbench.cli import _normalise_argv
 
     assert _normalise_argv(["report", "--filters", "-ekf"]) == ["report", "--filters=-ekf"]
-    code = main(["report", "--paper", "003", "--out", str(tmp_path), "--no-progress", "--filters",
+    code = main(["report", "--quick", "--paper", "003", "--out", str(tmp_path), "--no-progress", "--filters",
                  "ekf,-ekf"])
     assert code == EXIT["input"]
     _one_error_line(capsys, "leaves no filter")

@@ -74,7 +74,7 @@ def test_figure_formats_are_honoured_or_refused_by_name(tmp_path, demo_host, mon
     with pytest.raises(InputError, match="named twice"):
         run_report(demo_host, tmp_path / "x", papers=["demo"], progress=False, formats=["png", "png"])
     monkeypatch.setenv("WORKBENCH_REPORT_FORMATS", "jpeg")
-    assert main(["report", "--paper", "000", "--out", str(tmp_path / "y"), "--no-progress"]) == 2
+    assert main(["report", "--quick", "--paper", "000", "--out", str(tmp_path / "y"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["workbench: error: WORKBENCH_REPORT_FORMATS='jpeg': figure formats are png and svg "
                    "(comma-separated), got 'jpeg'"]
@@ -331,7 +331,7 @@ def test_failed_task_is_reported_and_the_rest_kept(tmp_path, demo_host):
 def test_interrupted_report_resumes_and_loses_nothing(tmp_path):
     env = demo_distribution_env(tmp_path)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "workbench.cli", "report", "--paper", "demo", "--out", str(out), "--no-progress"]
+    cmd = [sys.executable, "-m", "workbench.cli", "report", "--quick", "--paper", "demo", "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, env=dict(env, WORKBENCH_TEST_SLOW_TASK="ekf"), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     cache_dir = out / "cache" / "paperdemo"

@@ -344,7 +344,7 @@ def test_the_command_line_waits_as_long_as_wait_says_then_names_the_holder(tmp_p
     try:
         assert holder.stdout.readline().strip() == "held"
         t0 = time.monotonic()
-        code = main(["report", "--paper", "000", "--out", str(tmp_path), "--no-progress", "--wait", "0.5"])
+        code = main(["report", "--quick", "--paper", "000", "--out", str(tmp_path), "--no-progress", "--wait", "0.5"])
         waited = time.monotonic() - t0
     finally:
         holder.kill()
@@ -370,7 +370,7 @@ def test_a_folder_whose_filesystem_cannot_lock_is_refused_as_such_not_as_busy(tm
         raise OSError(code, os.strerror(code))
 
     monkeypatch.setattr(fcntl, "flock", flock)
-    code_ = main(["report", "--paper", "000", "--out", str(tmp_path), "--no-progress"])
+    code_ = main(["report", "--quick", "--paper", "000", "--out", str(tmp_path), "--no-progress"])
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert code_ == EXIT["input"]
     assert line.startswith(f"workbench: error: cannot lock the report folder {tmp_path}: {problem} "
@@ -394,7 +394,7 @@ def test_two_report_processes_into_one_folder_never_mix_their_tables(tmp_path):
     """Two command-line reports with different --filters at once: one runs, the other is refused by name."""
     env = demo_distribution_env(tmp_path)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "workbench.cli", "report", "--paper", "demo", "--out", str(out), "--no-progress"]
+    cmd = [sys.executable, "-m", "workbench.cli", "report", "--quick", "--paper", "demo", "--out", str(out), "--no-progress"]
     # the first one sleeps inside its ekf task, holding the folder, until it is killed
     slow = subprocess.Popen([*cmd, "--filters", "kf,ekf"], env=dict(env, WORKBENCH_TEST_SLOW_TASK="ekf"),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -239,19 +239,19 @@ def test_the_command_line_jobs_option(tmp_path, capsys, monkeypatch):
     here_only = load_host(extra_plugins=[("registered-here-only", HereOnly())])
     monkeypatch.delenv("WORKBENCH_JOBS", raising=False)  # the default of a plain command line (tests/conftest.py sets 1)
 
-    assert main(["report", "--jobs", "2", "--workers", "2", "--out", str(tmp_path / "a")]) == EXIT["input"]
+    assert main(["report", "--quick", "--jobs", "2", "--workers", "2", "--out", str(tmp_path / "a")]) == EXIT["input"]
     _one_error_line(capsys, "--jobs 2 and --workers", "not both")
     with pytest.raises(SystemExit):
-        main(["report", "--jobs", "0"])
+        main(["report", "--quick", "--jobs", "0"])
     assert "expected a whole number >= 1, got 0" in capsys.readouterr().err
     # a host with a plugin registered in this process only: --jobs 2 is refused by name, before any paper runs ...
     monkeypatch.setattr(cli, "load_host", lambda block=(): here_only)
-    code = main(["report", "--paper", "here", "--jobs", "2", "--out", str(tmp_path / "b"), "--no-progress"])
+    code = main(["report", "--quick", "--paper", "here", "--jobs", "2", "--out", str(tmp_path / "b"), "--no-progress"])
     assert code == EXIT["input"]
     _one_error_line(capsys, "--jobs 2:", "would not load", "--jobs 1")
     assert not (tmp_path / "b" / "paperhere").exists()
     # ... and the default (no --jobs) runs its tasks in this process, whatever the machine's cores
-    assert main(["report", "--paper", "here", "--out", str(tmp_path / "c"), "--no-progress"]) == 0
+    assert main(["report", "--quick", "--paper", "here", "--out", str(tmp_path / "c"), "--no-progress"]) == 0
     assert (tmp_path / "c" / "paperhere" / "fig1.png").exists()
 
 
@@ -265,12 +265,22 @@ def test_the_jobs_variable_sets_the_default_and_a_bad_value_is_refused_by_name(t
     assert _default_jobs(2) == 5
     for bad in ("0", "-2", "two", "1.5"):
         monkeypatch.setenv(JOBS_VARIABLE, bad)
-        assert main(["report", "--paper", "003", "--out", str(tmp_path / bad), "--no-progress"]) == EXIT["input"]
+        assert main(["report", "--quick", "--paper", "003", "--out", str(tmp_path / bad), "--no-progress"]) == EXIT["input"]
         _one_error_line(capsys, f"{JOBS_VARIABLE}={bad!r}", "whole number of worker processes >= 1")
         assert not (tmp_path / bad).exists()
     # WORKBENCH_JOBS=1: no worker pool is started; --jobs still overrides it (refused here with --workers, by name)
     started = []
     monkeypatch.setattr(engine, "LocalProcesses", lambda *a, **k: started.append(a) or pytest.fail("pool started"))
     monkeypatch.setenv(JOBS_VARIABLE, "1")
-    assert main(["report", "--paper", "here", "--out", str(tmp_path / "one"), "--no-progress"]) == EXIT["input"]
+    assert main(["report", "--quick", "--paper", "here", "--out", str(tmp_path / "one"), "--no-progress"]) == EXIT["input"]
     assert not started
+
+
+def test_the_report_command_gives_firm_verdicts_by_default_and_quick_only_on_request():
+    from workbench.cli import build_parser
+    parser = build_parser()
+    assert parser.parse_args(["report"]).size == "full"
+    assert parser.parse_args(["report", "--quick"]).size == "quick"
+    assert parser.parse_args(["report", "--full"]).size == "full"
+    with pytest.raises(SystemExit):  # one size or the other, never both
+        parser.parse_args(["report", "--quick", "--full"])
