@@ -284,3 +284,43 @@ def test_the_report_command_gives_firm_verdicts_by_default_and_quick_only_on_req
     assert parser.parse_args(["report", "--full"]).size == "full"
     with pytest.raises(SystemExit):  # one size or the other, never both
         parser.parse_args(["report", "--quick", "--full"])
+
+
+class TwoPapers:
+    """The demo recipe twice more, as papers ``twin-a`` and ``twin-b`` (the same task keys in both)."""
+
+    @hookimpl
+    def workbench_report_recipes(self):
+        return [replace(demo_plugin.RECIPE, paper="twin-a"), replace(demo_plugin.RECIPE, paper="twin-b")]
+
+
+def test_papers_run_side_by_side_in_one_batch_per_seed_with_the_numbers_of_one_paper_alone(tmp_path):
+    """Every paper's tasks on the reported seed go to the workers in one call (longest first across papers), then
+    every paper's confirmation tasks in one more (run by a thread while the figures are drawn); each paper's results,
+    time table and verdicts are those of the paper run alone, in process."""
+    from workbench.plugins import load_host
+
+    host = load_host(extra_plugins=[("demo", demo_plugin), ("twins", TwoPapers())])
+    recording = _Recording(host)
+    report = run_report(host, tmp_path / "both", papers=["twin-a", "twin-b"], size="full", filters="+sir",
+                        progress=False, executor=recording)
+    keys = [e["key"] for e in report.papers[0].tasks if not e["key"].startswith("confirmation/")]
+    assert keys == ["mse-kf", "mse-ekf", "mse-sir"]
+    # one call per seed, whatever the number of papers; never run before here, so in the declared order
+    assert len(recording.order) == 2 and recording.order[0] == keys * 2
+    read = [e["key"].removeprefix("confirmation/") for e in report.papers[0].tasks
+            if e["key"].startswith("confirmation/") and not e.get("reused")]
+    assert read and recording.order[1] == read * 2
+    for paper in report.papers:
+        alone = run_recipe(replace(demo_plugin.RECIPE, paper=paper.paper), host, tmp_path / f"alone-{paper.paper}",
+                           size="full", filters="+sir", progress=False)
+        assert [c.to_dict() for c in paper.criteria] == [c.to_dict() for c in alone.criteria]
+        assert all(c.confirmation is not None and c.confirmation.verdict for c in paper.criteria)
+        assert [(e["key"], e["cached"], e.get("reused")) for e in paper.tasks] == [
+            (e["key"], e["cached"], e.get("reused")) for e in alone.tasks]
+        assert [f["id"] for f in paper.figures] == [f["id"] for f in alone.figures] and paper.figures
+    # a second report into the folder: every task from the cache, nothing handed to the workers
+    recording.order.clear()
+    run_report(host, tmp_path / "both", papers=["twin-a", "twin-b"], size="full", filters="+sir", progress=False,
+               executor=recording)
+    assert all(not batch for batch in recording.order)

@@ -352,14 +352,16 @@ def cmd_report(args) -> int:
             counts[c.verdict] = counts.get(c.verdict, 0) + 1
         verdicts = ", ".join(f"{n} {v}" for v, n in counts.items()) or "none"
         marker = " (indicative: quick run)" if any(c.indicative for c in p.criteria) else ""
+        computed = sum(float(t.get("seconds") or 0.0) for t in p.tasks if not t.get("cached") and not t.get("reused"))
+        # the papers run side by side (their tasks share the workers): each paper's own compute, the wall at the end
         print(f"paper {p.paper}: {len(p.figures)} figures, {len(p.tables)} tables, "
-              f"criteria: {verdicts}{marker}, {p.seconds:.1f} s"
+              f"criteria: {verdicts}{marker}, {computed:.1f} s of tasks"
               + (f", {len(p.errors)} problems" if p.errors else ""))
         for err in p.errors:
             print(f"  not done: {err}", file=sys.stderr)
     if not report.papers:
         print("no report recipes are installed", file=sys.stderr)
-    print(f"report: {report.out / 'index.html'} ({report.seconds:.1f} s)")
+    print(f"report: {report.out / 'index.html'} ({report.seconds:.1f} s wall)")
     return 1 if report.failed else 0
 
 

@@ -37,6 +37,13 @@ run again: the confirmation reuses its result on the reported seed; nor is a tas
 non-primary grid value of a declared unknown), since the confirmation judges the primary values only.  A quick report runs no confirmation (its verdicts
 are indications already).
 
+Papers side by side: a report of several papers hands every paper's tasks on the reported seed to the workers in
+one batch (the longest first, by the last report's times), judges each paper's criteria, then hands every paper's
+confirmation tasks over in one more batch, which the workers run while this process draws the figures and tables;
+each paper's results, time table and verdicts are those of the paper run alone (a task's result depends on its
+seed and parameters only).  A paper's ``seconds`` is then the wall time from its start to its end, beside the
+others; the command line prints each paper's own task seconds and the report's wall time.
+
 The time table: every task the report runs (on the reported seed, at the declared unknowns' grid points, on the
 confirmation seed) records its seconds and, where the task declares it, its number of runs;
 :func:`task_time_table` turns them into a table per paper (task, runs, seconds, share of the paper's task compute,
@@ -535,12 +542,51 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     :data:`CONFIRMATION_SEED` for the full size, none for any other; ``None``: none); only the tasks the criteria
     read are rerun with it.
     """
-    import matplotlib
+    return _run_papers([recipe], host, out, size=size, seed=seed, filters=filters, arch=arch, progress=progress,
+                       trackers={recipe.paper: trackers}, on_task=on_task, executor=executor, command=command,
+                       formats=formats, confirmation_seed=confirmation_seed)[0]
 
-    matplotlib.use("Agg", force=False)
 
+@dataclass
+class _Batch:
+    """One recipe's tasks on one seed: run beside the other recipes' batches of the same seed (:func:`_execute`),
+    their results and time-table entries kept apart."""
+
+    recipe: RecipeSpec
+    tasks: list
+    seed: int
+    size: str
+    arch: str
+    version: str
+    outcome: PaperOutcome  # where the batch's task entries, errors and warnings go
+    previous: Mapping[str, float]  # task key -> seconds it took in the last report into the folder
+    results: dict = field(default_factory=dict)
+    pending: list = field(default_factory=list)  # (task, cache digest) of the tasks not in the cache
+
+
+@dataclass
+class _PaperRun:
+    """One recipe's report: its options, its reported seed's batch and, after the criteria, its confirmation's."""
+
+    recipe: RecipeSpec
+    options: RecipeOptions
+    outcome: PaperOutcome
+    paper_dir: Path
+    version: str
+    main: _Batch
+    confirmation_seed: int | None
+    start: float
+    previous_confirmation: Mapping[str, float]
+    formats: tuple
+    read: set = field(default_factory=set)
+    confirmation: _Batch | None = None
+    reused: list = field(default_factory=list)  # (task, why) the confirmation takes from the reported seed
+
+
+def _begin(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str, seed: int, filters: str | None, arch: str,
+           trackers: str | None, command: str, formats: tuple, confirmation_seed: int | None | str) -> _PaperRun:
+    """Everything about one recipe's report that comes before its tasks run: the checks, the options, its tasks."""
     start = time.perf_counter()
-    formats = figure_formats(formats)
     if confirmation_seed == "auto":
         confirmation_seed = CONFIRMATION_SEED if size == FIRM_SIZE else None
     check_report_seed(seed, confirmation_seed)
@@ -557,7 +603,6 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
                            seed=seed, command=command, unknowns=list(getattr(recipe, "unknowns", ()) or ()))
     paper_dir = out / f"paper{recipe.paper}"
     paper_dir.mkdir(parents=True, exist_ok=True)
-    cache = TaskCache(out / "cache")
 
     tasks = list(recipe.tasks(options))
     keys = [t.key for t in tasks]
@@ -569,60 +614,48 @@ def run_recipe(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str = "
     modules = {recipe.tasks.__module__} | {getattr(t.run, "__module__", None) for t in tasks}
     module_files = tuple(sorted(f for m in modules if m and (f := getattr(sys.modules.get(m), "__file__", None))))
     version = code_version(module_files)
-    run = executor if executor is not None else InProcess(host)
     # the seconds of the last report into this folder, read before this one overwrites them: the order of the tasks
     # on workers that run side by side (longest first)
-    previous = previous_seconds(out, recipe.paper)
-    previous_confirmation = previous_seconds(out, recipe.paper, "confirmation/")
-    results = _run_tasks(recipe, tasks, host, cache, run, outcome, seed=seed, size=size, arch=arch, version=version,
-                         progress=progress, on_task=on_task, label=f"paper {recipe.paper} ({size})",
-                         previous=previous)
+    main = _Batch(recipe, tasks, seed, size, arch, version, outcome, previous_seconds(out, recipe.paper))
+    return _PaperRun(recipe, options, outcome, paper_dir, version, main,
+                     None if confirmation_seed is None else int(confirmation_seed), start,
+                     previous_seconds(out, recipe.paper, "confirmation/"), formats)
+
+
+def _judge(pr: _PaperRun) -> None:
+    """After the reported seed's tasks: their entries in the declared order, the components that failed inside a
+    task, and the criteria (with the set of tasks they read)."""
+    outcome, keys = pr.outcome, [t.key for t in pr.main.tasks]
     outcome.tasks.sort(key=lambda t: keys.index(t["key"]))
     for entry in outcome.tasks:  # components that failed inside a task whose other results were kept
-        failed = component_errors(results.get(entry["key"], {}))
+        failed = component_errors(pr.main.results.get(entry["key"], {}))
         if failed:
             entry["partial"] = [f"{what} failed: {msg}" for what, msg in failed]
             outcome.errors.extend(f"task {entry['key']!r}: {what} failed: {msg} (the task's other results are kept)"
                                   for what, msg in failed)
-    t0 = time.perf_counter()
-    _draw_and_tabulate(recipe, results, outcome, paper_dir, formats)
-    outcome.stage_seconds["figures and tables"] = time.perf_counter() - t0
-    if recipe.criteria is not None:
-        read: set[str] = set()
+    if pr.recipe.criteria is not None:
         t0 = time.perf_counter()
         try:
-            outcome.criteria, read = judged_tasks(recipe.criteria, results)
+            outcome.criteria, pr.read = judged_tasks(pr.recipe.criteria, pr.main.results)
         except Exception as exc:  # noqa: BLE001
             outcome.errors.append(f"criteria not evaluated: {type(exc).__name__}: {exc}")
         outcome.stage_seconds["criteria"] = time.perf_counter() - t0
-        if outcome.criteria and confirmation_seed is not None:
-            outcome.criteria = _confirmation(recipe, host, cache, run, outcome, options, read, results,
-                                             seed=int(confirmation_seed), version=version, progress=progress,
-                                             on_task=on_task, reported={t.key: t for t in tasks},
-                                             previous=previous_confirmation)
-        if size != FIRM_SIZE:
-            outcome.criteria = [c.as_indicative() for c in outcome.criteria]
-    outcome.confirmation_seed = None if confirmation_seed is None else int(confirmation_seed)
-    outcome.seconds = time.perf_counter() - start
-    outcome.finished = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-    save_outcome(outcome, out)
-    return outcome
 
 
-def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
-                  options: RecipeOptions, read: set[str], results: Mapping, *, seed: int, version: str,
-                  progress: bool, on_task, reported: Mapping[str, Task] | None = None,
-                  previous: Mapping[str, float] | None = None) -> list[Criterion]:
-    """The criteria with their verdicts on the confirmation seed: the tasks they read rerun with ``seed``
-    (cached under it), the criteria judged again unchanged on those results (the other tasks' results are the
-    reported seed's, which the criteria do not read).  A task they read that is declared ``seeded=False`` is not
-    rerun: its result on the reported seed is the result on any seed, and is reused (where the reported seed's
-    task with that key had the same parameters and finished).  Nor is a task declared ``sensitivity=True`` (a
-    non-primary grid value of a declared unknown): the confirmation records the verdicts at the primary values only
-    (:func:`workbench.criteria.confirm`), which such a task does not feed; the re-judged criteria read the reported
-    seed's result for it, and their ``across`` is discarded."""
-    again_options = dataclasses.replace(options, seed=seed)
-    reported = reported or {}
+def _confirmation_batch(pr: _PaperRun) -> _Batch | None:
+    """The tasks the criteria read, again with the confirmation seed (cached under it), less those whose result on
+    the reported seed stands for the confirmation's: a task declared ``seeded=False`` (its result on the reported
+    seed is the result on any seed, where the reported seed's task with that key had the same parameters and
+    finished) and a task declared ``sensitivity=True`` (a non-primary grid value of a declared unknown: the
+    confirmation records the verdicts at the primary values only (:func:`workbench.criteria.confirm`), which such a
+    task does not feed; the re-judged criteria read the reported seed's result for it, and their ``across`` is
+    discarded).  ``None`` where there is no confirmation (no criteria, or no confirmation seed)."""
+    if not pr.outcome.criteria or pr.confirmation_seed is None:
+        return None
+    seed = pr.confirmation_seed
+    again_options = dataclasses.replace(pr.options, seed=seed)
+    reported = {t.key: t for t in pr.main.tasks}
+    results = pr.main.results
 
     def why_reused(task: Task) -> str:
         """Why ``task`` is not run again on the confirmation seed ('' where it is)."""
@@ -635,45 +668,127 @@ def _confirmation(recipe: RecipeSpec, host: PluginHost, cache: TaskCache, run, o
             return "the reported seed's result (sensitivity point: the confirmation judges the primary values)"
         return ""
 
-    wanted = [t for t in recipe.tasks(again_options) if t.key in read]
-    reused = [(t, why_reused(t)) for t in wanted if why_reused(t)]
+    wanted = [t for t in pr.recipe.tasks(again_options) if t.key in pr.read]
+    pr.reused = [(t, why_reused(t)) for t in wanted if why_reused(t)]
     tasks = [t for t in wanted if not why_reused(t)]
-    note = PaperOutcome(recipe.paper, recipe.title, options.size, options.filters, "", {})
-    fresh = _run_tasks(recipe, tasks, host, cache, run, note, seed=seed, size=options.size, arch=options.arch,
-                       version=version, progress=progress, on_task=on_task,
-                       label=f"paper {recipe.paper} ({options.size}, confirmation seed {seed})", previous=previous)
-    for task, why in reused:
-        outcome.tasks.append({"key": f"confirmation/{task.key}", "seconds": 0.0, "cached": False, "error": "",
-                              "runs": task.runs, "seed": seed, "reused": why})
-    for entry in note.tasks:
-        outcome.tasks.append({**entry, "key": f"confirmation/{entry['key']}", "seed": seed})
-    outcome.warnings.extend(note.warnings)
-    outcome.warnings.extend(f"paper {recipe.paper}, confirmation seed {seed}: {line}" for line in note.errors)
-    lost = [t.key for t in tasks if t.key not in fresh]
-    if lost:
-        why = (f"the task(s) {', '.join(lost)} failed on the confirmation seed {seed}: "
-               + "; ".join(note.errors or ["a component failed inside them"]))
-        outcome.warnings.append(f"paper {recipe.paper}: no confirmation: {why}")
-        return confirm(outcome.criteria, None, seed, why)
-    try:
-        again = list(recipe.criteria({**results, **fresh}))
-    except Exception as exc:  # noqa: BLE001 - the reported verdicts stand; the confirmation says why it has none
-        why = f"the criteria raised on the confirmation seed {seed}: {type(exc).__name__}: {exc}"
-        outcome.warnings.append(f"paper {recipe.paper}: no confirmation: {why}")
-        return confirm(outcome.criteria, None, seed, why)
-    return confirm(outcome.criteria, again, seed)
+    note = PaperOutcome(pr.recipe.paper, pr.recipe.title, pr.options.size, pr.options.filters, "", {})
+    pr.confirmation = _Batch(pr.recipe, tasks, seed, pr.options.size, pr.options.arch, pr.version, note,
+                             pr.previous_confirmation)
+    return pr.confirmation
+
+
+def _finish(pr: _PaperRun, out: Path) -> PaperOutcome:
+    """The confirmation's verdicts beside the reported ones, the indicative mark below the firm size, the outcome
+    saved."""
+    outcome, batch, seed = pr.outcome, pr.confirmation, pr.confirmation_seed
+    if batch is not None:
+        for task, why in pr.reused:
+            outcome.tasks.append({"key": f"confirmation/{task.key}", "seconds": 0.0, "cached": False, "error": "",
+                                  "runs": task.runs, "seed": seed, "reused": why})
+        note = batch.outcome
+        order = [t.key for t in batch.tasks]
+        for entry in sorted(note.tasks, key=lambda e: order.index(e["key"])):
+            outcome.tasks.append({**entry, "key": f"confirmation/{entry['key']}", "seed": seed})
+        outcome.warnings.extend(note.warnings)
+        outcome.warnings.extend(f"paper {pr.recipe.paper}, confirmation seed {seed}: {line}" for line in note.errors)
+        lost = [t.key for t in batch.tasks if t.key not in batch.results]
+        if lost:
+            why = (f"the task(s) {', '.join(lost)} failed on the confirmation seed {seed}: "
+                   + "; ".join(note.errors or ["a component failed inside them"]))
+            outcome.warnings.append(f"paper {pr.recipe.paper}: no confirmation: {why}")
+            outcome.criteria = confirm(outcome.criteria, None, seed, why)
+        else:
+            try:
+                again = list(pr.recipe.criteria({**pr.main.results, **batch.results}))
+            except Exception as exc:  # noqa: BLE001 - the reported verdicts stand; the confirmation says why not
+                why = f"the criteria raised on the confirmation seed {seed}: {type(exc).__name__}: {exc}"
+                outcome.warnings.append(f"paper {pr.recipe.paper}: no confirmation: {why}")
+                outcome.criteria = confirm(outcome.criteria, None, seed, why)
+            else:
+                outcome.criteria = confirm(outcome.criteria, again, seed)
+    if pr.options.size != FIRM_SIZE:
+        outcome.criteria = [c.as_indicative() for c in outcome.criteria]
+    outcome.confirmation_seed = seed
+    outcome.seconds = time.perf_counter() - pr.start
+    outcome.finished = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    save_outcome(outcome, out)
+    return outcome
+
+
+def _draw(pr: _PaperRun) -> None:
+    t0 = time.perf_counter()
+    _draw_and_tabulate(pr.recipe, pr.main.results, pr.outcome, pr.paper_dir, pr.formats)
+    pr.outcome.stage_seconds["figures and tables"] = time.perf_counter() - t0
+
+
+def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, size: str, seed: int,
+                filters: str | None, arch: str, progress: bool, trackers: Mapping[str, str | None],
+                on_task: Callable[[str], None] | None, executor: "Executor | None", command: str,
+                formats: Sequence[str] | str | None, confirmation_seed: int | None | str = "auto"
+                ) -> list[PaperOutcome]:
+    """Run ``recipes`` side by side: every paper's tasks on the reported seed as one batch (longest first on
+    workers that run side by side), then each paper's criteria, then every paper's confirmation tasks as one batch;
+    on side-by-side workers the figures and tables are drawn here while the workers run the confirmation.  Each
+    paper's results, time table and outcome are its own, as if it had run alone (the same numbers: a task's result
+    depends on its seed and parameters only)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    formats = figure_formats(formats)
+    cache = TaskCache(out / "cache")
+    run = executor if executor is not None else InProcess(host)
+    runs = [_begin(r, host, out, size=size, seed=seed, filters=filters, arch=arch, trackers=trackers.get(r.paper),
+                   command=command, formats=formats, confirmation_seed=confirmation_seed) for r in recipes]
+    label = (f"paper {recipes[0].paper} ({size})" if len(recipes) == 1
+             else f"papers {', '.join(r.paper for r in recipes)} ({size})")
+    _execute([pr.main for pr in runs], host, cache, run, progress=progress, on_task=on_task, label=label)
+    for pr in runs:
+        _judge(pr)
+    again = [b for pr in runs if (b := _confirmation_batch(pr)) is not None]
+    conf_label = f"{label[:-1]}, confirmation seed {again[0].seed})" if again else ""
+
+    def confirm_all():
+        _execute(again, host, cache, run, progress=progress, on_task=on_task, label=conf_label)
+
+    if again and not isinstance(run, InProcess):
+        # the workers run the confirmation while this process draws the figures and tables
+        failure: list[BaseException] = []
+
+        def background():
+            try:
+                confirm_all()
+            except BaseException as exc:  # noqa: BLE001 - raised again in the calling thread below
+                failure.append(exc)
+
+        import threading
+
+        worker = threading.Thread(target=background, name="workbench-confirmation", daemon=True)
+        worker.start()
+        try:
+            for pr in runs:
+                _draw(pr)
+        finally:
+            worker.join()
+        if failure:
+            raise failure[0]
+    else:
+        for pr in runs:
+            _draw(pr)
+        if again:
+            confirm_all()
+    return [_finish(pr, out) for pr in runs]
+
+
+def _task_cost(task: Task, seconds: Mapping[str, float], i: int) -> tuple:
+    known = seconds.get(task.key)
+    return (0, 0.0, i) if known is None else (1, -float(known), i)
 
 
 def longest_first(tasks: Sequence[Task], seconds: Mapping[str, float]) -> list[Task]:
     """``tasks`` in the order a pool of workers should take them so that they finish together: the longest first,
     by ``seconds`` (task key -> the seconds it took last time).  A task without a time (never computed here) goes
     first, in the declared order (it may be long); ties keep the declared order."""
-    def cost(item):
-        i, task = item
-        known = seconds.get(task.key)
-        return (0, 0.0, i) if known is None else (1, -float(known), i)
-
-    return [t for _, t in sorted(enumerate(tasks), key=cost)]
+    return [t for _, t in sorted(enumerate(tasks), key=lambda item: _task_cost(item[1], seconds, item[0]))]
 
 
 def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float]:
@@ -696,45 +811,56 @@ def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float
     return found
 
 
-def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: TaskCache, run, outcome: PaperOutcome,
-               *, seed: int, size: str, arch: str, version: str, progress: bool, on_task,
-               label: str, previous: Mapping[str, float] | None = None) -> dict[str, dict[str, np.ndarray]]:
-    """Run ``tasks`` with ``seed`` (each finished one cached at once, a cached one reused); their results, with
-    each task's timing in ``outcome.tasks`` and failures in ``outcome.errors``.  An executor that runs tasks side by
-    side gets them the longest first (:func:`longest_first`, by ``previous``: the seconds each took in the last
-    report into this folder)."""
-    results: dict[str, dict[str, np.ndarray]] = {}
-    bar = _progress_bar(len(tasks), label, progress)
-    pending = []
-    for task in tasks:
-        digest = task_key(recipe.paper, task.key, task.params, seed, version, size=size, arch=arch)
-        try:
-            cached = cache.get(recipe.paper, task.key, digest, host)
-        except CacheEntryUnreadable as exc:
-            outcome.warnings.append(f"paper {recipe.paper}, task {task.key!r}: {exc}")
-            cached = None
-        if cached is not None and component_errors(cached):
-            # a component failed inside this task (a one-off MemoryError, a race...): never replayed from the
-            # cache, the task runs again (its finished parts with it) and its entry is overwritten
-            cached = None
-        if cached is not None:
-            results[task.key] = cached
-            outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": "", "runs": task.runs})
-            bar.update(1)
-        else:
-            pending.append((task, digest))
-    order = [t for t, _ in pending]
+def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run, *, progress: bool, on_task,
+             label: str) -> None:
+    """Run the tasks of ``batches`` (every batch of one seed and arch): each finished one cached at once, a cached
+    one reused; each batch's results (in its declared order) in ``batch.results``, its tasks' timing in its
+    ``outcome.tasks`` and failures in its ``outcome.errors``.  An executor that runs tasks side by side gets the
+    tasks of every batch in one call, the longest first (by each batch's ``previous``: the seconds each took in the
+    last report into this folder), so that its workers finish together."""
+    if not batches:
+        return
+    if len({(b.seed, b.arch) for b in batches}) != 1:
+        raise ValueError("one run of tasks takes batches of one seed and arch")
+    seed, arch = batches[0].seed, batches[0].arch
+    bar = _progress_bar(sum(len(b.tasks) for b in batches), label, progress)
+    owner: dict[int, tuple[_Batch, str]] = {}  # id(task) -> its batch and cache digest (keys repeat across papers)
+    order: list[Task] = []
+    costs: list[tuple] = []
+    for batch in batches:
+        recipe, outcome = batch.recipe, batch.outcome
+        for task in batch.tasks:
+            digest = task_key(recipe.paper, task.key, task.params, seed, batch.version, size=batch.size, arch=arch)
+            try:
+                cached = cache.get(recipe.paper, task.key, digest, host)
+            except CacheEntryUnreadable as exc:
+                outcome.warnings.append(f"paper {recipe.paper}, task {task.key!r}: {exc}")
+                cached = None
+            if cached is not None and component_errors(cached):
+                # a component failed inside this task (a one-off MemoryError, a race...): never replayed from the
+                # cache, the task runs again (its finished parts with it) and its entry is overwritten
+                cached = None
+            if cached is not None:
+                batch.results[task.key] = cached
+                outcome.tasks.append({"key": task.key, "seconds": 0.0, "cached": True, "error": "",
+                                      "runs": task.runs})
+                bar.update(1)
+            else:
+                owner[id(task)] = (batch, digest)
+                costs.append(_task_cost(task, batch.previous, len(order)))
+                order.append(task)
     if not isinstance(run, InProcess):  # one after another: the order changes nothing; side by side: longest first
-        order = longest_first(order, previous or {})
+        order = [t for _, t in sorted(zip(costs, order), key=lambda item: item[0])]
     for task, arrays, seconds, error in run.execute(order, seed, arch, on_task):
-        digest = next(d for t, d in pending if t.key == task.key)
+        batch, digest = owner[id(task)]
+        recipe, outcome = batch.recipe, batch.outcome
         if error is None:
             used = getattr(run, "used", {}).get(task.key)
             if used is None:  # an executor that does not say what the task used: every component counts
                 used = {(hook, "*") for hook in host.components}
             # saved the moment it finishes, with the fingerprints of the components it used
             cache.put(recipe.paper, task.key, digest, arrays, components_digest(host, used))
-            results[task.key] = {k: np.asarray(v) for k, v in arrays.items()}
+            batch.results[task.key] = {k: np.asarray(v) for k, v in arrays.items()}
             outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": "",
                                   "runs": task.runs})
         else:
@@ -744,8 +870,8 @@ def _run_tasks(recipe: RecipeSpec, tasks: Sequence, host: PluginHost, cache: Tas
                                   "runs": task.runs, "traceback": error[1]})
         bar.update(1)
     bar.close()
-    # in the declared order, however the tasks came back (from the cache, or from workers as they finished)
-    return {t.key: results[t.key] for t in tasks if t.key in results}
+    for batch in batches:  # in the declared order, however the tasks came back (from the cache, or from workers)
+        batch.results = {t.key: batch.results[t.key] for t in batch.tasks if t.key in batch.results}
 
 
 def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutcome, paper_dir: Path,
@@ -1397,11 +1523,8 @@ def run_report(host: PluginHost, out: Path, *, papers: Iterable[str] | None = No
     routed = tracker_papers(recipes, trackers, host, named=bool(papers))  # --trackers refused before any paper runs
     with report_lock(out, command, wait) as notes:
         start = time.perf_counter()
-        outcomes = []
-        for recipe in recipes:
-            outcomes.append(run_recipe(recipe, host, out, size=size, seed=seed, filters=filters, arch=arch,
-                                       trackers=routed[recipe.paper],
-                                       progress=progress, executor=executor, command=command, formats=formats))
+        outcomes = _run_papers(recipes, host, out, size=size, seed=seed, filters=filters, arch=arch, progress=progress,
+                               trackers=routed, on_task=None, executor=executor, command=command, formats=formats)
         saved, warnings = saved_outcomes(out, skip=[o.paper for o in outcomes])
         warnings = [*notes, *(w for o in outcomes for w in o.warnings), *warnings]
         for line in warnings:
