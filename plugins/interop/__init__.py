@@ -5,7 +5,8 @@
   ``stonesoup_interop``;
 - :mod:`.stonesoup_export`: truths, detections and tracks as Stone Soup ``GroundTruthPath``, ``Detection`` /
   ``Clutter`` and ``Track`` objects;
-- :mod:`.stonesoup_models`: the model conversions both use.
+- :mod:`.stonesoup_models`: the model conversions both use;
+- :mod:`.stonesoup_available`: whether Stone Soup is installed, and the named error where it is needed.
 
 Stone Soup is an optional extra: ``pip install "workbench[stonesoup]"``.  Without it the plugin registers no
 filter, and the export functions raise an ``ImportError`` that says how to install it.

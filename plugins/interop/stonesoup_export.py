@@ -29,7 +29,7 @@ from workbench.models import MeasurementModel, MotionModel
 from workbench.tracking import CONFIRMED, Track as WorkbenchTrack, TrackLog
 from workbench.types import CLUTTER, InputError, Scans, Truth
 
-from .stonesoup_filters import AVAILABLE, EPOCH, REASON, StoneSoupMissing
+from .stonesoup_available import AVAILABLE, EPOCH, REASON, StoneSoupMissing
 
 __all__ = ["EPOCH", "ORDERS", "timestamps", "seconds", "ground_truth_paths", "detections", "state_order",
            "track_log_tracks", "filter_tracks"]

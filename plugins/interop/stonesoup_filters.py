@@ -32,7 +32,7 @@ name (``--filters ss-ukf``, a scenario file) then says that it needs Stone Soup 
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta
+from datetime import timedelta
 from functools import partial
 
 import numpy as np
@@ -44,35 +44,10 @@ from workbench.params import Param
 from workbench.specs import FilterSpec
 from workbench.types import Gaussian, InputError, Particles, Scan
 
-
-
-class StoneSoupMissing(InputError, ImportError):
-    """Stone Soup is needed and not installed: the message says how to install it (``pip install
-    "workbench[stonesoup]"``).  An :class:`~workbench.types.InputError` (the command line prints one line, exit
-    2) and an ``ImportError``."""
-
-
-try:  # Stone Soup is an optional extra: without it the plugin provides nothing
-    import stonesoup  # noqa: F401
-except ImportError as _exc:  # pragma: no cover - depends on the environment
-    AVAILABLE = False
-    REASON = (f"Stone Soup is not installed ({_exc}); install it with pip install \"workbench[stonesoup]\" to get "
-              f"the ss-* filters")
-else:
-    AVAILABLE = True
-    REASON = ""
+from .stonesoup_available import AVAILABLE, EPOCH, REASON, StoneSoupMissing, require_stonesoup
 
 __all__ = ["AVAILABLE", "REASON", "StoneSoupMissing", "require_stonesoup", "make_gaussian", "make_particle",
            "filters", "workbench_filters", "WORKBENCH_UNAVAILABLE"]
-
-
-def require_stonesoup(what: str) -> None:
-    """Raise :class:`StoneSoupMissing` naming ``what`` when Stone Soup is not installed."""
-    if not AVAILABLE:
-        raise StoneSoupMissing(f"{what} needs Stone Soup: {REASON}")
-
-#: The time of every prior handed to Stone Soup (its states need time stamps; only the differences matter).
-EPOCH = datetime(2000, 1, 1)
 
 #: name -> (Stone Soup predictor, updater, summary)
 GAUSSIAN = {

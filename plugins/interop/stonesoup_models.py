@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import multivariate_normal
 
-from .stonesoup_filters import require_stonesoup
+from .stonesoup_available import require_stonesoup
 
 require_stonesoup("workbench_interop.stonesoup_models")  # a named error, not a bare ModuleNotFoundError
 
