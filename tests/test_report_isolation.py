@@ -180,14 +180,14 @@ def _options(recipe, size, seed, filters):
 
 
 def test_a_filter_raising_in_paper_000s_shared_task_loses_only_its_row():
-    from workbench_papers.paper000 import recipe as paper000
+    from workbench_papers.paper000 import tasks as paper000
 
     host = load_host(extra_plugins=[("boom", _plugin(BOOM_EKF))])
     task = paper000.Task("t", {"runs": 1, "rcs": paper000.PRIMARY_RCS, "stream": "", "threshold_db": 5.0,
                                "combos": [["boom-ekf", 600, 1000.0], ["ekf", 600, 1000.0]]}, paper000._runs_task)
     out = task.run(TaskContext(params=task.params, seed=1, host=host))
     assert str(out["error/filter:boom-ekf (N=600, R=1000 m)"]) == "RuntimeError: deliberate failure inside the tracker"
-    rows = paper000._runs({"table@x": out})
+    rows = paper000.runs_of({"table@-20dBsm": out})
     assert list(rows) == [("A", 600, 1000.0)] and set(rows[("A", 600, 1000.0)]) == set(paper000.FIELDS)
 
 

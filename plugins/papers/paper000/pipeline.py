@@ -12,11 +12,11 @@ Positions ``(..., 3)``, states ``[x, y, z, vx, vy, vz]`` ``(..., 6)``, measureme
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.special import logsumexp
 
 from workbench.models import MeasurementModel, MotionModel
 from workbench.models.measurement import linear_measurement
@@ -36,6 +36,17 @@ def _log_weights(scan: Scan, predicted: np.ndarray, sigma_g: float, sigma_vr: fl
     dv = scan.z[..., 3] - radial_velocity(predicted)[:, None]
     log_w = model.detection.log_pd(np.nan_to_num(scan.snr)) - 0.5 * r2 / sigma_g**2 - 0.5 * dv**2 / sigma_vr**2
     return np.where(scan.valid, log_w, -np.inf)
+
+
+def _normalised_weights(scan: Scan, predicted: np.ndarray, sigma_g: float, sigma_vr: float,
+                        model: MeasurementModel) -> np.ndarray:
+    """``w~_m = w_m / sum_m w_m`` of eq 10 per item ``(B, M)``, computed in the log domain (the largest log weight
+    taken out first); 0 on invalid rows and on every row of an item without a valid detection."""
+    log_w = _log_weights(scan, predicted, sigma_g, sigma_vr, model)
+    top = np.max(log_w, axis=1, keepdims=True)
+    w = np.exp(log_w - np.where(np.isfinite(top), top, 0.0))
+    total = w.sum(axis=1, keepdims=True)
+    return w / np.where(total > 0, total, 1.0)
 
 
 def _detection(model: MeasurementModel):
@@ -65,9 +76,7 @@ def weighted_mean_measurement(scan: Scan, predicted: np.ndarray, model: Measurem
     present = scan.valid.any(axis=1)
     if scan.z.shape[1] == 0:
         return Scan.single(np.zeros((scan.batch, 4)), present, time=scan.time)
-    log_w = _log_weights(scan, predicted, sigma_g, sigma_vr, model)
-    total = logsumexp(log_w, axis=1, keepdims=True)
-    w = np.exp(log_w - np.where(np.isfinite(total), total, 0.0))  # w~_m = w_m / sum_m w_m
+    w = _normalised_weights(scan, predicted, sigma_g, sigma_vr, model)  # w~_m = w_m / sum_m w_m
     # z_bar = sum_m w~_m [p_m; vr_m]     (11)
     z_bar = np.einsum("bm,bmk->bk", w, scan.z)
     return Scan.single(z_bar, present, time=scan.time)
@@ -120,15 +129,17 @@ def pseudo_measurement_covariance(scan: Scan, predicted: np.ndarray, model: Meas
     scan.z : (B, M, 4), scan.snr : (B, M) dB; predicted : (B, 6); returns (Scan (B, 1, 4), R_bar (B, 4, 4))
     """
     detection = _detection(model)
-    z_bar = weighted_mean_measurement(scan, predicted, model, sigma_g, sigma_vr)
+    if scan.snr is None:
+        raise InputError("pseudo_measurement_covariance needs scan.snr (dB) for P_D(snr_m)")
     B = scan.batch
     R_bar = np.broadcast_to(np.eye(4), (B, 4, 4)).copy()
     if scan.z.shape[1] == 0:
-        return z_bar, R_bar
+        return Scan.single(np.zeros((B, 4)), np.zeros(B, dtype=bool), time=scan.time), R_bar
     snr_db = np.nan_to_num(scan.snr)
-    log_w = _log_weights(scan, predicted, sigma_g, sigma_vr, model)
-    total = logsumexp(log_w, axis=1, keepdims=True)
-    w = np.where(scan.valid, np.exp(log_w - np.where(np.isfinite(total), total, 0.0)), 0.0)
+    predicted = np.asarray(predicted, dtype=float)
+    w = _normalised_weights(scan, predicted, sigma_g, sigma_vr, model)
+    # z_bar = sum_m w~_m [p_m; vr_m]     (11)
+    z_bar = Scan.single(np.einsum("bm,bmk->bk", w, scan.z), scan.valid.any(axis=1), time=scan.time)
     # sum_m w~_m R_m: isotropic position variance at each detection's SNR, radial-velocity noise
     var_p = detection.position_sigma(np.where(scan.valid, snr_db, 10.0), np.linalg.norm(scan.z[..., :3], axis=-1)) ** 2
     meas = np.zeros((B, 4, 4))
@@ -221,6 +232,8 @@ class GatedRun:
     ------
     mean, predicted : (B, T, 6); gated_count : (B, T); measurement_error : (B, T) (NaN for an empty gate)
     gated_points : (K, 6) rows ``[k, x, y, z, vr, origin]``: every gated detection of the recorded item
+    seconds, cpu_seconds : the tracking loop's wall time and this process's CPU time in it (all threads), the
+    scoring after it excluded
     """
 
     mean: np.ndarray
@@ -230,6 +243,7 @@ class GatedRun:
     seconds: float
     diagnostics: dict
     gated_points: np.ndarray
+    cpu_seconds: float = float("nan")
 
 
 def run_gated(spec: FilterSpec, prior: Gaussian, motion: MotionModel, model: MeasurementModel, scans: Scans,
@@ -243,17 +257,26 @@ def run_gated(spec: FilterSpec, prior: Gaussian, motion: MotionModel, model: Mea
     measurement-error metric (eq 19); the filter never sees it, nor the detections' origin, which the gated points
     of batch item ``record_item`` carry for plotting.
     """
+    cpu = time.process_time()
     track = run(spec, scans, motion, model, association=Gated(radius, pseudo, dims=3), prior=prior, rng=rng)
-    gated = track.records["gated"]
+    cpu = time.process_time() - cpu
+    M = scans.z.shape[2]
+    gated = track.records["gated"][:, :, :M]
     B, T = scans.batch, scans.steps
     m_err = np.full((B, T), np.nan)
-    points = []
-    for k in range(T):
-        keep = gated[:, k, : scans.z.shape[2]]
-        if truth is not None:
-            m_err[:, k] = measurement_error(scans.z[:, k], keep, truth[:, k, :3])
-        row = keep[record_item]
-        origin = scans.origin[record_item, k, row] if scans.origin is not None else np.full(int(row.sum()), -1)
-        points.append(np.column_stack([np.full(int(row.sum()), k), scans.z[record_item, k][row], origin]))
+    if truth is not None:
+        # eq 19 at every scan, over the gated detections only (a few per scan among the scan's padded rows)
+        b_idx, k_idx, m_idx = np.nonzero(gated)
+        d = np.linalg.norm(scans.z[b_idx, k_idx, m_idx, :3] - np.asarray(truth, dtype=float)[b_idx, k_idx, :3], axis=-1)
+        cell = b_idx * T + k_idx
+        n = np.bincount(cell, minlength=B * T).reshape(B, T)
+        total = np.bincount(cell, weights=d, minlength=B * T).reshape(B, T)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m_err = np.where(n > 0, total / np.maximum(n, 1), np.nan)
+    # every gated detection of the recorded item, scan by scan: [k, x, y, z, vr, origin]
+    k_idx, m_idx = np.nonzero(gated[record_item])
+    origin = scans.origin[record_item][k_idx, m_idx] if scans.origin is not None else np.full(k_idx.size, -1)
+    points = np.column_stack([k_idx, scans.z[record_item][k_idx, m_idx], origin]) if k_idx.size else \
+        np.zeros((0, 2 + scans.z.shape[3]))
     return GatedRun(track.mean, track.predicted_mean, track.records["gated_count"], m_err, track.seconds,
-                    dict(track.diagnostics), np.concatenate(points, axis=0))
+                    dict(track.diagnostics), points, cpu)

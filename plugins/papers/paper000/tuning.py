@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["TUNING_SEEDS", "RULE", "Step", "STEPS", "score", "run_search", "CALIBRATION_SEED", "CALIBRATION_RULE",
-           "CALIBRATION_RUNS", "calibration_scores", "calibrate"]
+           "CALIBRATION_RUNS", "CALIBRATED_POINT", "calibration_scores", "calibrate"]
 
 #: Seeds of the search; the report uses seed 0 (its runs and replications come from seed 0's streams).
 TUNING_SEEDS = (101, 102, 103, 104)
@@ -48,6 +48,12 @@ RULE = ("fewest lost runs of the step's method over the tuning runs (4 seeds x 2
 CALIBRATION_SEED = TUNING_SEEDS[0]
 #: Runs of the calibration at each candidate (the paper's protocol).
 CALIBRATION_RUNS = 20
+#: The point the calibration chose on :data:`CALIBRATION_SEED` ((reference RCS dBsm, clutter rate per scan); score
+#: 1.08: A 105 m, B 280 m), declared so that the report knows before it runs which grid point the calibrated criteria
+#: read (that point's runs are judged, and run again on the confirmation seed; the other grid points are
+#: sensitivities).  The full report recomputes the calibration and judges the calibrated criteria only where its
+#: choice is this point.
+CALIBRATED_POINT = (-15.0, 50.0)
 CALIBRATION_RULE = (f"on tuning seed {CALIBRATION_SEED} ({CALIBRATION_RUNS} runs, N = 600, R = 1 km, 5 dB), each "
                     "candidate (reference RCS, clutter rate) scores |ln(A / 236 m)| + |ln(B / 214 m)| with A and B the "
                     "literal rows' mean whole-track errors (lost runs included, as the paper's Table 3 means); the "

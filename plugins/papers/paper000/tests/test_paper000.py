@@ -16,7 +16,7 @@ from workbench.sensing.radar import (db, detection_probability, exponential_powe
 from workbench.specs import RecipeOptions, TaskContext
 from workbench.testing.bootstrap import loop_statistics, same_numbers
 from workbench.types import Gaussian, InputError, Scan
-from workbench_papers.paper000 import methods, recipe, scenario, tuning
+from workbench_papers.paper000 import judging, methods, scenario, tasks, tuning
 from workbench_papers.paper000.pipeline import (estimation_error, lost_track, measurement_error, moment_matched_scale,
                                                 position_model, pseudo_measurement_covariance,
                                                 weighted_mean_measurement, weighted_mean_position, whitened_model)
@@ -38,7 +38,7 @@ def model(host):
 def test_snr_checkpoints_along_the_scenario(host):
     truth = scenario.scenario_truth(1)
     assert truth.steps == 300
-    res = recipe._scenario_task(TaskContext({"runs": 2, "thresholds": [5.0]}, seed=0, host=host))
+    res = tasks._scenario_task(TaskContext({"runs": 2, "thresholds": [5.0]}, seed=0, host=host))
     want = {0: 2.3, 50: 5.7, 100: 9.9, 130: 18.0, 160: 22.0, 200: 19.6, 299: 12.5}  # the brief's check
     got = res["nominal_snr_db"]
     for k, snr in want.items():
@@ -88,7 +88,7 @@ def test_declared_unknowns_hold_their_primaries_and_grids():
     rcs, rate = scenario.REFERENCE_RCS, scenario.CLUTTER_RATE
     assert rcs.primary == scenario.PRIMARY_RCS == -20.0 and min(rcs.grid) == -20.0 and max(rcs.grid) == -10.0
     assert rate.primary == 1000.0 and min(rate.grid) == 50.0
-    points = recipe.grid_points()
+    points = tasks.grid_points()
     assert points[0] == (-20.0, 1000.0) and len(set(points)) == len(points)
     assert {(-15.0, 50.0), (-20.0, 50.0), (-10.0, 1000.0)} <= set(points)
 
@@ -298,35 +298,48 @@ def test_method_rows(host):
 def test_recipe_tasks_cover_the_grid_and_honour_filters(host):
     rcp = host.recipe("000")
     full = RecipeOptions("full", rcp.sizes["full"], 0, rcp.default_filters + ("ukf",))
-    tasks = {t.key: t for t in rcp.tasks(full)}
-    grid = {f"grid@{r:g}dBsm" + ("" if c == 1000.0 else f"@{c:g}perscan") for r, c in recipe.grid_points()[1:]}
-    assert set(tasks) == {"scenario", "table@-20dBsm", "sweep@-20dBsm", "replicate@-20dBsm", "timing@-20dBsm",
-                          "calibration"} | grid
-    cal = tasks["calibration"]
+    tasks_ = {t.key: t for t in rcp.tasks(full)}
+    grid = {f"grid@{r:g}dBsm" + ("" if c == 1000.0 else f"@{c:g}perscan") for r, c in tasks.grid_points()[1:]}
+    assert set(tasks_) == {"scenario", "table@-20dBsm", "ablations@-20dBsm", "sweep@-20dBsm", "replicate@-20dBsm",
+                           "calibration"} | grid
+    cal = tasks_["calibration"]
     assert not cal.seeded and cal.params["seed"] in tuning.TUNING_SEEDS and cal.params["seed"] != 0
-    assert [tuple(p) for p in cal.params["points"]] == list(recipe.grid_points())
-    assert tasks["grid@-15dBsm@50perscan"].params["rate"] == 50.0
-    assert {c[3] for c in tasks["grid@-10dBsm"].params["combos"]} == {"A", "B", "C"}
-    timing = tasks["timing@-20dBsm"].params
-    assert (timing["runs"], timing["repeats"], timing["filter"]) == (20, recipe.TIMING_REPEATS, "tbd-pf")
-    combos = {tuple(c) for c in tasks["table@-20dBsm"].params["combos"]}
-    assert ("ukf", 600, 1000.0, "ukf") in combos and ("tbd-pf", 600, 2500.0, "C") in combos
-    assert all((m.filter, 600, 1000.0, m.key) in combos for m in methods.METHODS)
-    sweep = {c[1] for c in tasks["sweep@-20dBsm"].params["combos"] if c[2] == 1000.0}
+    assert [tuple(p) for p in cal.params["points"]] == list(tasks.grid_points())
+    assert tasks_["grid@-15dBsm@50perscan"].params["rate"] == 50.0
+    assert {c[3] for c in tasks_["grid@-10dBsm"].params["combos"]} == {"A", "B", "C"}
+    # every grid task is a sensitivity (Criterion.across only) but the declared calibrated point's, which criteria
+    # 1-3 are judged at again; nothing at the primary values is
+    assert tuning.CALIBRATED_POINT in tasks.grid_points()[1:]
+    assert {k for k, t in tasks_.items() if t.sensitivity} == grid - {"grid@-15dBsm@50perscan"}
+    # the verdicts' rows (A, B, C at both radii, our A and B) and the rest (ablations, the extra filter, the path
+    # figure's N = 100 at 2.5 km) in separate tasks, on the same draws
+    table = [tuple(c) for c in tasks_["table@-20dBsm"].params["combos"]]
+    assert {c[3] for c in table} == {"A", "B", "C", "A+", "B+"}
+    assert table.index(("tbd-pf", 600, 2500.0, "C")) == table.index(("tbd-pf", 600, 1000.0, "C")) + 1
+    others = {tuple(c) for c in tasks_["ablations@-20dBsm"].params["combos"]}
+    assert ("ukf", 600, 1000.0, "ukf") in others and ("tbd-pf", 100, 2500.0, "C") in others
+    assert {m.key for m in methods.METHODS if m.role == "ablation"} == {c[3] for c in others} - {"ukf", "C"}
+    assert tasks_["table@-20dBsm"].params["stream"] == tasks_["ablations@-20dBsm"].params["stream"] == ""
+    sweep = {c[1] for c in tasks_["sweep@-20dBsm"].params["combos"] if c[2] == 1000.0}
     assert sweep == {50, 100, 200, 300, 400, 500, 800, 1000}  # 600 comes from the table task
-    rep = tasks["replicate@-20dBsm"].params
-    assert rep["stream"] == "replicate" and rep["runs"] == 80
-    assert {c[3] for c in rep["combos"]} == {"A", "B", "C"}
+    assert all(c[2] == 1000.0 for c in tasks_["sweep@-20dBsm"].params["combos"])
+    # the replications: A and B in one batch, C at both radii in 4 batches of the protocol's 20 runs: with the
+    # table's pair, the 5 repetitions criterion 5's timing needs
+    rep = tasks_["replicate@-20dBsm"].params
+    assert rep["stream"] == "replicate" and rep["runs"] == 80 and rep["batch_runs"] == 20
+    assert {c[3] for c in rep["combos"]} == {"A", "B"}
+    assert [tuple(c) for c in rep["timed"]] == [("tbd-pf", 600, 1000.0, "C"), ("tbd-pf", 600, 2500.0, "C")]
+    assert 1 + rep["runs"] // rep["batch_runs"] == judging.MIN_TIMING_REPEATS
     assert rcp.sizes["full"]["runs"] == 20
     quick = {t.key for t in rcp.tasks(RecipeOptions("quick", rcp.sizes["quick"], 0, ("tbd-pf",)))}
-    assert quick == {"scenario", "table@-20dBsm", "sweep@-20dBsm"}
+    assert quick == {"scenario", "table@-20dBsm", "ablations@-20dBsm", "sweep@-20dBsm"}
 
 
 @pytest.fixture(scope="module")
 def results(host):
     rcp = host.recipe("000")
     values = {"runs": 2, "path_particles": [100, 600], "sweep_particles": [100, 600], "unknowns": False,
-              "calibration_runs": 0, "replicated_runs": 2, "timing_repeats": 2}
+              "calibration_runs": 0, "replicated_runs": 2}
     options = RecipeOptions(size="test", values=values, seed=1, filters=rcp.default_filters)
     return {t.key: {k: np.asarray(v) for k, v in t.run(TaskContext(t.params, seed=1, host=host)).items()}
             for t in rcp.tasks(options)}
@@ -352,11 +365,11 @@ def test_report_figures_hold_the_scenario_and_the_runs(host, results):
     assert np.all(figs["fig6"]["distance_km"] >= 0) and figs["fig6"]["radii_km"].tolist() == [2.5, 1.0]
     g7 = figs["fig7"]
     assert g7["gated_km_R2500"].shape[0] > g7["gated_km_R1000"].shape[0]  # a wider gate takes in more
-    c600 = recipe._get(results, "C", 600, 1000.0)
+    c600 = tasks.get_run(results, "C", 600, 1000.0)
     np.testing.assert_allclose(figs["fig9"]["estimate_km_R1000"], c600["path0"] / 1e3)
-    np.testing.assert_allclose(figs["fig8"]["estimate_km_R2500"], recipe._get(results, "C", 100, 2500.0)["path0"] / 1e3)
+    np.testing.assert_allclose(figs["fig8"]["estimate_km_R2500"], tasks.get_run(results, "C", 100, 2500.0)["path0"] / 1e3)
     np.testing.assert_allclose(figs["fig10"]["e_error_R1000"], c600["error"].mean(axis=0))
-    np.testing.assert_allclose(figs["fig10"]["m_error_R1000"], recipe.mean_over_runs(c600["m_error"]))
+    np.testing.assert_allclose(figs["fig10"]["m_error_R1000"], tasks.mean_over_runs(c600["m_error"]))
     assert figs["fig11"]["particles"].tolist() == [100, 600]
     np.testing.assert_allclose(figs["fig11"]["e_error"][1], c600["error"].mean(axis=0))
     np.testing.assert_allclose(figs["fig12"]["e_avg_mean"][1], c600["error"][:, 1:].mean())
@@ -385,7 +398,7 @@ def test_report_table3_shows_mean_median_not_lost_and_lost(host, results):
             "table_tuning"} == set(tables)
     t3 = tables["table3"]
     rows = {r[0]: dict(zip(t3.columns, r)) for r in t3.rows}
-    c = recipe._get(results, "C", 600, 1000.0)
+    c = tasks.get_run(results, "C", 600, 1000.0)
     early, whole = c["error"][:, 1:101].mean(axis=1), c["error"][:, 1:].mean(axis=1)
     row = rows[methods.METHODS[2].label]
     assert row["role"] == "C" and row["runs"] == 2
@@ -401,7 +414,7 @@ def test_report_table3_shows_mean_median_not_lost_and_lost(host, results):
     assert {r[2] for r in tables["table3_all_runs"].rows} == {4}
     # the grid and the calibration say they were not run at this size (the primary point is the table's)
     assert [r[2] for r in tables["table_unknowns"].rows if "not run" in str(r[2])] and \
-        len(tables["table_unknowns"].rows) == 3 + len(recipe.grid_points()) - 1
+        len(tables["table_unknowns"].rows) == 3 + len(tasks.grid_points()) - 1
     assert tables["table_calibration"].rows[0][0].startswith("not run at this size")
     assert tables["table_calibration"].rows[-1][6] == tuning.CALIBRATION_RULE
     # the tuning table shows the values the filters really use, each one of its step's candidates
@@ -424,14 +437,14 @@ def test_criteria_records_carry_n_interval_and_verdict(host, results):
     first = crit[0]
     # 2 + 2 runs: fewer than the paper's 20, so inconclusive at best; not judgeable where a judged row loses more
     # than the stated share of its runs (the precondition names the counts)
-    lost = {k: np.concatenate([recipe._get(results, k, 600, 1000.0, stream=s)["lost"] for s in ("", "replicate")])
+    lost = {k: np.concatenate([tasks.get_run(results, k, 600, 1000.0, stream=s)["lost"] for s in ("", "replicate")])
             for k in ("A", "B", "C")}
-    above = [k for k, f in lost.items() if f.mean() > recipe.MAX_LOST_SHARE]
+    above = [k for k, f in lost.items() if f.mean() > judging.MAX_LOST_SHARE]
     assert first.n == 4 and first.verdict == ("not judgeable" if above else "inconclusive")
     assert [p.name for p in first.preconditions] == ["judged rows track"]
     assert first.preconditions[0].values["above"] == above
     # the A/C ratio is the ratio of the mean whole-track errors of the pooled runs
-    pooled = [np.concatenate([recipe._get(results, k, 600, 1000.0, stream=s)["error"] for s in ("", "replicate")])
+    pooled = [np.concatenate([tasks.get_run(results, k, 600, 1000.0, stream=s)["error"] for s in ("", "replicate")])
               for k in ("A", "C")]
     assert crit[1].ours == pytest.approx(pooled[0][:, 1:].mean() / pooled[1][:, 1:].mean())
 
@@ -458,17 +471,17 @@ def test_criteria_verdicts_on_hand_made_runs():
         return level * shape * (1 + spread * rng.standard_normal((100, 1)))
 
     good = _fake_results({"A": method(300.0), "B": method(200.0), "C": method(100.0)}, 100)
-    crit = {c.id: c for c in recipe.criteria(good)}
+    crit = {c.id: c for c in judging.criteria(good)}
     assert crit["1"].verdict == "met" and crit["1"].replication == (5, 5) and crit["1"].n == 100
     assert crit["2"].verdict == "met" and crit["2"].ours == pytest.approx(3.0, rel=0.05)
     assert crit["3"].verdict == "met"
     swapped = _fake_results({"A": method(100.0), "B": method(200.0), "C": method(300.0)}, 100)
-    crit = {c.id: c for c in recipe.criteria(swapped)}
+    crit = {c.id: c for c in judging.criteria(swapped)}
     assert crit["1"].verdict == "not met" and crit["1"].replication == (0, 5)
     assert crit["2"].verdict == "not met"
     # A/C straddling 1.3 with a wide spread between runs: the interval decides nothing
     close = _fake_results({"A": method(130.0, 0.8), "B": method(120.0, 0.8), "C": method(100.0, 0.8)}, 100)
-    assert {c.id: c for c in recipe.criteria(close)}["2"].verdict == "inconclusive"
+    assert {c.id: c for c in judging.criteria(close)}["2"].verdict == "inconclusive"
 
 
 def test_criteria_1_to_3_are_not_judgeable_on_rows_that_lose_their_track():
@@ -480,7 +493,7 @@ def test_criteria_1_to_3_are_not_judgeable_on_rows_that_lose_their_track():
     tracking = 100.0 * shape * (1 + 0.05 * rng.standard_normal((100, 1)))
     diverging = lambda rate: rate * k * (1 + 0.05 * rng.standard_normal((100, 1)))  # noqa: E731 - m per scan
     lost_all = _fake_results({"A": diverging(150.0), "B": diverging(100.0), "C": tracking}, 100)
-    crit = {c.id: c for c in recipe.criteria(lost_all)}
+    crit = {c.id: c for c in judging.criteria(lost_all)}
     for cid in ("1", "2", "3"):
         c = crit[cid]
         assert c.verdict == "not judgeable" and not c.met, cid
@@ -493,22 +506,57 @@ def test_criteria_1_to_3_are_not_judgeable_on_rows_that_lose_their_track():
     # one A run in ten lost: at the stated share, still judged (A's other runs track)
     part = tracking.copy()
     part[:10] = diverging(150.0)[:10]
-    some = {c.id: c for c in recipe.criteria(_fake_results({"A": part, "B": 0.9 * tracking + 100.0,
+    some = {c.id: c for c in judging.criteria(_fake_results({"A": part, "B": 0.9 * tracking + 100.0,
                                                              "C": tracking}, 100))}
-    assert recipe.MAX_LOST_SHARE == 0.10
+    assert judging.MAX_LOST_SHARE == 0.10
     assert some["2"].verdict == "met" and some["2"].preconditions[0].holds
     assert "A 10/100 (10 %)" in some["2"].preconditions[0].detail
     # one more: above the share, not judgeable
     part[10] = diverging(150.0)[10]
-    more = {c.id: c for c in recipe.criteria(_fake_results({"A": part, "B": 0.9 * tracking + 100.0,
+    more = {c.id: c for c in judging.criteria(_fake_results({"A": part, "B": 0.9 * tracking + 100.0,
                                                              "C": tracking}, 100))}
     assert more["2"].verdict == "not judgeable" and "A 11/100 (11 %)" in more["2"].preconditions[0].detail
 
 
-def test_the_timing_task_times_both_radii_in_turn(results):
-    t = results["timing@-20dBsm"]
-    assert t["cpu_wide"].shape == t["cpu_table"].shape == (2,) and int(t["runs"]) == 2
-    assert np.all(t["cpu_wide"] > 0) and np.all(t["cpu_table"] > 0)
+def test_the_timing_repetitions_are_the_table_pair_and_the_replication_batches(results):
+    wide, table, runs = judging.timing_repetitions(results)
+    assert wide.shape == table.shape == (2,) and runs == [2, 2]  # the table's pair, the replications' one batch
+    assert np.all(wide > 0) and np.all(table > 0)
+    rep = results["replicate@-20dBsm"]
+    assert wide[1] == rep["C__N600__R2500__cpu_batches"][0] == rep["C__N600__R2500__cpu_seconds"]
+    assert table[0] == results["table@-20dBsm"]["C__N600__R1000__cpu_seconds"]
+
+
+def test_replications_run_c_in_batches_with_the_radii_in_turn(host, monkeypatch):
+    """The timed rows run batch by batch on the batch's own runs and draws, their order alternating (repetition 1
+    runs R = 2.5 km first), and their arrays are the batches' joined along the runs (a stand-in for run_method that
+    records its calls)."""
+    calls = []
+
+    def fake(host_, method, scans, truth, model, *, radius, particles, seed, rng_key, clutter_rate):
+        j = len(calls)
+        calls.append((radius, scans.batch, rng_key))
+        e = np.full((scans.batch, scans.steps), float(j))
+        return {"error": e, "m_error": e + 0.5, "gated": np.ones_like(e), "lost": np.zeros(scans.batch, bool),
+                "seconds": np.array(0.1 * (j + 1)), "cpu_seconds": np.array(1.0 + j), "path0": np.full((3, 3), j),
+                "gated0": np.zeros((0, 6))}
+
+    monkeypatch.setattr(tasks, "run_method", fake)
+    params = {"runs": 5, "rcs": -20.0, "stream": "replicate", "combos": [["ekf", 600, 1000.0, "A"]],
+              "timed": [["tbd-pf", 600, 1000.0, "C"], ["tbd-pf", 600, 2500.0, "C"]], "batch_runs": 2,
+              "first_repetition": 1}
+    out = tasks._runs_task(TaskContext(params, seed=1, host=host))
+    # A alone on all 5 runs; then batches of 2, 2, 1 runs, the radii in turn: 2.5 km first in repetition 1
+    assert [(r, b) for r, b, _ in calls] == [(1000.0, 5), (2500.0, 2), (1000.0, 2), (1000.0, 2), (2500.0, 2),
+                                              (2500.0, 1), (1000.0, 1)]
+    assert calls[0][2] == ("replicate",) and calls[1][2] == calls[2][2] == ("replicate", "batch", 0)
+    assert calls[5][2] == ("replicate", "batch", 2)
+    c1, c25 = out["C__N600__R1000__error"], out["C__N600__R2500__error"]
+    assert c1.shape == (5, 300) and c1[:, 0].tolist() == [2, 2, 3, 3, 6] and c25[:, 0].tolist() == [1, 1, 4, 4, 5]
+    assert out["C__N600__R1000__cpu_batches"].tolist() == [3.0, 4.0, 7.0]
+    assert float(out["C__N600__R1000__cpu_seconds"]) == 14.0
+    assert out["C__N600__R2500__path0"][0, 0] == 1  # run 0's path: the first batch's
+    assert set(tasks.runs_of({"replicate@-20dBsm": out}, stream="replicate")[("C", 600, 2500.0)]) == set(tasks.FIELDS)
 
 
 def test_criterion_5_judges_its_timing_on_repetitions():
@@ -526,18 +574,20 @@ def test_criterion_5_judges_its_timing_on_repetitions():
             base[task][f"C__N600__R{r}__gated"] = np.ones_like(base[task][f"C__N600__R{r}__error"])
 
     def crit5(wide, table):
-        res = dict(base)
+        res = {k: dict(v) for k, v in base.items()}
         if wide is not None:
-            res["timing@-20dBsm"] = {"runs": np.array(20), "repeats": np.array(len(wide)), "rcs": np.array(-20.0),
-                                     "cpu_wide": np.array(wide), "cpu_table": np.array(table)}
-        return {c.id: c for c in recipe.criteria(res)}["5"]
+            # repetition 0 in the Table 3 task, the others the replications' batches
+            for task, part in (("table@-20dBsm", slice(0, 1)), ("replicate@-20dBsm", slice(1, None))):
+                res[task]["C__N600__R2500__cpu_batches"] = np.array(wide[part])
+                res[task]["C__N600__R1000__cpu_batches"] = np.array(table[part])
+        return {c.id: c for c in judging.criteria(res)}["5"]
 
-    noise = 0.01 * rng.standard_normal(7)
+    noise = 0.01 * rng.standard_normal(5)
     slower = crit5(1.3 + noise, 1.0 + noise[::-1])
     assert slower.verdict == "met" and slower.extra["timing"]["verdict"] == "met"
     assert slower.replication == (5, 5)  # the replications judge the accuracy part
     assert crit5(0.8 + noise, 1.0 + noise[::-1]).verdict == "not met"  # R = 2.5 km shown faster
-    tie = crit5(1.0 + 0.2 * rng.standard_normal(7), 1.0 + 0.2 * rng.standard_normal(7))
+    tie = crit5(1.0 + 0.2 * rng.standard_normal(5), 1.0 + 0.2 * rng.standard_normal(5))
     assert tie.verdict == "inconclusive" and "the accuracy part alone: met" in tie.detail
     few = crit5(1.3 + noise[:4], 1.0 + noise[:4])  # fewer repetitions than the criterion needs
     assert few.verdict == "inconclusive" and few.extra["timing"]["n"] == 4
@@ -567,13 +617,15 @@ def test_batched_criteria_give_the_per_resample_loops_numbers(monkeypatch):
             m[rng.random(m.shape) < 0.1] = np.nan  # scans without a gated detection
             res[task][f"C__N600__R{r}__m_error"] = m
             res[task][f"C__N600__R{r}__gated"] = np.ones_like(m)
-    res["timing@-20dBsm"] = {"runs": np.array(20), "repeats": np.array(7), "rcs": np.array(-20.0),
-                             "cpu_wide": 1.1 + 0.1 * rng.standard_normal(7), "cpu_table": 1.0 + 0.1 * rng.random(7)}
+    cpu_wide, cpu_table = 1.1 + 0.1 * rng.standard_normal(5), 1.0 + 0.1 * rng.random(5)
+    for task, part in (("table@-20dBsm", slice(0, 1)), ("replicate@-20dBsm", slice(1, None))):
+        res[task]["C__N600__R2500__cpu_batches"] = cpu_wide[part]
+        res[task]["C__N600__R1000__cpu_batches"] = cpu_table[part]
     res["sweep@-20dBsm"] = {"rcs": np.array(-20.0), "stream": np.array(""), "runs": np.array(20)}
-    monkeypatch.setattr(recipe, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
-    fast = recipe.criteria(res)
+    monkeypatch.setattr(judging, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
+    fast = judging.criteria(res)
     monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
-    slow = recipe.criteria(res)
+    slow = judging.criteria(res)
     assert [c.id for c in fast] == [c.id for c in slow] and {"1", "2", "3", "5", "6"} <= {c.id for c in fast}
     finite = [c.id for c in fast if c.interval is not None and np.all(np.isfinite(c.interval))]
     assert {"1", "2", "3", "5", "6"} <= set(finite)
@@ -588,7 +640,7 @@ def test_batched_criteria_give_the_per_resample_loops_numbers(monkeypatch):
     e25 = e25.copy()
     e25[7, 40:60] = np.nan
     monkeypatch.undo()
-    args = ((e25, m25, e1, m1), recipe._below_measurement)
+    args = ((e25, m25, e1, m1), judging._below_measurement)
     fast = wc.bootstrap_interval(*args, resamples=300)
     monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
     slow = wc.bootstrap_interval(*args, resamples=300)
@@ -624,10 +676,11 @@ def test_calibration_rule_on_a_small_synthetic_table():
         tuning.calibrate(cands, [np.nan] * 4, [1.0] * 4, cands[0])
 
 
-def test_criteria_across_the_unknowns_and_at_the_calibrated_values():
-    """Criteria 1-3 judged at every grid point (not judgeable where A and B lose their tracks, met where the three
-    rows track in the paper's order) and again at the point the calibration chose."""
-    rng = np.random.default_rng(3)
+def _grid_results(seed: int = 3) -> dict:
+    """Hand-made results of the full report's judged tasks: at the primary values A and B lose every run, C tracks;
+    at four grid points (the calibrated one among them) the three rows track in the paper's order; the calibration
+    task chose (-15 dBsm, 50 per scan)."""
+    rng = np.random.default_rng(seed)
     k = np.arange(300)
     shape = np.where(k <= 100, 2.0, 1.0)
 
@@ -637,10 +690,9 @@ def test_criteria_across_the_unknowns_and_at_the_calibrated_values():
     def diverging(runs):
         return 150.0 * k * (1 + 0.05 * rng.standard_normal((runs, 1)))
 
-    # the primary: A and B lose every run
     res = _fake_results({"A": diverging(100), "B": diverging(100), "C": tracking(100.0, 100)}, 100)
     tracks_at = {(-15.0, 50.0), (-10.0, 1000.0), (-12.5, 1000.0), (-20.0, 50.0)}
-    for rcs, rate in recipe.grid_points()[1:]:
+    for rcs, rate in tasks.grid_points()[1:]:
         task = {"rcs": np.array(rcs), "rate": np.array(rate), "stream": np.array(""), "runs": np.array(20)}
         good = (rcs, rate) in tracks_at
         for key, e in (("A", tracking(300.0, 20) if good else diverging(20)),
@@ -648,14 +700,21 @@ def test_criteria_across_the_unknowns_and_at_the_calibrated_values():
             task[f"{key}__N600__R1000__error"] = e
             task[f"{key}__N600__R1000__lost"] = lost_track(e)
             task[f"{key}__N600__R1000__seconds"] = np.array(1.0)
-        res[f"grid@{rcs:g}dBsm" + ("" if rate == 1000.0 else f"@{rate:g}perscan")] = task
-    points = recipe.grid_points()
+        res[tasks.task_key("grid", rcs, rate)] = task
+    points = tasks.grid_points()
     whole = {(-15.0, 50.0): (230.0, 220.0)}
     res["calibration"] = {"points": np.array(points), "seed": np.array(101), "runs": np.array(3),
                           "A__whole": np.array([[whole.get(p, (5e3, 5e3))[0]] * 3 for p in points]),
                           "B__whole": np.array([[whole.get(p, (5e3, 5e3))[1]] * 3 for p in points]),
                           "A__lost": np.zeros((len(points), 3), bool), "B__lost": np.zeros((len(points), 3), bool)}
-    crit = {c.id: c for c in recipe.criteria(res)}
+    return res
+
+
+def test_criteria_across_the_unknowns_and_at_the_calibrated_values():
+    """Criteria 1-3 judged at every grid point (not judgeable where A and B lose their tracks, met where the three
+    rows track in the paper's order) and again at the point the calibration chose."""
+    res = _grid_results()
+    crit = {c.id: c for c in judging.criteria(res)}
     assert crit["1"].verdict == "not judgeable"
     rcs = {r.value: r.verdict for r in crit["1"].across if r.unknown == "reference RCS"}
     assert rcs == {-20.0: "not judgeable", -17.5: "not judgeable", -15.0: "not judgeable", -12.5: "met",
@@ -664,7 +723,55 @@ def test_criteria_across_the_unknowns_and_at_the_calibrated_values():
     assert rate == {50.0: "met", 200.0: "not judgeable", 1000.0: "not judgeable"}
     assert {r.unknown for r in crit["2"].across} == {"reference RCS", "clutter rate"} and not crit["4"].across
     # the calibration chose (-15 dBsm, 50 per scan); criteria 1-3 judged there on the report's runs
-    assert recipe.calibration(res)["point"] == (-15.0, 50.0)
+    assert judging.calibration(res)["point"] == (-15.0, 50.0) == tuning.CALIBRATED_POINT
     for cid in ("1", "2", "3"):
         c = crit[f"{cid}@calibrated"]
         assert c.verdict == "met" and c.n == 20 and "-15 dBsm, clutter rate 50" in c.text
+
+
+def test_a_calibration_that_leaves_the_declared_point_is_not_judged_elsewhere():
+    """Where the calibration chooses another point than tuning.CALIBRATED_POINT (whose grid task alone the
+    confirmation seed runs again), the calibrated criteria say so instead of reading a sensitivity task."""
+    res = _grid_results()
+    points = tasks.grid_points()
+    j = points.index((-12.5, 1000.0))
+    res["calibration"]["A__whole"][j] = 236.0
+    res["calibration"]["B__whole"][j] = 214.0
+    assert judging.calibration(res)["point"] == (-12.5, 1000.0)
+    crit = {c.id: c for c in judging.criteria(res)}
+    for cid in ("1", "2", "3"):
+        c = crit[f"{cid}@calibrated"]
+        assert c.verdict == "inconclusive" and "tuning.CALIBRATED_POINT = (-15 dBsm, 50 per scan)" in c.detail
+
+
+def test_the_primary_verdicts_read_no_sensitivity_task(host):
+    """The tasks declared sensitivity=True feed Criterion.across alone: with their runs replaced (every row there
+    tracking, or every row lost) every verdict, statistic, interval and detail is the same, while the across
+    verdicts follow; and the criteria read neither the scenario nor the ablations."""
+    from workbench.report.engine import judged_tasks
+
+    rcp = host.recipe("000")
+    full = RecipeOptions("full", rcp.sizes["full"], 0, rcp.default_filters)
+    sensitivity = {t.key for t in rcp.tasks(full) if t.sensitivity}
+    res = _grid_results()
+    assert sensitivity and sensitivity < set(res)
+    res["scenario"] = {"truth": np.zeros((300, 6))}
+    res["ablations@-20dBsm"] = dict(res["table@-20dBsm"])
+    base, read = judged_tasks(judging.criteria, res)
+    assert "scenario" not in read and "ablations@-20dBsm" not in read
+    assert {"table@-20dBsm", "replicate@-20dBsm", "calibration", "grid@-15dBsm@50perscan"} <= read
+    k = np.arange(300)
+    for level in (50.0, None):  # every row tracking (C worst), every row lost
+        changed = {key: dict(v) for key, v in res.items()}
+        for key in sensitivity:
+            for field in [f for f in changed[key] if f.endswith("__error")]:
+                e = 100.0 * (1 + np.arange(20)[:, None] / 20) * np.ones(300) if level is not None else \
+                    200.0 * k * np.ones((20, 1))
+                e = e * {"A": 1.0, "B": 2.0, "C": 3.0}[field[0]] if level is not None else e
+                changed[key][field] = e
+                changed[key][field.replace("__error", "__lost")] = lost_track(e)
+        again = judging.criteria(changed)
+        assert [c.id for c in again] == [c.id for c in base]
+        for a, b in zip(base, again):
+            same_numbers({**a.to_dict(), "across": None}, {**b.to_dict(), "across": None}, a.id)
+        assert [r.verdict for r in again[0].across] != [r.verdict for r in base[0].across]
