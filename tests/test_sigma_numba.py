@@ -36,12 +36,14 @@ def _scenario(model, B=40, steps=30, seed=0):
                                    linear_measurement(np.eye(2, 4), np.diag([2.0, 3.0]))],
                          ids=["range-bearing", "linear"])
 @pytest.mark.parametrize("B", [40, 64], ids=["serial", "threaded"])  # below and at sigma_numba.PARALLEL_MIN
-def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model, B):
+@pytest.mark.parametrize("name", ["ukf", "cdkf"])
+def test_compiled_ukf_equals_the_numpy_ukf(monkeypatch, model, B, name):
+    # the UKF's and the CDKF's compiled loops against their NumPy code
     from workbench_filters.sigma_point import sigma_numba
     from workbench.plugins import load_host
 
     assert (B >= sigma_numba.PARALLEL_MIN) == (B == 64)
-    spec = load_host().filter("ukf")
+    spec = load_host().filter(name)
     prior, motion, scans = _scenario(model, B=B)
     before = sigma_point.backend_counts()
     fast = run_filter(spec, prior, motion, model, scans, None)
@@ -87,3 +89,57 @@ def test_compiled_update_declines_a_covariance_that_is_not_positive_definite():
     assert not sigma_numba.chol_sigma(x, P, 2.0, X, S)
     assert sigma_numba.chol_sigma(x[:1], P[:1], 2.0, X[:1], S[:1]) and np.allclose(S[0], np.eye(4))
     assert np.allclose(X[0, 1:5], 2.0 * np.eye(4)) and np.allclose(X[0, 5:], -2.0 * np.eye(4))
+
+
+@pytest.mark.parametrize("name", ["sr-ukf", "sr-cdkf"])
+@pytest.mark.parametrize("model", [range_bearing(1.0, 0.1, sensor=(3.0, -2.0)),
+                                   linear_measurement(np.eye(2, 4), np.diag([2.0, 3.0]))],
+                         ids=["range-bearing", "linear"])
+@pytest.mark.parametrize("B", [1, 64], ids=["one-track", "threaded"])
+def test_compiled_square_root_forms_equal_the_numpy_square_root_forms(name, model, B):
+    # the compiled QR (Householder) and rank-1 sweeps of the SR-UKF and SR-CDKF against the NumPy forms (LAPACK's
+    # QR, workbench.linalg.cholupdate), and both against the full-covariance filter run in NumPy
+    from workbench.plugins import load_host
+
+    host = load_host()
+    spec = host.filter(name)
+    prior, motion, scans = _scenario(model, B=B, seed=3)
+    before = sigma_point.backend_counts()
+    fast = run_filter(spec, prior, motion, model, scans, None)
+    ran = _difference(sigma_point.backend_counts(), before)
+    assert ran.get("numpy", 0) == 0 and ran.get("numba", 0) >= scans.steps, ran  # every predict and update compiled
+    assert fast.diagnostics["downdate_fallbacks"] == 0
+    with backend.preferring("numpy"):
+        before = sigma_point.backend_counts()
+        slow = run_filter(spec, prior, motion, model, scans, None)
+        ran = _difference(sigma_point.backend_counts(), before)
+        assert ran.get("numba", 0) == 0 and ran.get("numpy", 0) >= scans.steps, ran
+        full = run_filter(host.filter(name[3:]), prior, motion, model, scans, None)
+    np.testing.assert_allclose(fast.mean, slow.mean, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(fast.cov, slow.cov, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fast.mean, full.mean, rtol=1e-8, atol=1e-7)
+    np.testing.assert_allclose(fast.cov, full.cov, rtol=1e-7, atol=1e-7)
+
+
+def test_compiled_square_root_pieces_against_their_definitions():
+    # tria: the lower factor of A A^T with a non-negative diagonal (A of rank n, and a zero column);
+    # cholupdate: S S^T + sign u u^T; a downdate past positive definiteness is declined
+    from workbench_filters.sigma_point import sigma_numba
+
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(4, 11))
+    S = np.empty((4, 4))
+    sigma_numba.tria_into(np.ascontiguousarray(A.T), S)
+    np.testing.assert_allclose(S, np.linalg.cholesky(A @ A.T), rtol=1e-12, atol=1e-12)
+    A[:, 3] = 0.0
+    sigma_numba.tria_into(np.ascontiguousarray(A.T), S)
+    np.testing.assert_allclose(S @ S.T, A @ A.T, rtol=1e-12, atol=1e-12)
+    assert np.all(np.diag(S) >= 0.0) and np.allclose(np.triu(S, 1), 0.0)
+    L = np.linalg.cholesky(A @ A.T + np.eye(4))
+    u = rng.normal(size=4)
+    for sign in (0.7, -0.05):
+        T = L.copy()
+        assert sigma_numba.cholupdate_into(T, u, sign)
+        np.testing.assert_allclose(T @ T.T, L @ L.T + sign * np.outer(u, u), rtol=1e-12, atol=1e-12)
+    T = L.copy()
+    assert not sigma_numba.cholupdate_into(T, 10.0 * np.linalg.norm(L) * u / np.linalg.norm(u), -1.0)

@@ -214,7 +214,7 @@ def test_the_papers_declare_only_their_fixed_seed_tuning_tasks_unseeded():
     seed 101 alone; paper 002 has no such task (it tunes its restart delay inside its seeded tasks), so every other
     task stays seeded."""
     from workbench.specs import RecipeOptions
-    from workbench_papers.paper003 import recipe as p003
+    from workbench_papers.paper003 import tasks as p003
 
     host = load_host()
     for paper in ("000", "001", "002", "003"):

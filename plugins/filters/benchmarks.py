@@ -74,7 +74,7 @@ SPEEDUP_TARGET = 10.0
 FLOOR_TARGET = 1.5
 NOT_INSTALLED = "not installed"
 
-# Paper 003's scenario (workbench_papers.paper003.recipe: X0, XHAT0, P0, level L2).
+# Paper 003's scenario (workbench_papers.paper003.scenario: X0, XHAT0, P0, level L2).
 X0 = (100.0, 50.0, -1.0, 1.0)
 XHAT0 = (110.0, 40.0, 0.0, 0.0)
 P0 = (10.0**2, 10.0**2, 2.0**2, 2.0**2)

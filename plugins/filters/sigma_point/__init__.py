@@ -34,7 +34,7 @@ a wrapped residual.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 
@@ -124,9 +124,17 @@ def _central_diffs(points: np.ndarray, n: int, residual=None) -> tuple[np.ndarra
 
 
 def _lower_sqrt(R: np.ndarray) -> np.ndarray:
-    """A lower factor of the (PSD) measurement noise covariance."""
-    chol, _ = safe_cholesky(R[None], jitter=1e-15)
-    return chol[0]
+    """A lower factor of the (PSD) measurement noise covariance (computed once per distinct ``R``; read-only)."""
+    R = np.ascontiguousarray(R, dtype=float)
+    return _lower_sqrt_cached(R.tobytes(), R.shape[0])
+
+
+@lru_cache(maxsize=64)
+def _lower_sqrt_cached(r_bytes: bytes, m: int) -> np.ndarray:
+    chol, _ = safe_cholesky(np.frombuffer(r_bytes, dtype=float).reshape(m, m)[None], jitter=1e-15)
+    out = np.ascontiguousarray(chol[0])
+    out.flags.writeable = False
+    return out
 
 
 def _solve_lower(L: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -195,10 +203,12 @@ _RECORD = BackendRecord()  # which code the last full-covariance predict / updat
 
 
 def last_backend() -> str | None:
-    """Which code computed this thread's last full-covariance sigma-point predict or update: ``"numba"`` (the
-    compiled UKF loops of :mod:`workbench_filters.sigma_point.sigma_numba`) or ``"numpy"`` (the NumPy code below: the backend
-    policy did not pick Numba, e.g. ``WORKBENCH_BACKEND=numpy``, no Numba or a GPU arch; the CDKF; a covariance the
-    compiled Cholesky declines); ``None`` before the first call.  For tests, which must know
+    """Which code computed this thread's last sigma-point predict or update: ``"numba"`` (the compiled UKF loops of
+    :mod:`workbench_filters.sigma_point.sigma_numba`, or its square-root loops for the SR-UKF and SR-CDKF) or
+    ``"numpy"`` (the NumPy code below: the backend policy did not pick Numba, e.g. ``WORKBENCH_BACKEND=numpy``, no
+    Numba or a GPU arch; the full-covariance CDKF; a covariance the compiled Cholesky declines; a square-root update
+    or downdate that would fail, which the NumPy code falls back from and counts; a motion model that is not
+    linear in the square-root predict; the SR-CDKF's downdate-free form); ``None`` before the first call.  For tests, which must know
     which path ran."""
     return _RECORD.last()
 
@@ -237,6 +247,15 @@ def _compiled_points(fast, x: np.ndarray, P: np.ndarray, spread: float) -> np.nd
 def _predict_full(state: SigmaPointState, motion: MotionModel, rng=None, *, weights: SigmaWeights) -> SigmaPointState:
     x, P = state.mean, state.cov
     n = x.shape[1]
+    central = _compiled_any() if weights.kind == "central" and motion.linear else None
+    if central is not None:  # the CDKF: points, f = X F^T and the central differences' moments in one call
+        mean, cov = np.empty(x.shape), np.empty(P.shape)
+        if central.central_linear_predict(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(P, dtype=float),
+                                          np.ascontiguousarray(motion.F, dtype=float), float(weights.spread),
+                                          weights.mean, float(weights.c1), float(weights.c2),
+                                          np.ascontiguousarray(motion.Q, dtype=float), mean, cov):
+            _RECORD.note("numba")
+            return _full_state(mean, cov, state.jitters)
     fast = _compiled(weights)
     if fast is not None and motion.linear:  # f(X) = X F^T, declared: points, f and moments in one compiled call
         mean, cov = np.empty(x.shape), np.empty(P.shape)
@@ -273,6 +292,20 @@ def _update_full(state: SigmaPointState, scan: Scan, model: MeasurementModel, rn
         return state
     x, P = state.mean, state.cov
     B, n = x.shape
+    central = _compiled_any() if weights.kind == "central" else None
+    X = _compiled_points(central, x, P, weights.spread)
+    if X is not None:  # the CDKF's update item by item, the same formulas as below
+        Y = np.ascontiguousarray(model.h(X), dtype=float)
+        m = z.shape[1]
+        angular = cached_angle_mask(model)
+        if Y.shape == (B, 2 * n + 1, m) and model.R.shape == (m, m) and angular.shape == (m,):
+            mean, cov = np.empty(x.shape), np.empty(P.shape)
+            if central.central_update(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(P, dtype=float), Y, float(weights.spread),
+                                      weights.mean, float(weights.c1), float(weights.c2), angular,
+                                      np.ascontiguousarray(model.R, dtype=float), np.ascontiguousarray(z, dtype=float),
+                                      np.ascontiguousarray(present, dtype=bool), mean, cov):
+                _RECORD.note("numba")
+                return _full_state(mean, cov, state.jitters)
     fast = _compiled(weights)
     X = _compiled_points(fast, x, P, weights.spread)
     if X is not None:  # the same formulas as below, item by item (tests/test_sigma_numba.py)
@@ -342,9 +375,39 @@ def _init_sqrt(prior: Gaussian, rng=None) -> SquareRootState:
     return SquareRootState(prior.mean, chol)
 
 
+def _compiled_any():
+    """The module of the Numba loops (:mod:`workbench_filters.sigma_point.sigma_numba`) where the backend policy picks
+    Numba, whatever the weights (the CDKF's loops and the square-root forms' use it), else ``None``."""
+    if not runs_numba():
+        return None
+    if not _LOOPS:
+        from . import sigma_numba
+
+        _LOOPS.append(sigma_numba)
+    return _LOOPS[0]
+
+
+def _weights_args(weights: SigmaWeights) -> tuple:
+    """``(wm, wc, central, c1, c2)`` of the compiled square-root loops (``wc`` unused by the central form)."""
+    central = weights.kind == "central"
+    return (weights.mean, weights.mean if weights.cov is None else weights.cov, central, float(weights.c1),
+            float(weights.c2))
+
+
 def _predict_sqrt(state: SquareRootState, motion: MotionModel, rng=None, *, weights: SigmaWeights) -> SquareRootState:
     x, S = state.mean, state.chol
     B, n = x.shape
+    fast = _compiled_any() if motion.linear else None
+    if fast is not None:  # f(X) = X F^T, declared: points, f, QR and the centre's update in one compiled call
+        mean, S_new = np.empty(x.shape), np.empty(S.shape)
+        if fast.sqrt_linear_predict(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(S, dtype=float),
+                                    np.ascontiguousarray(motion.F, dtype=float), float(weights.spread),
+                                    *_weights_args(weights), np.ascontiguousarray(motion.Q_sqrt, dtype=float), mean,
+                                    S_new):
+            _RECORD.note("numba")
+            return SquareRootState(mean, S_new, state.fallbacks)
+        # an update would lose positive definiteness: the NumPy code below falls back and counts it
+    _RECORD.note("numpy")
     Xf = motion.f(sigma_points(x, S, weights.spread))  # X* = f(X)
     mean = weights.mean @ Xf  # x- = sum Wm X*
     q_sqrt = np.broadcast_to(motion.Q_sqrt, (B, n, n))
@@ -376,6 +439,20 @@ def _update_sqrt(state: SquareRootState, scan: Scan, model: MeasurementModel, rn
     m = model.dim
     X = sigma_points(x, S, weights.spread)  # redraw from (x-, S-)
     Y = model.h(X)
+    fast = _compiled_any() if weights.kind == "unscented" or downdate == "cholupdate" else None
+    if fast is not None:
+        Y = np.ascontiguousarray(Y, dtype=float)
+        angular = cached_angle_mask(model)
+        r_sqrt = _lower_sqrt(model.R)
+        if Y.shape == (B, 2 * n + 1, m) and r_sqrt.shape[0] == m and angular.shape == (m,):  # the loop's indices
+            mean, S_new = np.empty(x.shape), np.empty(S.shape)
+            # declined (False) for a present z that is not finite or an update or downdate that would fail
+            if fast.sqrt_update(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(S, dtype=float), X, Y,
+                                *_weights_args(weights), angular, r_sqrt, np.ascontiguousarray(z, dtype=float),
+                                np.ascontiguousarray(present, dtype=bool), mean, S_new):
+                _RECORD.note("numba")
+                return SquareRootState(mean, S_new, state.fallbacks)
+    _RECORD.note("numpy")
     y_hat = model.mean(Y, weights.mean)  # y^ = sum Wm Y, angle-aware
     r_sqrt = np.broadcast_to(_lower_sqrt(model.R), (B, m, m))
     failed = np.zeros(B, dtype=bool)

@@ -9,7 +9,17 @@ per step.  The motion's ``f`` and the sensor's ``h`` stay NumPy calls of the mod
 - :func:`linear_predict`: the three steps of a predict in one call for a :attr:`~workbench.models.MotionModel.linear`
   motion (``X* = X F^T``, the model's declared ``f``), which needs no Python call between them;
 - :func:`unscented_update`: the angle-aware ``y^``, ``Pxy``, ``Pyy = sum Wc dY dY^T + R``,
-  ``K = Pxy Pyy^-1`` (Cholesky solves), ``x = x- + K wrap(z - y^)``, ``P = P- - (K L)(K L)^T``.
+  ``K = Pxy Pyy^-1`` (Cholesky solves), ``x = x- + K wrap(z - y^)``, ``P = P- - (K L)(K L)^T``;
+- :func:`central_linear_predict` and :func:`central_update`: the CDKF's full-covariance predict (linear motion)
+  and update, the central differences ``a_i``, ``b_i`` of the points (wrapped for angles) in place of the
+  unscented sums;
+- :func:`sqrt_linear_predict` and :func:`sqrt_update`: the square-root forms (SR-UKF and SR-CDKF, van der Merwe
+  2004) item by item: the QR of the weighted deviations (:func:`tria_into`, Householder, the factor's diagonal
+  made non-negative as :func:`workbench.linalg.tria` does), the rank-1 :func:`cholupdate_into` sweep of
+  :func:`workbench.linalg.cholupdate` (the same formulas in the same order), ``K`` by two triangular solves and the
+  downdates ``S = cholupdate(S-, K S_y, -1)`` column by column.  A downdate or update that would lose positive
+  definiteness makes the call return ``False``: the caller then takes the NumPy path, whose ``cholupdate`` falls
+  back to a jittered refactorisation and counts it.
 
 A matrix that is not numerically positive definite makes the call return ``False``; the caller then
 takes the NumPy path, which adds and counts jitter.  So does a present measurement that is not finite: the NumPy
@@ -255,7 +265,413 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
     return ok.all()
 
 
+def _central_linear_predict(x, P, F, spread, wm, c1, c2, Q, mean, cov):
+    """The CDKF predict of every item for a linear motion ``f(X) = X F^T``: ``S = chol(P)``, the points
+    ``[x, x + h S_j, x - h S_j]``, ``x- = sum Wm X*`` and ``P- = sym(sum_i Wc1 a_i a_i^T + Wc2 b_i b_i^T + Q)`` with
+    ``a_i = X*_i - X*_{L+i}``, ``b_i = X*_i + X*_{L+i} - 2 X*_0``.  Returns whether every ``P[b]`` was positive
+    definite."""
+    B, n = x.shape
+    S = 2 * n + 1
+    ok = np.ones(B, dtype=np.bool_)
+    for b in numba.prange(B):
+        L = np.zeros((n, n))
+        if not cholesky_into(P[b], L):
+            ok[b] = False
+            continue
+        X = np.empty((S, n))
+        for r in range(n):
+            X[0, r] = x[b, r]
+        for j in range(n):
+            for r in range(n):
+                step = spread * L[r, j]
+                X[1 + j, r] = x[b, r] + step
+                X[1 + n + j, r] = x[b, r] - step
+        Xf = np.empty((S, n))
+        for s in range(S):  # X* = X F^T
+            for r in range(n):
+                acc = 0.0
+                for k in range(n):
+                    acc += X[s, k] * F[r, k]
+                Xf[s, r] = acc
+        for r in range(n):
+            acc = 0.0
+            for s in range(S):
+                acc += wm[s] * Xf[s, r]
+            mean[b, r] = acc
+        A = np.empty((n, n))
+        D = np.empty((n, n))
+        for i in range(n):
+            for r in range(n):
+                A[i, r] = Xf[1 + i, r] - Xf[1 + n + i, r]
+                D[i, r] = Xf[1 + i, r] + Xf[1 + n + i, r] - 2.0 * Xf[0, r]
+        C = np.empty((n, n))
+        for r in range(n):
+            for c in range(n):
+                aa = 0.0
+                dd = 0.0
+                for i in range(n):
+                    aa += A[i, r] * A[i, c]
+                    dd += D[i, r] * D[i, c]
+                C[r, c] = c1 * aa + c2 * dd + Q[r, c]
+        for r in range(n):  # sym(P + Q)
+            for c in range(r + 1):
+                v = 0.5 * (C[r, c] + C[c, r])
+                cov[b, r, c] = v
+                cov[b, c, r] = v
+    return ok.all()
+
+
+def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, cov):
+    """The CDKF update of every present item (an absent one keeps ``x``, ``P``) from the measured points ``Y`` of
+    the points ``[x, x + h S_j, x - h S_j]``, ``S = chol(P)``: the angle-aware ``y^``,
+    ``Pyy = sym(sum_i Wc1 a_i a_i^T + Wc2 b_i b_i^T + R)`` with ``a_i = wrap(Y_i - Y_{L+i})``,
+    ``b_i = wrap(Y_i - Y_0) + wrap(Y_{L+i} - Y_0)``, ``Pxy = sqrt(Wc1) S [a_1 .. a_L]``, ``K = Pxy Pyy^-1``
+    (Cholesky solves), ``x = x- + K wrap(z - y^)``, ``P = sym(P- - (K L)(K L)^T)``.  ``False`` where some ``P`` or
+    ``Pyy`` is not positive definite or a present ``z`` is not finite (nothing is then to be used)."""
+    B, n = x.shape
+    Sp = Y.shape[1]
+    m = Y.shape[2]
+    ok = np.ones(B, dtype=np.bool_)
+    for b in numba.prange(B):
+        if not present[b]:
+            for r in range(n):
+                mean[b, r] = x[b, r]
+                for c in range(n):
+                    cov[b, r, c] = P[b, r, c]
+            continue
+        finite = True
+        for k in range(m):
+            finite = finite and math.isfinite(z[b, k])
+        if not finite:
+            ok[b] = False
+            continue
+        Sx = np.zeros((n, n))
+        if not cholesky_into(P[b], Sx):
+            ok[b] = False
+            continue
+        y_hat = np.empty(m)
+        for k in range(m):
+            acc = 0.0
+            if angular[k]:
+                ref = Y[b, 0, k]
+                for s in range(Sp):
+                    acc += wm[s] * wrap(Y[b, s, k] - ref)
+                y_hat[k] = wrap(ref + acc)
+            else:
+                for s in range(Sp):
+                    acc += wm[s] * Y[b, s, k]
+                y_hat[k] = acc
+        A = np.empty((n, m))
+        D = np.empty((n, m))
+        for i in range(n):
+            for k in range(m):
+                d = Y[b, 1 + i, k] - Y[b, 1 + n + i, k]
+                dp = Y[b, 1 + i, k] - Y[b, 0, k]
+                dm = Y[b, 1 + n + i, k] - Y[b, 0, k]
+                if angular[k]:
+                    d, dp, dm = wrap(d), wrap(dp), wrap(dm)
+                A[i, k] = d
+                D[i, k] = dp + dm
+        Pyy = np.empty((m, m))
+        for k in range(m):
+            for l in range(m):
+                aa = 0.0
+                dd = 0.0
+                for i in range(n):
+                    aa += A[i, k] * A[i, l]
+                    dd += D[i, k] * D[i, l]
+                Pyy[k, l] = c1 * aa + c2 * dd + R[k, l]
+        for k in range(m):
+            for l in range(k + 1):
+                v = 0.5 * (Pyy[k, l] + Pyy[l, k])
+                Pyy[k, l] = v
+                Pyy[l, k] = v
+        w1 = math.sqrt(c1)
+        Pxy = np.empty((n, m))
+        for r in range(n):
+            for k in range(m):
+                acc = 0.0
+                for i in range(n):
+                    acc += Sx[r, i] * A[i, k]
+                Pxy[r, k] = w1 * acc
+        L = np.zeros((m, m))
+        if not cholesky_into(Pyy, L):
+            ok[b] = False
+            continue
+        K = np.empty((n, m))
+        for r in range(n):
+            for k in range(m):
+                v = Pxy[r, k]
+                for l in range(k):
+                    v -= L[k, l] * K[r, l]
+                K[r, k] = v / L[k, k]
+            for k in range(m - 1, -1, -1):
+                v = K[r, k]
+                for l in range(k + 1, m):
+                    v -= L[l, k] * K[r, l]
+                K[r, k] = v / L[k, k]
+        for r in range(n):
+            v = x[b, r]
+            for k in range(m):
+                d = z[b, k] - y_hat[k]
+                v += K[r, k] * (wrap(d) if angular[k] else d)
+            mean[b, r] = v
+        KL = np.zeros((n, m))
+        for r in range(n):
+            for k in range(m):
+                v = 0.0
+                for l in range(k, m):
+                    v += K[r, l] * L[l, k]
+                KL[r, k] = v
+        for r in range(n):
+            for c in range(r + 1):
+                v = 0.0
+                for k in range(m):
+                    v += KL[r, k] * KL[c, k]
+                w = 0.5 * (P[b, r, c] + P[b, c, r]) - v
+                cov[b, r, c] = w
+                cov[b, c, r] = w
+    return ok.all()
+
+
+@numba.njit(error_model="numpy")
+def tria_into(M, S):
+    """``S (n, n)`` = the lower factor of ``A A^T`` for ``M = A^T (k, n)``, ``k >= n``, by Householder QR of ``M``
+    (overwritten): ``S = R^T`` with each column's sign made that of a non-negative diagonal
+    (:func:`workbench.linalg.tria`)."""
+    k, n = M.shape
+    for j in range(n):
+        tail = 0.0
+        for i in range(j + 1, k):
+            tail += M[i, j] * M[i, j]
+        norm2 = M[j, j] * M[j, j] + tail
+        if norm2 == 0.0:
+            continue
+        alpha = -math.copysign(math.sqrt(norm2), M[j, j])
+        # v = M[j:, j] - alpha e_1, kept in column j below the diagonal and in v0
+        v0 = M[j, j] - alpha
+        vv = v0 * v0 + tail
+        if vv > 0.0:
+            for c in range(j + 1, n):
+                dot = v0 * M[j, c]
+                for i in range(j + 1, k):
+                    dot += M[i, j] * M[i, c]
+                f = 2.0 * dot / vv
+                M[j, c] -= f * v0
+                for i in range(j + 1, k):
+                    M[i, c] -= f * M[i, j]
+        M[j, j] = alpha
+    for r in range(n):
+        sign = -1.0 if M[r, r] < 0.0 else 1.0  # sign(0) = 1, as tria
+        for c in range(n):
+            S[c, r] = sign * M[r, c] if c >= r else 0.0
+
+
+@numba.njit(error_model="numpy")
+def cholupdate_into(S, u, sign):
+    """``S S^T + sign u u^T`` as a lower factor, in place: :func:`workbench.linalg.cholupdate`'s sweep, the same
+    formulas in the same order; ``False`` (``S`` then garbage) where a pivot would not be positive."""
+    n = S.shape[0]
+    x = np.empty(n)
+    scale = math.sqrt(abs(sign))
+    for i in range(n):
+        x[i] = u[i] * scale
+    sgn = -1.0 if sign < 0.0 else 1.0
+    for k in range(n):
+        skk = S[k, k]
+        r2 = skk * skk + sgn * x[k] * x[k]
+        if r2 <= 0.0:
+            return False
+        r = math.sqrt(r2)
+        safe = 1.0 if skk == 0.0 else skk
+        c = r / safe
+        sn = x[k] / safe
+        S[k, k] = r
+        for i in range(k + 1, n):
+            col = (S[i, k] + sgn * sn * x[i]) / c
+            x[i] = c * x[i] - sn * col
+            S[i, k] = col
+    return True
+
+
+def _sqrt_linear_predict(x, S, F, spread, wm, wc, central, c1, c2, Qs, mean, S_new):
+    """The square-root predict of every item for a linear motion ``f(X) = X F^T``: the points
+    ``[x, x + c S_j, x - c S_j]``, ``x- = sum Wm X*`` and ``S- = tria([sqrt(Wc1) (X*_{1:2L} - x-), sqrt(Q)])``
+    updated with ``X*_0 - x-`` (sign ``Wc0``; unscented), or ``S- = tria([sqrt(Wc1) (X*_i - X*_{L+i}),
+    sqrt(Wc2) (X*_i + X*_{L+i} - 2 X*_0), sqrt(Q)])`` (central).  ``False`` where an update would fail."""
+    B, n = x.shape
+    P = 2 * n + 1
+    q = Qs.shape[1]
+    ok = np.ones(B, dtype=np.bool_)
+    for b in numba.prange(B):
+        X = np.empty((P, n))
+        for r in range(n):
+            X[0, r] = x[b, r]
+        for j in range(n):
+            for r in range(n):
+                step = spread * S[b, r, j]  # column j of the factor
+                X[1 + j, r] = x[b, r] + step
+                X[1 + n + j, r] = x[b, r] - step
+        Xf = np.empty((P, n))
+        for s in range(P):  # X* = X F^T
+            for r in range(n):
+                acc = 0.0
+                for k in range(n):
+                    acc += X[s, k] * F[r, k]
+                Xf[s, r] = acc
+        for r in range(n):
+            acc = 0.0
+            for s in range(P):
+                acc += wm[s] * Xf[s, r]
+            mean[b, r] = acc
+        M = np.empty((2 * n + q, n))
+        if central:
+            w1, w2 = math.sqrt(c1), math.sqrt(c2)
+            for i in range(n):
+                for r in range(n):
+                    M[i, r] = w1 * (Xf[1 + i, r] - Xf[1 + n + i, r])
+                    M[n + i, r] = w2 * (Xf[1 + i, r] + Xf[1 + n + i, r] - 2.0 * Xf[0, r])
+        else:
+            w1 = math.sqrt(wc[1])
+            for s in range(1, P):
+                for r in range(n):
+                    M[s - 1, r] = w1 * (Xf[s, r] - mean[b, r])
+        for j in range(q):  # the columns of sqrt(Q) as rows of A^T
+            for r in range(n):
+                M[2 * n + j, r] = Qs[r, j]
+        tria_into(M, S_new[b])
+        if not central and wc[0] != 0.0:
+            d0 = np.empty(n)
+            for r in range(n):
+                d0[r] = Xf[0, r] - mean[b, r]
+            if not cholupdate_into(S_new[b], d0, wc[0]):
+                ok[b] = False
+    return ok.all()
+
+
+def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, mean, S_new):
+    """The square-root update of every present item (an absent one keeps ``x``, ``S``): the angle-aware ``y^``,
+    ``S_y`` by :func:`tria_into` (and, unscented, the centre point's :func:`cholupdate_into`), ``Pxy``,
+    ``K = Pxy S_y^-T S_y^-1``, ``x = x- + K wrap(z - y^)`` and ``S = cholupdate(S-, K S_y, -1)`` column by
+    column.  ``False`` where a present ``z`` is not finite or an update or downdate would fail."""
+    B, P, n = X.shape
+    m = Y.shape[2]
+    ok = np.ones(B, dtype=np.bool_)
+    for b in numba.prange(B):
+        for r in range(n):
+            mean[b, r] = x[b, r]
+            for c in range(n):
+                S_new[b, r, c] = S[b, r, c]
+        if not present[b]:
+            continue
+        finite = True
+        for k in range(m):
+            finite = finite and math.isfinite(z[b, k])
+        if not finite:  # the NumPy path names it
+            ok[b] = False
+            continue
+        # y^ = sum Wm Y; angular components as y_0 + sum Wm wrap(y_s - y_0), wrapped
+        y_hat = np.empty(m)
+        for k in range(m):
+            acc = 0.0
+            if angular[k]:
+                ref = Y[b, 0, k]
+                for s in range(P):
+                    acc += wm[s] * wrap(Y[b, s, k] - ref)
+                y_hat[k] = wrap(ref + acc)
+            else:
+                for s in range(P):
+                    acc += wm[s] * Y[b, s, k]
+                y_hat[k] = acc
+        q = Rs.shape[1]
+        M = np.empty((2 * n + q, m))
+        Pxy = np.zeros((n, m))
+        dY = np.empty((P, m))
+        if central:
+            w1, w2 = math.sqrt(c1), math.sqrt(c2)
+            A = np.empty((n, m))
+            for i in range(n):
+                for k in range(m):
+                    d = Y[b, 1 + i, k] - Y[b, 1 + n + i, k]
+                    dp = Y[b, 1 + i, k] - Y[b, 0, k]
+                    dm = Y[b, 1 + n + i, k] - Y[b, 0, k]
+                    if angular[k]:
+                        d, dp, dm = wrap(d), wrap(dp), wrap(dm)
+                    A[i, k] = w1 * d
+                    M[i, k] = A[i, k]
+                    M[n + i, k] = w2 * (dp + dm)
+            for r in range(n):  # Pxy = S- A
+                for k in range(m):
+                    acc = 0.0
+                    for i in range(n):
+                        acc += S[b, r, i] * A[i, k]
+                    Pxy[r, k] = acc
+        else:
+            for s in range(P):
+                for k in range(m):
+                    d = Y[b, s, k] - y_hat[k]
+                    dY[s, k] = wrap(d) if angular[k] else d
+            w1 = math.sqrt(wc[1])
+            for s in range(1, P):
+                for k in range(m):
+                    M[s - 1, k] = w1 * dY[s, k]
+            for s in range(P):  # Pxy = sum Wc (X - x-)(Y - y^)^T
+                for r in range(n):
+                    dx = wc[s] * (X[b, s, r] - x[b, r])
+                    for k in range(m):
+                        Pxy[r, k] += dx * dY[s, k]
+        for j in range(q):  # the columns of sqrt(R) as rows of A^T
+            for k in range(m):
+                M[2 * n + j, k] = Rs[k, j]
+        Sy = np.empty((m, m))
+        tria_into(M, Sy)
+        if not central and wc[0] != 0.0:
+            if not cholupdate_into(Sy, dY[0], wc[0]):
+                ok[b] = False
+                continue
+        bad = False
+        for k in range(m):
+            bad = bad or not Sy[k, k] > 0.0
+        if bad:
+            ok[b] = False
+            continue
+        # K = Pxy (S_y S_y^T)^-1: S_y M = Pxy^T (forward), S_y^T K^T = M (back)
+        K = np.empty((n, m))
+        for r in range(n):
+            for k in range(m):
+                v = Pxy[r, k]
+                for l in range(k):
+                    v -= Sy[k, l] * K[r, l]
+                K[r, k] = v / Sy[k, k]
+            for k in range(m - 1, -1, -1):
+                v = K[r, k]
+                for l in range(k + 1, m):
+                    v -= Sy[l, k] * K[r, l]
+                K[r, k] = v / Sy[k, k]
+        for r in range(n):  # x = x- + K wrap(z - y^)
+            v = x[b, r]
+            for k in range(m):
+                d = z[b, k] - y_hat[k]
+                v += K[r, k] * (wrap(d) if angular[k] else d)
+            mean[b, r] = v
+        u = np.empty(n)
+        for j in range(m):  # S = cholupdate(S-, (K S_y)_j, -1), one column at a time
+            for r in range(n):
+                acc = 0.0
+                for k in range(j, m):
+                    acc += K[r, k] * Sy[k, j]
+                u[r] = acc
+            if not cholupdate_into(S_new[b], u, -1.0):
+                ok[b] = False
+                break
+    return ok.all()
+
+
 chol_sigma = _dispatch(_chol_sigma, "chol_sigma")
 predicted_moments = _dispatch(_predicted_moments, "predicted_moments")
 linear_predict = _dispatch(_linear_predict, "linear_predict")
 unscented_update = _dispatch(_unscented_update, "unscented_update")
+sqrt_linear_predict = _dispatch(_sqrt_linear_predict, "sqrt_linear_predict")
+sqrt_update = _dispatch(_sqrt_update, "sqrt_update")
+central_linear_predict = _dispatch(_central_linear_predict, "central_linear_predict")
+central_update = _dispatch(_central_update, "central_update")

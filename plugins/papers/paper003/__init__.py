@@ -1,8 +1,9 @@
 """Paper 003: EKF, UKF, CDKF, their square-root forms and the cost-reference particle filter under unknown noise.
 
 The paper's own plugin package: its scenario (:mod:`.scenario`: constants, the two readings of the bearing unit,
-data streams, the lost rule, the declared unknown delta), tasks, figures and tables (:mod:`.recipe`), "reproduced
-if" criteria (:mod:`.judging`), its benchmarks (:mod:`.bench`) and its tests (``tests/``).
+data streams, the lost rule, the declared unknown delta, the published claims and notes), tasks (:mod:`.tasks`),
+figures (:mod:`.figures`), tables (:mod:`.tables`), "reproduced if" criteria (:mod:`.judging`), the recipe that
+only wires them (:mod:`.recipe`), its benchmarks (:mod:`.bench`) and its tests (``tests/``).
 It registers through the ``workbench`` entry-point group exactly as a third-party package would, and reaches the
 sensors, clutter models and filters it compares only through the plugin host.  Choices where the paper is silent
 are in ``docs/paper003.md``.

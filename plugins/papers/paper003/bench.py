@@ -32,7 +32,10 @@ from workbench.plugins import load_host
 from workbench.report.engine import InProcess
 from workbench.specs import RecipeOptions, TaskContext
 
+from . import reading as p3_reading
 from . import recipe
+from . import scenario
+from . import tasks as p3_tasks
 from .scenario import filter_models, level_sigmas, make_case, prior, simulate_units, units
 
 __all__ = ["bench", "monte_carlo_wall_time", "ukf_vs_filterpy", "quick_tasks_time"]
@@ -56,7 +59,7 @@ def _is_primary(key: str) -> bool:
     """The radians reading's mismatched runs of every filter, the ablation row and the reference row."""
     parts = key.split("/")
     case = parts[1] if len(parts) > 1 else ""
-    return case in recipe.LEVELS and ((parts[0] == "mc" and parts[-1] == "mismatched")
+    return case in scenario.LEVELS and ((parts[0] == "mc" and parts[-1] == "mismatched")
                                       or parts[0] in ("ablation", "reference"))
 
 
@@ -69,8 +72,8 @@ def primary_tasks(size: str = "full", seed: int = 0, values=None) -> list:
     """The recipe's primary Monte Carlo tasks (radians reading, mismatched noise, every level: the 8 default filters,
     the ablation row and the reference row), largest first (by particle count) so that parallel workers finish
     together.  ``values`` replaces the size's values (tests)."""
-    options = RecipeOptions(size=size, values=values or recipe.SIZES[size], seed=seed, filters=recipe.DEFAULT_FILTERS)
-    tasks = [t for t in recipe.tasks(options) if _is_primary(t.key)]
+    options = RecipeOptions(size=size, values=values or p3_tasks.SIZES[size], seed=seed, filters=p3_tasks.DEFAULT_FILTERS)
+    tasks = [t for t in p3_tasks.tasks(options) if _is_primary(t.key)]
     return sorted(tasks, key=lambda t: -_particles(t))
 
 
@@ -98,13 +101,13 @@ def monte_carlo_wall_time(size: str = "full", seed: int = 0, values=None) -> dic
     """Wall time of the primary Monte Carlo in this process, with each row's own filtering time (the compiled
     kernels loaded first: a fresh install compiles them once, into Numba's on-disk cache), and the load average
     of the machine before and after (other jobs on a shared machine slow every figure down)."""
-    values = values or recipe.SIZES[size]
+    values = values or p3_tasks.SIZES[size]
     _warm_up_kernels(values if size != "full" else None)
     load_before = os.getloadavg()[0]
     wall, results = run_primary(size, seed, values=values)
     out = {"mc_size": size, "mc_runs_per_level": values["runs"],
            "mc_reference_runs_per_level": values["reference_runs"],
-           "mc_steps": values["steps"], "mc_levels": len(recipe.LEVELS), "mc_filters": len(recipe.DEFAULT_FILTERS),
+           "mc_steps": values["steps"], "mc_levels": len(scenario.LEVELS), "mc_filters": len(p3_tasks.DEFAULT_FILTERS),
            "mc_wall_s": wall, "mc_crpf_backend": resolve_backend("auto"),
            "mc_load_average_1min_before": load_before, "mc_load_average_1min_after": os.getloadavg()[0]}
     if size == "full":  # the target is about the paper's size
@@ -118,10 +121,10 @@ def monte_carlo_wall_time(size: str = "full", seed: int = 0, values=None) -> dic
                     "met_mc_wall_s_strict": bool(wall <= MC_STRICT_TARGET_S),
                     "note_mc_wall_s_strict": (f"the same run; the CRPF rows (paper, ablation) take {crpf:.1f} s of its "
                                               "tasks, the 5,000-particle reference row is part of it")})
-    for name in recipe.DEFAULT_FILTERS:
+    for name in p3_tasks.DEFAULT_FILTERS:
         out[f"mc_filter_s[{name}]"] = sum(float(r["seconds"]) for k, r in results.items()
                                           if k.startswith("mc/") and k.split("/")[2] == name)
-    for kind, spec in (("ablation", recipe.PREVIOUS), ("reference", recipe.REFERENCE)):
+    for kind, spec in (("ablation", p3_tasks.PREVIOUS), ("reference", p3_reading.REFERENCE)):
         out[f"mc_filter_s[{spec['label']}]"] = sum(float(r["seconds"]) for k, r in results.items()
                                                    if k.startswith(kind + "/"))
     return out
@@ -132,7 +135,7 @@ def ukf_vs_filterpy(batch: int = 3000, filterpy_runs: int = 30, steps: int = 100
     """Per run-step cost (one predict + update) of our UKF over ``batch`` runs vs FilterPy's UKF, one run
     at a time; both are medians of ``repeat`` timings after a warm-up (:func:`workbench.bench.median_time`)."""
     host = _host()
-    sig = level_sigmas("rad", recipe.NOMINAL)
+    sig = level_sigmas("rad", scenario.NOMINAL)
     case = [make_case("bench", sig)]
     truth, scans = simulate_units(host, seed, case, units(case, batch, 250), steps)
     motion, model = filter_models(host, sig, "mismatched")
@@ -163,7 +166,7 @@ def ukf_vs_filterpy(batch: int = 3000, filterpy_runs: int = 30, steps: int = 100
     def theirs(redraw: bool = False, count: int = runs):
         finals = []
         for r in range(count):
-            ukf = filterpy_range_bearing_ukf(recipe.XHAT0, np.diag(recipe.P0), motion, model, params["alpha"],
+            ukf = filterpy_range_bearing_ukf(scenario.XHAT0, np.diag(scenario.P0), motion, model, params["alpha"],
                                              params["beta"], params["kappa"])
             ukf.update(z[r, 0])
             for k in range(1, steps):
@@ -186,7 +189,7 @@ def ukf_vs_filterpy(batch: int = 3000, filterpy_runs: int = 30, steps: int = 100
 def quick_tasks_time(seed: int = 0) -> dict:
     """Compute time of every quick-size task of the recipe (default filters), in this process."""
     host = _host()
-    options = RecipeOptions(size="quick", values=recipe.SIZES["quick"], seed=seed, filters=recipe.DEFAULT_FILTERS)
+    options = RecipeOptions(size="quick", values=p3_tasks.SIZES["quick"], seed=seed, filters=p3_tasks.DEFAULT_FILTERS)
     tasks = recipe.RECIPE.tasks(options)
     t0 = time.perf_counter()
     for t in tasks:

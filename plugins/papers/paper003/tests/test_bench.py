@@ -5,9 +5,10 @@ for their form (positive, finite, every key there) -- never against a restatemen
 import pytest
 
 from workbench_papers.paper003 import bench as bench_paper003
-from workbench_papers.paper003 import recipe
+from workbench_papers.paper003 import reading as p3_reading
+from workbench_papers.paper003 import tasks as p3_tasks
 
-SMALL = {**recipe.SIZES["quick"], "runs": 8, "chunk": 4, "reference_runs": 2, "steps": 20}
+SMALL = {**p3_tasks.SIZES["quick"], "runs": 8, "chunk": 4, "reference_runs": 2, "steps": 20}
 
 
 # -- the arithmetic, on hand-made timings ------------------------------------------------------------------------
@@ -51,8 +52,8 @@ def test_full_size_targets_are_judged_on_the_wall_time(monkeypatch, wall, met, s
 
 def test_paper003_monte_carlo_measures_every_row():
     out = bench_paper003.monte_carlo_wall_time("quick", values=SMALL)
-    assert out["mc_runs_per_level"] == 8 and out["mc_filters"] == len(recipe.DEFAULT_FILTERS)
-    rows = list(recipe.DEFAULT_FILTERS) + [recipe.PREVIOUS["label"], recipe.REFERENCE["label"]]
+    assert out["mc_runs_per_level"] == 8 and out["mc_filters"] == len(p3_tasks.DEFAULT_FILTERS)
+    rows = list(p3_tasks.DEFAULT_FILTERS) + [p3_tasks.PREVIOUS["label"], p3_reading.REFERENCE["label"]]
     per_row = [out[f"mc_filter_s[{name}]"] for name in rows]
     # every row ran and took time; the rows' own times are parts of the wall time that holds them all
     assert all(s > 0 for s in per_row) and sum(per_row) <= out["mc_wall_s"]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from workbench_papers.paper003 import judging
-from workbench_papers.paper003.recipe import CRPF_FILTERS, KALMAN_TYPE
+from workbench_papers.paper003.judging import CRPF_FILTERS, KALMAN_TYPE
 
 LEVELS = ("L1", "L2", "L3")
 RUNS = 1500
@@ -286,7 +286,7 @@ def test_timing_criteria():
 def _with_delta(results, crpf_by_value, n=RUNS, k=1000):
     """Add the ``delta/`` rows of the radians reading: ``crpf_by_value[value][level]`` the CRPF-100 mean (CRPF-300
     and 500 at 0.8 and 0.7 of it), on the first ``k`` runs."""
-    from workbench_papers.paper003.recipe import delta_key
+    from workbench_papers.paper003.reading import delta_key
 
     out = dict(results)
     for value, means in crpf_by_value.items():

@@ -16,7 +16,9 @@ from workbench.testing.bootstrap import loop_statistics, same_numbers
 from workbench.trajectory import sample_motion
 from workbench.types import InputError
 from workbench_papers.paper003 import judging
-from workbench_papers.paper003 import recipe as p3
+from workbench_papers.paper003 import reading as p3_reading
+from workbench_papers.paper003 import tables as p3_tables
+from workbench_papers.paper003 import tasks as p3_tasks
 from workbench_papers.paper003 import scenario
 
 HOST = load_host()
@@ -100,10 +102,10 @@ def test_no_measurement_spread_against_dead_reckoning():
     rng = np.random.default_rng(1)
     steps, B = 60, 40_000
     for sigma_a in (0.01, 1.0):
-        x0 = rng.multivariate_normal(p3.XHAT0, np.diag(p3.P0), B)
-        truth = sample_motion(x0, random_walk_velocity(2, p3.DT, sigma_a), steps, rng)
-        t = (steps - 1) * p3.DT
-        mean_xy = np.array(p3.XHAT0[:2]) + t * np.array(p3.XHAT0[2:])
+        x0 = rng.multivariate_normal(scenario.XHAT0, np.diag(scenario.P0), B)
+        truth = sample_motion(x0, random_walk_velocity(2, scenario.DT, sigma_a), steps, rng)
+        t = (steps - 1) * scenario.DT
+        mean_xy = np.array(scenario.XHAT0[:2]) + t * np.array(scenario.XHAT0[2:])
         rms = np.sqrt(np.mean(np.sum((truth.states[:, -1, :2] - mean_xy) ** 2, axis=1)))
         assert scenario.no_measurement_rms(sigma_a, steps) == pytest.approx(rms, rel=0.02)
 
@@ -115,9 +117,9 @@ def test_lost_rule_marks_a_diverged_run_lost_and_a_tracking_one_not_at_every_lev
     # the former 10 x one-measurement rule (about 6 km) could not mark a diverged run.
     steps, runs = 100, 20
     ukf = HOST.filter("ukf")
-    drift = 20.0 * np.arange(steps) * p3.DT
-    for reading in p3.READINGS:
-        for level in p3.LEVELS:
+    drift = 20.0 * np.arange(steps) * scenario.DT
+    for reading in scenario.READINGS:
+        for level in scenario.LEVELS:
             sigmas = scenario.level_sigmas(reading, level)
             truth, scans = scenario.simulate_chunk(HOST, 11, f"lost-test-{reading}-{level}", sigmas, 0, runs, steps)
             motion, model = scenario.filter_models(HOST, sigmas, "matched")
@@ -136,14 +138,14 @@ def test_lost_rule_marks_a_diverged_run_lost_and_a_tracking_one_not_at_every_lev
 
 def test_common_random_numbers():
     # the same (seed, case, chunk) gives the same truths and measurements, whichever task asks
-    a = p3.simulate_chunk(HOST, 3, "L2", p3.LEVELS["L2"], 1, 5, 20)
-    b = p3.simulate_chunk(HOST, 3, "L2", p3.LEVELS["L2"], 1, 5, 20)
-    c = p3.simulate_chunk(HOST, 3, "L2", p3.LEVELS["L2"], 2, 5, 20)
+    a = scenario.simulate_chunk(HOST, 3, "L2", scenario.LEVELS["L2"], 1, 5, 20)
+    b = scenario.simulate_chunk(HOST, 3, "L2", scenario.LEVELS["L2"], 1, 5, 20)
+    c = scenario.simulate_chunk(HOST, 3, "L2", scenario.LEVELS["L2"], 2, 5, 20)
     assert np.array_equal(a[0].states, b[0].states) and np.array_equal(a[1].z, b[1].z)
     assert not np.array_equal(a[0].states, c[0].states)
-    assert np.allclose(a[0].states[:, 0], p3.X0)
+    assert np.allclose(a[0].states[:, 0], scenario.X0)
     # a prefix of the runs is the same data as those runs in a task on all of them
-    cases = [scenario.make_case("L2", p3.LEVELS["L2"])]
+    cases = [scenario.make_case("L2", scenario.LEVELS["L2"])]
     whole, _ = scenario.simulate_units(HOST, 3, cases, scenario.units(cases, 10, 4), 20)
     prefix, _ = scenario.simulate_units(HOST, 3, cases, scenario.units(cases, 6, 4, of_runs=10), 20)
     assert np.array_equal(prefix.states, whole.states[:6])
@@ -179,10 +181,10 @@ def test_task_layout_and_third_party_filters():
         {k: v for k, v in ref.params.items() if k not in ("configure", "label", "runs")}
     assert check.params["runs"] == min(RECIPE.sizes["quick"]["reference_check_runs"], ref.params["runs"])
     assert RECIPE.sizes["full"]["reference_check_runs"] == RECIPE.sizes["full"]["reference_runs"] == 100
-    assert len([k for k in keys if k.startswith("tune/")]) == 2 * len(p3.TUNE_SIGMA0) * len(p3.TUNE_DELTA)
+    assert len([k for k in keys if k.startswith("tune/")]) == 2 * len(p3_tasks.TUNE_SIGMA0) * len(p3_tasks.TUNE_DELTA)
     # the tuning runs use their own seed and stream, never the report's
     tune = next(t for t in tasks if t.key.startswith("tune/"))
-    assert tune.params["data_seed"] == p3.TUNING_SEED and tune.params["stream"] != scenario.STREAM
+    assert tune.params["data_seed"] == p3_tasks.TUNING_SEED and tune.params["stream"] != scenario.STREAM
 
 
 def test_tasks_recompute_independently_and_reproducibly(tiny):
@@ -235,8 +237,8 @@ def test_tuning_data_do_not_depend_on_the_report_seed():
     b = task.run(TaskContext(params=task.params, seed=99, host=HOST))
     assert np.array_equal(a["L2:run_mse"], b["L2:run_mse"])
     # and they are not the reported runs: the reported data of seed 20031 differ from the tuning data
-    truth_tune, _ = scenario.simulate_chunk(HOST, p3.TUNING_SEED, "L2", p3.LEVELS["L2"], 0, 2, 5, p3.TUNING_STREAM)
-    truth_rep, _ = scenario.simulate_chunk(HOST, p3.TUNING_SEED, "L2", p3.LEVELS["L2"], 0, 2, 5)
+    truth_tune, _ = scenario.simulate_chunk(HOST, p3_tasks.TUNING_SEED, "L2", scenario.LEVELS["L2"], 0, 2, 5, p3_tasks.TUNING_STREAM)
+    truth_rep, _ = scenario.simulate_chunk(HOST, p3_tasks.TUNING_SEED, "L2", scenario.LEVELS["L2"], 0, 2, 5)
     assert not np.array_equal(truth_tune.states, truth_rep.states)
 
 
@@ -266,7 +268,7 @@ def test_mse_figures_have_one_curve_per_row(tiny):
 def test_degrees_figure(tiny):
     _, results = tiny
     data = _figure("fig8").data(results)
-    for level in p3.LEVELS:
+    for level in scenario.LEVELS:
         labels = list(data[f"{level}:filters"])
         assert labels[: len(RECIPE.default_filters)] == list(RECIPE.default_filters)
         assert np.allclose(data[f"{level}:mse_t"][0], results[f"mc/deg-{level}/ekf/mismatched"]["mse_t"])
@@ -347,7 +349,7 @@ def test_figures_draw_their_data_through_workbench_plot():
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (m)", "y (m)")
     assert ax.get_title().startswith("L2 run 4: all filters track")
     curves = rng.random((5, T)) * 100 + 1
-    mse = {"level": np.array("L2"), "reading": np.array("rad"), "time": np.arange(T) * p3.DT, "mse_t": curves,
+    mse = {"level": np.array("L2"), "reading": np.array("rad"), "time": np.arange(T) * scenario.DT, "mse_t": curves,
            "filters": np.array(names + ["crpf-100 previous (ablation)", "pf-5000 (true noise), first 4 runs"]),
            "kind": np.array(["filter"] * 3 + ["ablation", "reference"])}
     fig = Figure()
@@ -360,7 +362,7 @@ def test_figures_draw_their_data_through_workbench_plot():
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("time (s)", "position MSE (m$^2$)")
     assert ax.get_yscale() == "log" and _plain_ticks(ax)
     deg = {"time": mse["time"]}
-    for i, level in enumerate(p3.LEVELS):
+    for i, level in enumerate(scenario.LEVELS):
         deg.update({f"{level}:filters": mse["filters"], f"{level}:kind": mse["kind"],
                     f"{level}:mse_t": curves * (i + 1)})
     fig = Figure()
@@ -401,9 +403,9 @@ def test_mse_tables(tiny):
         ratio = res["run_mse"][: len(ref)].mean() / ref.mean()
         assert float(row[cols.index("MSE / reference (same runs)")]) == pytest.approx(ratio, rel=1e-3)
         labels = [r[0] for r in table.rows]
-        assert any(label.startswith(p3.REFERENCE["label"]) for label in labels) and p3.PREVIOUS["label"] in labels
+        assert any(label.startswith(p3_reading.REFERENCE["label"]) for label in labels) and p3_tasks.PREVIOUS["label"] in labels
         # the 4N reference's ratio to the reference is on the runs both ran
-        row = next(r for r in table.rows if r[0].startswith(p3.REFERENCE_4N["label"]) and r[1] == f"{prefix}L3")
+        row = next(r for r in table.rows if r[0].startswith(p3_reading.REFERENCE_4N["label"]) and r[1] == f"{prefix}L3")
         check = results[f"reference4n/{prefix}L3"]["run_mse"]
         assert float(row[cols.index("MSE / reference (same runs)")]) == pytest.approx(
             check.mean() / ref[: len(check)].mean(), rel=1e-3)
@@ -418,22 +420,22 @@ def test_other_tables(tiny):
     assert len(tables["timing"].rows) == len(RECIPE.default_filters)
     assert len(tables["scenario"].rows) == 6
     changes = tables["changes"]
-    assert [r[0] for r in changes.rows] == [label for label, _ in p3.CHANGES]
+    assert [r[0] for r in changes.rows] == [label for label, _ in p3_tasks.CHANGES]
     first = changes.rows[0][2]  # paper setting, L1 = the registered crpf-100 on the first change_runs runs
-    mse = float(np.mean(results[f"changes/rad/{p3.CHANGES[0][0]}"]["L1:mse_t"]))
+    mse = float(np.mean(results[f"changes/rad/{p3_tasks.CHANGES[0][0]}"]["L1:mse_t"]))
     assert first.startswith(f"{mse:.4g}")
     # the brief's criterion 3 is a check beside the criteria: the SR forms equal the full forms to round-off
     chk = tables["checks"]
     assert [r[1] for r in chk.rows] == ["rad", "deg"] and all(r[4] == "holds" for r in chk.rows)
     assert all(float(r[2]) < 1e-6 for r in chk.rows)
     tuning = tables["tuning"]
-    assert len(tuning.rows) == len(p3.TUNE_SIGMA0) * len(p3.TUNE_DELTA)
-    scores = p3.tuning_scores(results)
+    assert len(tuning.rows) == len(p3_tasks.TUNE_SIGMA0) * len(p3_tasks.TUNE_DELTA)
+    scores = p3_tables.tuning_scores(results)
     best = min(scores, key=lambda k: scores[k][1])
     marked = [r for r in tuning.rows if "chosen by the rule" in r[-1]]
     assert len(marked) == 1 and (float(marked[0][0]), float(marked[0][1])) == best
     in_use = [r for r in tuning.rows if "in use" in r[-1]]
-    assert len(in_use) == 1 and (float(in_use[0][0]), float(in_use[0][1])) == p3.setting_in_use(results)
+    assert len(in_use) == 1 and (float(in_use[0][0]), float(in_use[0][1])) == p3_tables.setting_in_use(results)
     # the geometric mean column is the rule's score
     for r in tuning.rows:
         vals = [float(x) for x in r[2:8]]
@@ -468,7 +470,7 @@ def test_criteria_carry_n_interval_and_verdict(tiny):
     # the statistic of C4-L2 is CRPF-100 over the best Kalman-type filter's mean MSE, on the same runs
     c4 = {c.id: c for c in crit}["C4-L2"]
     crpf = results["mc/L2/crpf-100/mismatched"]["run_mse"].mean()
-    best = min(results[f"mc/L2/{n}/mismatched"]["run_mse"].mean() for n in p3.KALMAN_TYPE)
+    best = min(results[f"mc/L2/{n}/mismatched"]["run_mse"].mean() for n in judging.KALMAN_TYPE)
     assert c4.ours == pytest.approx(crpf / best)
 
 
@@ -513,7 +515,7 @@ def test_notes_and_docs_record_the_choices():
                  "tuning"):
         assert word in RECIPE.notes.lower() and word in doc.lower()
     # the rule of the tuning is written in the docs with its candidates and seed
-    assert str(p3.TUNING_SEED) in doc and "geometric mean" in doc
+    assert str(p3_tasks.TUNING_SEED) in doc and "geometric mean" in doc
 
 
 def test_delta_grid_tasks_share_the_main_rows_data():
@@ -524,20 +526,49 @@ def test_delta_grid_tasks_share_the_main_rows_data():
     options = RecipeOptions(size="full", values=RECIPE.sizes["full"], seed=0, filters=RECIPE.default_filters)
     tasks = {t.key: t for t in RECIPE.tasks(options)}
     keys = [k for k in tasks if k.startswith("delta/")]
-    assert sorted(keys) == sorted(p3.delta_key(r, v, n) for r in p3.READINGS for v in (0.3, 1.0)
-                                  for n in p3.CRPF_FILTERS)
-    d, m = tasks[p3.delta_key("rad", 1.0, "crpf-300")].params, tasks["mc/L2/crpf-300/mismatched"].params
+    assert sorted(keys) == sorted(p3_reading.delta_key(r, v, n) for r in scenario.READINGS for v in (0.3, 1.0)
+                                  for n in judging.CRPF_FILTERS)
+    d, m = tasks[p3_reading.delta_key("rad", 1.0, "crpf-300")].params, tasks["mc/L2/crpf-300/mismatched"].params
     assert d["configure"] == {"delta": 1.0} and d["runs"] == RECIPE.sizes["full"]["delta_runs"] == 1000
     assert d["of_runs"] == m["runs"] and d["chunk"] == m["chunk"] and "data_seed" not in d and "stream" not in d
     assert [c["case"] for c in d["cases"]] == ["L1", "L2", "L3"]
     # at the quick size too (fewer grid runs than a chunk: the chunking must still be the main rows')
     quick = {t.key: t for t in RECIPE.tasks(RecipeOptions(size="quick", values=RECIPE.sizes["quick"], seed=0,
                                                           filters=RECIPE.default_filters))}
-    dq, mq = quick[p3.delta_key("deg", 0.3, "crpf-100")].params, quick["mc/deg-L3/crpf-100/mismatched"].params
+    dq, mq = quick[p3_reading.delta_key("deg", 0.3, "crpf-100")].params, quick["mc/deg-L3/crpf-100/mismatched"].params
     assert dq["runs"] < mq["chunk"] and (dq["chunk"], dq["of_runs"]) == (mq["chunk"], mq["runs"])
     # the same chunks: the first 1000 runs of the delta task are the first 1000 runs of the main task
     assert scenario.units(d["cases"], d["runs"], d["chunk"], d["of_runs"])[:4] == \
         [(0, k, 250, 250) for k in range(4)]
+
+
+def test_sensitivity_tasks_feed_only_the_across_of_the_criteria(tiny, monkeypatch):
+    # the tasks declared sensitivity=True (the confirmation seed does not rerun them) are exactly the delta tasks at
+    # the non-primary values; replacing their arrays changes each criterion's `across`, never its primary verdict,
+    # statistic, interval or n
+    monkeypatch.setattr(judging, "RESAMPLES", 200)
+    tasks, results = tiny
+    marked = {t.key for t in tasks if t.sensitivity}
+    assert marked and marked == {t.key for t in tasks if t.key.startswith("delta/")}
+    assert all(t.params["configure"]["delta"] != scenario.DELTA.primary for t in tasks if t.sensitivity)
+    rng = np.random.default_rng(5)
+    changed = dict(results)
+    for key in marked:  # every run's error scaled by its own random factor: other means, another order of filters
+        arrays = dict(results[key])
+        for name in [k for k in arrays if k.endswith(":run_mse") or k.endswith(":mse_t")]:
+            arrays[name] = arrays[name] * rng.uniform(0.01, 100.0, arrays[name].shape)
+        changed[key] = arrays
+    before = {c.id: c for c in RECIPE.criteria(results)}
+    after = {c.id: c for c in RECIPE.criteria(changed)}
+    assert before.keys() == after.keys()
+    moved = 0
+    for cid, c in before.items():
+        primary_after, primary_before = after[cid].to_dict(), c.to_dict()
+        across_after, across_before = primary_after.pop("across"), primary_before.pop("across")
+        # verdict, statistic, interval, n, preconditions and detail at the primary values: unchanged
+        same_numbers(primary_after, primary_before, cid)
+        moved += across_after != across_before
+    assert moved > 0  # the replaced arrays are what `across` reads
 
 
 def test_delta_table_and_across_in_a_tiny_report(tiny, monkeypatch):
@@ -546,7 +577,7 @@ def test_delta_table_and_across_in_a_tiny_report(tiny, monkeypatch):
     table = next(t for t in RECIPE.tables if t.id == "delta").make(results)
     assert len(table.rows) == 2 * 3 * 3  # readings x CRPFs x grid values
     row = next(r for r in table.rows if r[:3] == ("rad", "crpf-100", "1"))
-    mse = results[p3.delta_key("rad", 1.0, "crpf-100")]["L3:run_mse"][:TINY["delta_runs"]].mean()
+    mse = results[p3_reading.delta_key("rad", 1.0, "crpf-100")]["L3:run_mse"][:TINY["delta_runs"]].mean()
     assert row[3] == TINY["delta_runs"] and row[6].startswith(f"{mse:.4g}")
     crit = {c.id: c for c in RECIPE.criteria(results)}
     assert [a.value for a in crit["C4-L3"].across] == [0.1, 0.3, 1.0]
