@@ -131,9 +131,9 @@ def test_a_report_seed_near_the_confirmation_seed_is_refused(tmp_path):
 
 def test_confirmation_seed_differs_from_every_seed_the_recipes_tune_on():
     from workbench_papers.paper000 import tuning as p000
-    from workbench_papers.paper001 import recipe as p001
-    from workbench_papers.paper002 import recipe as p002
-    from workbench_papers.paper003 import recipe as p003
+    from workbench_papers.paper001 import scenario as p001
+    from workbench_papers.paper002 import scenario as p002
+    from workbench_papers.paper003 import tasks as p003
 
     tuning = [*p000.TUNING_SEEDS, p002.TUNING_SEED, p003.TUNING_SEED, p001.SURROGATE_SEED]
     # recipes derive seed + j (seed blocks, replications): no tuning seed, nor the default report seed 0, is near

@@ -5,7 +5,7 @@ scenes:
 
 - ``demanding`` (the target): a 0.5 s CPI (5 M samples, the detection level's; 119 Doppler bins), ATSC 8-VSB
   illuminator, direct path +60 dB, clutter to 17.5 km, ECA over 600 taps (0-17.96 km), the reference received
-  with multipath (300 m, 750 m, 1.5 km at -10, -14, -18 dB) and cleaned (a delayed linear predictor of 64 taps),
+  with multipath (300 m, 750 m, 1.5 km at -10, -14, -18 dB) and cleaned (a delayed linear predictor of 128 taps),
   pilot removal;
 - ``benign`` (the paper's row): a 0.25 s CPI (2.5 M samples, 61 Doppler bins), noise-like illuminator, direct
   path +30 dB, ECA 16 taps.

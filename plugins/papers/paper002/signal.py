@@ -226,7 +226,7 @@ class PCLConfig:
     def fft_length(self, taps: int | None = None) -> int:
         """Per-batch FFT length of the folded chain: :func:`fast_length` of ``M + max(L, K) + K - 2 + 2 Q``
         (``Q``: :attr:`cleaning_memory`; 10240 at the defaults for any ``K <= L``, 12288 for the demanding
-        scene's 600 taps and 64 cleaning taps)."""
+        scene's 600 taps and 128 cleaning taps)."""
         k = self.eca_taps if taps is None else int(taps)
         # 2 Q: the segments of the cleaning stage reach Q further back, and their autocorrelation is read to lag Q
         return fast_length(self.batch_length + self.span(k) + max(k, 1) - 2 + 2 * self.cleaning_memory)
@@ -352,16 +352,24 @@ def dtv_reference_spectrum(n: int, sample_rate: float, bandwidth: float, rng: np
     ``(1 - rolloff) bandwidth / 2``; 8-VSB uses a root-raised-cosine pulse with roll-off 0.115), so the
     range autocorrelation decays quickly instead of the slow sinc of a brick-wall band.
     """
+    g = rng.standard_normal((2, n), dtype=np.float32)
+    return (g[0] + 1j * g[1]) * _dtv_amplitude(n, float(sample_rate), float(bandwidth), float(rolloff))
+
+
+@lru_cache(maxsize=4)
+def _dtv_amplitude(n: int, sample_rate: float, bandwidth: float, rolloff: float) -> np.ndarray:
+    """The deterministic part of :func:`dtv_reference_spectrum`: the amplitude of each bin (float32, read-only;
+    the same for every frame of a scene, so cached)."""
     f = np.abs(sfft.fftfreq(n, 1.0 / sample_rate))
     edge = 0.5 * bandwidth
     flat = (1.0 - rolloff) * edge
     # raised-cosine power: 1 below flat, cos^2 taper to 0 at the band edge
     taper = np.clip((f - flat) / max(edge - flat, 1e-12), 0.0, 1.0)
     power = np.where(f <= edge, np.cos(0.5 * np.pi * taper) ** 2, 0.0)
-    g = rng.standard_normal((2, n), dtype=np.float32)
     # unit time-domain power: sum |X_k|^2 = n^2 (Parseval with numpy's unnormalised FFT)
     amp = np.sqrt(power * n * n / (2.0 * power.sum())).astype(np.float32)
-    return (g[0] + 1j * g[1]) * amp
+    amp.setflags(write=False)
+    return amp
 
 
 def _cis(phase: np.ndarray) -> np.ndarray:
@@ -369,6 +377,31 @@ def _cis(phase: np.ndarray) -> np.ndarray:
     out = np.empty(phase.shape, dtype=np.complex64)
     out.real = np.cos(phase)
     out.imag = np.sin(phase)
+    return out
+
+
+_CIS_BLOCK = 1 << 16  # elements per block of :func:`_cis_ramp` (a block's temporaries stay in the cache)
+
+
+def _cis_ramp(base: np.ndarray, scale: float, gain: float = 1.0, out: np.ndarray | None = None,
+              add: bool = False) -> np.ndarray:
+    """``gain * exp(j base * scale)`` (``base`` float32, ``scale`` and ``gain`` taken as float32), complex64, in
+    blocks: element for element what ``np.float32(gain) * _cis(base * np.float32(scale))`` gives (the same
+    float32 operations on each element), without whole-array temporaries.  With ``out`` the result is written
+    (``add``: added) into it.  Shapes: ``base (N,)`` -> ``(N,)``."""
+    scale, gain = np.float32(scale), np.float32(gain)
+    if out is None:
+        out = np.empty(base.shape, dtype=np.complex64)
+    for lo in range(0, base.shape[0], _CIS_BLOCK):
+        sl = slice(lo, lo + _CIS_BLOCK)
+        phase = base[sl] * scale
+        c = _cis(phase)
+        if gain != 1.0:
+            c *= gain
+        if add:
+            out[sl] += c
+        else:
+            out[sl] = c
     return out
 
 
@@ -393,7 +426,7 @@ def _static_gain(total: int, sample_rate: float, direct_db: float, ranges: tuple
     two_pi_f = _two_pi_f(total, sample_rate)
     gain = np.full(total, _amp(direct_db), dtype=np.complex64)
     for R, db in zip(ranges, dbs):  # a handful of patches, each a whole-array term
-        gain += np.float32(_amp(db)) * _cis(-two_pi_f * np.float32(R / SPEED_OF_LIGHT))
+        _cis_ramp(two_pi_f, -np.float32(R / SPEED_OF_LIGHT), _amp(db), out=gain, add=True)
     gain.setflags(write=False)
     return gain
 
@@ -440,7 +473,8 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
     w = _workers()
 
     def delayed(gain: np.ndarray) -> np.ndarray:
-        return sfft.ifft(spec * gain, workers=w)[pad:pad + n]
+        # the product is a temporary: transformed in place (the same transform, without pocketfft's copy)
+        return sfft.ifft(spec * gain, workers=w, overwrite_x=True)[pad:pad + n]
 
     if scene.reference_multipath_ranges:
         # the reference antenna's channel: 1 + sum_p a_p exp(-j 2 pi f tau_p)
@@ -455,8 +489,10 @@ def frame_signals(targets, rng: np.random.Generator, config: PCLConfig = PCLConf
     for R, rdot in targets:
         f_d = range_rate_to_doppler(rdot, config.wavelength)
         # echo: a_t r(t - R/c) exp(+j 2 pi f_D t)
-        echo = delayed(np.float32(_amp(scene.target_db)) * _cis(-two_pi_f * np.float32(R / SPEED_OF_LIGHT)))
-        surv += echo * _cis(two_pi_t * np.float32(f_d))
+        echo = delayed(_cis_ramp(two_pi_f, -np.float32(R / SPEED_OF_LIGHT), _amp(scene.target_db)))
+        doppler = _cis_ramp(two_pi_t, f_d)
+        doppler *= echo
+        surv += doppler
     # circular complex Gaussian noise, unit power in the surveillance channel: real and imaginary parts N(0, 1/2)
     noise = rng.standard_normal(4 * n, dtype=np.float32).view(np.complex64).reshape(2, n)
     noise *= np.float32(np.sqrt(0.5))
@@ -487,13 +523,13 @@ def eca(surv: np.ndarray, ref: np.ndarray, taps: int, loading: float = 0.0) -> t
     Rf = sfft.fft(ref, nfft, workers=w)
     Sf = sfft.fft(surv, nfft, workers=w)
     # c[d] = sum_m conj(r[m]) r[m + d];  b[i] = sum_m conj(r[m]) s[m + i]
-    c = sfft.ifft(np.conj(Rf) * Rf, workers=w)[:taps].astype(complex)
-    b = sfft.ifft(np.conj(Rf) * Sf, workers=w)[:taps].astype(complex)
+    c = sfft.ifft(np.conj(Rf) * Rf, workers=w, overwrite_x=True)[:taps].astype(complex)
+    b = sfft.ifft(np.conj(Rf) * Sf, workers=w, overwrite_x=True)[:taps].astype(complex)
     # (X^H X)[i, j] = c[i - j]  (Toeplitz, Hermitian)
     gram = slinalg.toeplitz(c, np.conj(c)) + loading * c[0].real * np.eye(taps)
     weights = slinalg.cho_solve(slinalg.cho_factor(gram), b)
     # s_clean[n] = s[n] - sum_l w_l r[n - l]
-    fit = sfft.ifft(Rf * sfft.fft(weights, nfft), workers=w)[:n]
+    fit = sfft.ifft(Rf * sfft.fft(weights, nfft), workers=w, overwrite_x=True)[:n]
     return (surv - fit).astype(surv.dtype), weights
 
 
@@ -580,7 +616,8 @@ def clean_reference(ref: np.ndarray, config: PCLConfig, taps: int | None = None)
     n = ref.shape[0]
     nfft = sfft.next_fast_len(n + h.size)
     w = _workers()
-    out = sfft.ifft(sfft.fft(ref, nfft, workers=w) * sfft.fft(h.astype(ref.dtype), nfft), workers=w)[:n]
+    out = sfft.ifft(sfft.fft(ref, nfft, workers=w) * sfft.fft(h.astype(ref.dtype), nfft), workers=w,
+                    overwrite_x=True)[:n]
     return out.astype(ref.dtype, copy=False)
 
 
@@ -671,7 +708,7 @@ def caf_batches(surv: np.ndarray, ref: np.ndarray, config: PCLConfig = PCLConfig
     S = sfft.fft(segments, nfft, axis=1, workers=w)
     Rb = sfft.fft(ref.reshape(B, M), nfft, axis=1, workers=w)
     # c_b[l] = sum_m s[bM + m + l] conj(r[bM + m])
-    corr = sfft.ifft(S * np.conj(Rb), axis=1, workers=w)[:, :L]
+    corr = sfft.ifft(S * np.conj(Rb), axis=1, workers=w, overwrite_x=True)[:, :L]
     return CAFMap(_doppler(corr, config), config.range_axis, config.doppler_axis)
 
 

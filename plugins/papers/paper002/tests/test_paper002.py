@@ -17,10 +17,16 @@ from workbench.models import range_rate_model
 from workbench.plugins import load_host
 from workbench.recorded.pcl import load_pcl_candidates
 from workbench.rng import generator
-from workbench.sensing.bistatic import SPEED_OF_LIGHT, doppler_to_range_rate, wavelength
+from workbench.sensing.bistatic import SPEED_OF_LIGHT, doppler_to_range_rate, range_and_rate, wavelength
 from workbench.specs import RecipeOptions, TaskContext
+from workbench.types import InputError
 from workbench_papers.paper002 import atsc, fold
+from workbench_papers.paper002 import judging as jud
+from workbench_papers.paper002 import methods as meth
 from workbench_papers.paper002 import recipe as p2
+from workbench_papers.paper002 import scenario as scn
+from workbench_papers.paper002 import tables as tab
+from workbench_papers.paper002 import tuning as tun
 from workbench_papers.paper002.signal import (DEMANDING_SCENE, PCLConfig, SignalScene, batch_spectra, box_sum,
                                               ca_cfar, caf_batches, clean_reference, cleaning_weights,
                                               demanding_config, eca, eca_weights,
@@ -426,8 +432,6 @@ def test_simulate_scans_multi_labels_the_target_and_shares_the_frames():
 
 
 def test_signal_chain_rejects_bad_input():
-    from workbench.types import InputError
-
     with pytest.raises(InputError, match="eca_taps"):
         PCLConfig(eca_taps=10_001)  # beyond the batch length
     with pytest.raises(InputError, match="cleaning_delay"):
@@ -450,7 +454,7 @@ def test_signal_chain_rejects_bad_input():
 
 
 def test_drone_truth_respects_the_scenario():
-    truth = p2.drone_truth(generator(2, "truth"), 50, 120)
+    truth = scn.drone_truth(generator(2, "truth"), 50, 120)
     x = truth.states
     assert x.shape == (50, 120, 6)
     np.testing.assert_allclose(x[:, 0, :3], np.broadcast_to([250.0, 150.0, 60.0], (50, 3)))
@@ -458,22 +462,22 @@ def test_drone_truth_respects_the_scenario():
     speed = np.linalg.norm(x[..., 3:], axis=-1)
     assert speed.max() <= 10.0 + 1e-9 and np.median(speed) > 4.0
     accel = np.linalg.norm(np.diff(x[..., 3:], axis=1), axis=-1) / 0.5
-    assert accel.max() <= p2.MAX_ACCEL + 1e-9
+    assert accel.max() <= scn.MAX_ACCEL + 1e-9
     bearing = np.degrees(np.arctan2(x[..., 1], x[..., 0]))
     assert np.percentile(np.abs(bearing), 95) < 35.0  # inside the 60 deg sector around east (start at 31 deg)
 
 
 def test_false_alarm_rate_follows_the_cfar_pfa_and_the_map():
-    rate, cells = p2.cfar_false_alarms()
+    rate, cells = scn.cfar_false_alarms()
     # 0-3 km in c / 10 MHz bins: 102 lags; +-50 m/s in lambda / 0.5 s bins: +-59 Doppler bins
     lags = int(np.ceil(3000.0 / (SPEED_OF_LIGHT / 10e6))) + 1
     half = int(np.ceil(50.0 / (LAM / 0.5)))
     assert (lags, half) == (102, 59) and cells == lags * (2 * half + 1)
     assert rate == pytest.approx(1e-4 * cells)
     # the signal level's own map (CPI 0.25 s): the brief's 4 per frame is 6.4 times its Pfa x cells
-    sig_rate, sig_cells = p2.cfar_false_alarms(cpi=0.25)
+    sig_rate, sig_cells = scn.cfar_false_alarms(cpi=0.25)
     assert sig_cells == 102 * 61 and 4.0 / sig_rate == pytest.approx(6.43, abs=0.01)
-    ratio = p2.false_alarm_density(p2.CLUTTER_BRIEF) / p2.false_alarm_density(p2.CLUTTER_PFA)
+    ratio = scn.false_alarm_density(scn.CLUTTER_BRIEF) / scn.false_alarm_density(scn.CLUTTER_PFA)
     assert ratio == pytest.approx((4.0 / 40.0) / (rate / 100.0))
 
 
@@ -481,10 +485,10 @@ def test_false_alarms_drawn_at_the_pfa_rate(host):
     from workbench.types import Truth
 
     truth = Truth(np.zeros((400, 30, 6)), 0.5 * np.arange(30))
-    scans = p2.detection_scans(host, truth, 3)
+    scans = scn.detection_scans(host, truth, 3)
     clutter = scans.valid & (scans.origin != 0)
     # after the notch: Poisson(Pfa cells) false alarms (1/118 of them in the zero bin) + a little residue
-    expected = p2.FA_RATE * (1 - 2 * 2.0 * LAM / 100.0) + 3.0 * 2 * (1 - 0.99751)  # residue beyond 0.855 m/s
+    expected = scn.FA_RATE * (1 - 2 * 2.0 * LAM / 100.0) + 3.0 * 2 * (1 - 0.99751)  # residue beyond 0.855 m/s
     assert clutter.sum(axis=2).mean() == pytest.approx(expected, rel=0.05)
     far = clutter & (np.abs(scans.z[..., 1]) > 20.0)
     assert far.sum() / clutter.sum() == pytest.approx(60.0 / 100.0, abs=0.03)  # uniform on +-50 m/s
@@ -500,7 +504,7 @@ def test_run_sums_match_a_frame_by_frame_count():
     present = rng.random((B, T)) < 0.9
     white = rng.standard_normal((B, T, 2))
     white[rng.random((B, T)) < 0.2] = np.nan
-    s = p2.run_sums(truth, est, chosen, present, white, (15.0, 0.5))
+    s = jud.run_sums(truth, est, chosen, present, white, (15.0, 0.5))
     for b in range(B):
         inside = [k for k in range(1, T) if abs(est[b, k, 0] - truth[b, k, 0]) <= 45
                   and abs(est[b, k, 1] - truth[b, k, 1]) <= 1.5]
@@ -518,7 +522,7 @@ def test_run_sums_match_a_frame_by_frame_count():
         lag = [k for k in good if k - 1 in good]
         assert s["lag_ab"][b] == pytest.approx(sum(white[b, k, 0] * white[b, k - 1, 0] for k in lag))
     # the pooled statistics against numpy on the pooled samples
-    assert p2.stat_on_target(s["on"], s["present"]) == pytest.approx(s["on"].sum() / s["present"].sum())
+    assert jud.stat_on_target(s["on"], s["present"]) == pytest.approx(s["on"].sum() / s["present"].sum())
 
     def is_on(b, k):
         return bool(present[b, k] and np.isfinite(chosen[b, k, 0]) and abs(chosen[b, k, 0] - truth[b, k, 0]) <= 45
@@ -528,7 +532,7 @@ def test_run_sums_match_a_frame_by_frame_count():
     d_est = np.array([est[b, k, 0] - est[b, k - 1, 0] for b, k in pairs])
     d_meas = np.array([chosen[b, k, 0] - chosen[b, k - 1, 0] for b, k in pairs])
     assert d_est.size == s["d_n"].sum() > 5
-    assert p2.stat_smoothness(s["d_n"], s["d_est"], s["d_est2"], s["d_meas"], s["d_meas2"]) == pytest.approx(
+    assert jud.stat_smoothness(s["d_n"], s["d_est"], s["d_est2"], s["d_meas"], s["d_meas2"]) == pytest.approx(
         np.std(d_est) / np.std(d_meas))
 
 
@@ -541,40 +545,40 @@ def test_track_share_counts_frames_on_track_by_hand():
     chosen = np.full((2, 5, 2), np.nan)
     present = np.zeros((2, 5), bool)
     white = np.full((2, 5, 2), np.nan)
-    s = p2.run_sums(truth, est, chosen, present, white, (15.0, 0.5))
+    s = jud.run_sums(truth, est, chosen, present, white, (15.0, 0.5))
     assert list(s["track_in"]) == [2, 2] and list(s["frames"]) == [4, 4]
-    np.testing.assert_array_equal(p2.on_track(est, truth, (15.0, 0.5)),
+    np.testing.assert_array_equal(meth.on_track(est, truth, (15.0, 0.5)),
                                   [[False, True, True, False, False], [True, True, False, False, True]])
-    assert p2.stat_track_share(s["track_in"], s["frames"]) == pytest.approx(4 / 8)
+    assert jud.stat_track_share(s["track_in"], s["frames"]) == pytest.approx(4 / 8)
     # the ratio of sums, not the mean of per-run shares
-    assert p2.stat_track_share(np.array([1, 9]), np.array([2, 10])) == pytest.approx(10 / 12)
-    assert np.isnan(p2.stat_track_share(np.zeros(2), np.zeros(2)))
+    assert jud.stat_track_share(np.array([1, 9]), np.array([2, 10])) == pytest.approx(10 / 12)
+    assert np.isnan(jud.stat_track_share(np.zeros(2), np.zeros(2)))
 
 
 def test_tuning_rule_picks_the_best_share_and_breaks_ties_towards_the_shorter_delay():
     delays = (2, 4, 6, 8, 12)
     # a clear best
-    assert p2.choose_restart(delays, [0.90, 0.91, 0.93, 0.92, 0.80]) == 6
+    assert tun.choose_restart(delays, [0.90, 0.91, 0.93, 0.92, 0.80]) == 6
     # 6 and 8 within the 0.1-point tie of the best (8): the shorter wins; 4 is just outside the tie
-    assert p2.choose_restart(delays, [0.90, 0.9289, 0.9295, 0.930, 0.80], tie=0.001) == 6
+    assert tun.choose_restart(delays, [0.90, 0.9289, 0.9295, 0.930, 0.80], tie=0.001) == 6
     # the tie is relative to the best, not chained: 4 is within 0.1 point of 6 but not of 8
-    assert p2.choose_restart(delays, [0.0, 0.9281, 0.9290, 0.9299, 0.0], tie=0.001) == 6
+    assert tun.choose_restart(delays, [0.0, 0.9281, 0.9290, 0.9299, 0.0], tie=0.001) == 6
     # the order of the table does not matter; a NaN score never wins
-    assert p2.choose_restart((8, 2, 6), [0.95, np.nan, 0.95]) == 6
-    with pytest.raises(p2.InputError, match="one score per candidate"):
-        p2.choose_restart(delays, [0.9, 0.9])
-    with pytest.raises(p2.InputError, match="no candidate delay has a finite score"):
-        p2.choose_restart((4, 6), [np.nan, np.nan])
+    assert tun.choose_restart((8, 2, 6), [0.95, np.nan, 0.95]) == 6
+    with pytest.raises(InputError, match="one score per candidate"):
+        tun.choose_restart(delays, [0.9, 0.9])
+    with pytest.raises(InputError, match="no candidate delay has a finite score"):
+        tun.choose_restart((4, 6), [np.nan, np.nan])
 
 
 def test_ablation_statistic_and_its_sign():
     one = np.ones(1)
     # rr: 5 % tail, no correlation; rv: 10 % tail and correlated -> rv is worse on both counts
-    v = p2.stat_ablation(5 * one, 100 * one, 0 * one, 50 * one, 50 * one, 10 * one, 100 * one, 25 * one, 50 * one,
+    v = jud.stat_ablation(5 * one, 100 * one, 0 * one, 50 * one, 50 * one, 10 * one, 100 * one, 25 * one, 50 * one,
                          50 * one)
     assert v == pytest.approx(min(0.05 - 0.0, 0.5 - 0.0))
     # rv better on correlation: the statistic is negative
-    assert p2.stat_ablation(5 * one, 100 * one, 25 * one, 50 * one, 50 * one, 10 * one, 100 * one, 0 * one,
+    assert jud.stat_ablation(5 * one, 100 * one, 25 * one, 50 * one, 50 * one, 10 * one, 100 * one, 0 * one,
                             50 * one, 50 * one) < 0
 
 
@@ -601,34 +605,38 @@ def test_recipe_tasks_cover_filters_and_both_scenes(host):
     recipe = host.recipe("002")
     options = RecipeOptions(size="quick", values=recipe.sizes["quick"], seed=1, filters=("kf", "ukf"))
     keys = [t.key for t in recipe.tasks(options)]
-    assert keys == ["detection-kf", "detection-ukf", "signal", "signal-demanding"]
-    assert recipe.sizes["full"]["runs"] >= p2.MIN_RUNS and recipe.sizes["full"]["signal_frames"] == 120
+    assert keys == ["detection-kf", "brief-false-alarms-kf", "detection-ukf", "brief-false-alarms-ukf", "signal",
+                    "signal-demanding"]
+    # the brief's false alarms are a non-primary grid value of FALSE_ALARMS, and only they are declared so
+    assert [t.key for t in recipe.tasks(options) if t.sensitivity] == ["brief-false-alarms-kf",
+                                                                       "brief-false-alarms-ukf"]
+    assert recipe.sizes["full"]["runs"] >= scn.MIN_RUNS and recipe.sizes["full"]["signal_frames"] == 40
 
 
 def test_tuning_follows_its_rule_on_tuning_runs_only(quick_results, host):
     _, results = quick_results
     res = results["detection-kf"]
     shares = res["tuning/track_share"]
-    k = len(p2.RESTART_CANDIDATES)
-    assert tuple(res["tuning/candidates"]) == p2.RESTART_CANDIDATES and shares.shape == (k,)
+    k = len(scn.RESTART_CANDIDATES)
+    assert tuple(res["tuning/candidates"]) == scn.RESTART_CANDIDATES and shares.shape == (k,)
     assert res["tuning/on_target"].shape == res["tuning/track_rmse"].shape == (k,)
     # the rule: the shortest delay within 0.1 point of the best track share (not of the candidate-choice share)
     best = shares.max()
-    want = min(d for d, r in zip(p2.RESTART_CANDIDATES, shares) if r >= best - p2.TUNING_TIE)
+    want = min(d for d, r in zip(scn.RESTART_CANDIDATES, shares) if r >= best - scn.TUNING_TIE)
     assert int(res["tuning/chosen"]) == want
     # the track share the rule read, recomputed by hand for the chosen delay on the tuning runs
-    truth = p2.drone_truth(generator(p2.TUNING_SEED, "paper002", "tuning", "truth"), SIZE["tuning_runs"], 120)
-    truth_rr = p2.range_and_rate(truth.states, TX, RX)
-    scans = p2.detection_scans(host, truth, p2.TUNING_SEED, p2.CLUTTER_PFA, stream=("tuning",))
-    (track, _), = p2.run_variants(host.filter("kf"), scans, host.sensor("dtv-pbr").measurement_model(), p2.FRAME_DT,
-                                  p2.SIGMA_A, p2.TUNING_SEED, variants=("rr-gate",), restart_after=want,
+    truth = scn.drone_truth(generator(scn.TUNING_SEED, "paper002", "tuning", "truth"), SIZE["tuning_runs"], 120)
+    truth_rr = range_and_rate(truth.states, TX, RX)
+    scans = scn.detection_scans(host, truth, scn.TUNING_SEED, scn.CLUTTER_PFA, stream=("tuning",))
+    (track, _), = meth.run_variants(host.filter("kf"), scans, host.sensor("dtv-pbr").measurement_model(), scn.FRAME_DT,
+                                  scn.SIGMA_A, scn.TUNING_SEED, variants=("rr-gate",), restart_after=want,
                                   stream=("tuning",)).values()
     err = np.abs(track.mean[:, 1:] - truth_rr[:, 1:])
     inside = (err[..., 0] <= 45.0) & (err[..., 1] <= 1.5)
-    assert shares[p2.RESTART_CANDIDATES.index(want)] == pytest.approx(inside.mean())
+    assert shares[scn.RESTART_CANDIDATES.index(want)] == pytest.approx(inside.mean())
     # the tuning runs are not the reported runs: another truth
-    tuning_truth = p2.drone_truth(generator(p2.TUNING_SEED, "paper002", "tuning", "truth"), 3, 120)
-    reported = p2.drone_truth(generator(1, "paper002", "truth"), 3, 120)
+    tuning_truth = scn.drone_truth(generator(scn.TUNING_SEED, "paper002", "tuning", "truth"), 3, 120)
+    reported = scn.drone_truth(generator(1, "paper002", "truth"), 3, 120)
     assert not np.allclose(tuning_truth.states[:, 5], reported.states[:, 5])
     # the gated variants ran with the chosen delay: every restart follows exactly that many frames without an
     # update (counting the restart frame; longer only when the frame that reached the delay held no candidate)
@@ -653,7 +661,7 @@ def test_criteria_carry_n_intervals_verdicts_and_replications(quick_results):
         assert c.verdict in ("met", "not met", "inconclusive", "not judgeable")
         lo, hi = c.interval
         assert lo <= c.ours <= hi or not np.isfinite(c.ours)
-        assert c.replication[1] == min(p2.REPLICATIONS, SIZE["runs"])
+        assert c.replication[1] == min(scn.REPLICATIONS, SIZE["runs"])
     restart = int(res["tuning/chosen"])
     # C1 is judged on the track: recomputed from the saved per-frame estimates (frames k >= 1, all of them)
     truth = res["truth_rr"]
@@ -688,17 +696,47 @@ def test_criteria_carry_n_intervals_verdicts_and_replications(quick_results):
     assert not c4g.failed_preconditions
     # every criterion judged across the declared false-alarm rate, on the same runs: the primary's verdict is the
     # criterion's, the brief's value recomputed from the brief map's saved estimates
-    assert p2.RECIPE.unknowns == (p2.FALSE_ALARMS,)
-    assert p2.FALSE_ALARMS.primary == pytest.approx(1e-4 * 12138) and p2.FALSE_ALARMS.grid[1] == 4.0
+    assert p2.RECIPE.unknowns == (scn.FALSE_ALARMS,)
+    assert scn.FALSE_ALARMS.primary == pytest.approx(1e-4 * 12138) and scn.FALSE_ALARMS.grid[1] == 4.0
     for c in crit.values():
-        assert [a.value for a in c.across] == list(p2.FALSE_ALARMS.grid)
+        assert [a.value for a in c.across] == list(scn.FALSE_ALARMS.grid)
         assert c.across[0].verdict == c.verdict and c.across[0].ours == pytest.approx(c.ours, nan_ok=True)
     c1b = crit[f"C1 on track (kf, gate d2<=9.21, restart {restart})"].across[1]
-    est = res["brief/rr-gate/est"].astype(float)
+    brief = results["brief-false-alarms-kf"]
+    np.testing.assert_array_equal(brief["brief/truth_rr"], truth)  # the same runs
+    est = brief["brief/rr-gate/est"].astype(float)
     inside = (np.abs(est - truth)[..., 0] <= 45.0) & (np.abs(est - truth)[..., 1] <= 1.5)
     assert c1b.ours == pytest.approx(inside[:, 1:].mean()) and c1b.n == SIZE["runs"]
     assert crit["C4 ablation NIS (kf, no gate, as the paper)"].across[1].failed == (
         "range / range-rate model consistent",)
+
+
+def test_primary_verdicts_read_no_sensitivity_task(quick_results):
+    """The criteria read only the detection tasks (so the confirmation seed reruns no signal-level series), and
+    no primary verdict, statistic or interval reads the sensitivity task: with its arrays replaced by another
+    seed's (what the confirmation hands the re-judged criteria) only ``across`` at the brief's value changes."""
+    from workbench.report.engine import judged_tasks
+
+    recipe, results = quick_results
+    crit, read = judged_tasks(recipe.criteria, results)
+    assert read == {"detection-kf", "brief-false-alarms-kf"}
+    sens = {t.key for t in recipe.tasks(RecipeOptions(size="quick", values=SIZE, seed=1, filters=("kf",)))
+            if t.sensitivity}
+    assert sens == {"brief-false-alarms-kf"}
+    # the brief task of another seed (another truth, other candidates), as on the confirmation seed
+    task = next(t for t in recipe.tasks(RecipeOptions(size="quick", values=SIZE, seed=5, filters=("kf",)))
+                if t.key == "brief-false-alarms-kf")
+    other = task.run(TaskContext(params=task.params, seed=5, host=load_host()))
+    assert not np.array_equal(other["brief/rr-gate/est"], results["brief-false-alarms-kf"]["brief/rr-gate/est"])
+    again = recipe.criteria({**results, "brief-false-alarms-kf": other})
+    assert [c.id for c in again] == [c.id for c in crit]
+    changed = 0
+    for a, b in zip(crit, again):
+        assert (a.verdict, a.n, a.failed_preconditions) == (b.verdict, b.n, b.failed_preconditions)
+        np.testing.assert_array_equal([a.ours, *a.interval], [b.ours, *b.interval])
+        assert a.across[0] == b.across[0]
+        changed += a.across[1].ours != b.across[1].ours
+    assert changed >= len(crit) - 2  # the brief's value moves (C4 without a gate is not judgeable at both)
 
 
 def test_report_figures_hold_the_papers_content(quick_results):
@@ -763,7 +801,7 @@ def _figure_data_by_hand(T=12, K=3) -> dict[str, np.ndarray]:
     """Figure data of the shape ``fig_trajectory_data`` and ``fig_nis_data`` return, drawn from a seeded
     generator (the drawing is checked here; the data functions by test_report_figures_hold_the_papers_content)."""
     rng = generator(2002, "test", "figures")
-    times = np.arange(T) * p2.FRAME_DT
+    times = np.arange(T) * scn.FRAME_DT
     truth = np.column_stack([400.0 + 5.0 * times, np.full(T, 5.0)])
     out = {"filter": np.array(["kf"]), "truth": truth, "times": times, "wavelength": np.array(LAM),
            "candidates": truth[:, None, :] + rng.normal(size=(T, K, 2)) * [30.0, 1.0]}
@@ -841,12 +879,12 @@ def test_report_tables_are_computed_from_the_runs(quick_results):
     table = recipe.tables[0].make(results)
     assert table.columns[:5] == ("quantity", "filter", "model / false alarms", "no gate (paper)", "gate d2 <= 9.21")
     row = next(r for r in table.rows if r[0].startswith("C1: track estimate") and r[2] == "range / range-rate")
-    m = p2.variant_metrics(res, "rr-gate")
+    m = jud.variant_metrics(res, "rr-gate")
     assert row[4] == pytest.approx(round(100 * m["track_share"], 3)) and row[5] == ">= 90"
     row = next(r for r in table.rows if r[0].startswith("diagnostic (C1's former") and r[2] == "range / range-rate")
     assert row[4] == pytest.approx(round(100 * m["on_target"], 3)) and row[5] == "-"
     brief = [r for r in table.rows if "brief's false alarms" in r[2]]
-    assert len(brief) == len(p2._ABLATION_ROWS)
+    assert len(brief) == len(tab._ABLATION_ROWS)
     # the denser brief's map hurts the paper's no-gate tracker
     on_ours = next(r for r in table.rows if r[0].startswith("diagnostic (C1's") and r[2] == "range / range-rate")
     on_brief = next(r for r in brief if r[0].startswith("diagnostic (C1's"))
@@ -859,18 +897,19 @@ def test_report_tables_are_computed_from_the_runs(quick_results):
     dem = results["signal-demanding"]
     assert float(dem["accuracy/max_err_db"]) < -40 and bool(dem["accuracy/same_candidates"])
     assert int(dem["nopilot/candidates"]) > 5
-    assert np.mean(dem["series/full/detected"]) > np.mean(dem["series/edge/detected"])
+    # the series runs 600 taps only (the single frame above shows what 102 taps leave); the target is found
+    assert "series/edge/detected" not in dem and np.mean(dem["series/full/detected"]) >= 0.5
     assert any(k.startswith("demanding scene (600 taps), 1 run x 2 frames") for k in scene)
     # the reference multipath: a ghost near the path's level without the cleaning, 20+ dB lower with it
     ghost_clean, ghost_raw = dem["ghost_db"]
     assert -14.0 < ghost_raw < -8.0 and ghost_clean < ghost_raw - 20.0
     assert float(dem["floor_rise_db"][2]) > 5.0  # ECA with an uncleaned reference leaves more of the clutter
     assert any(k.startswith("benign scene, 1 run x 3 frames") for k in scene)
-    assert recipe.notes and "f_D = -Rdot / lambda" in recipe.notes and str(p2.TUNING_SEED) in recipe.notes
+    assert recipe.notes and "f_D = -Rdot / lambda" in recipe.notes and str(scn.TUNING_SEED) in recipe.notes
 
 
 def test_shipped_example_is_what_the_recipe_writes(host, tmp_path):
-    path = p2.write_synthetic_candidates(tmp_path / "c.csv", host)
+    path = scn.write_synthetic_candidates(tmp_path / "c.csv", host)
     shipped = ROOT / "examples" / "data" / "pcl_candidates_synthetic.csv"
     a, b = load_pcl_candidates(path), load_pcl_candidates(shipped)
     np.testing.assert_array_equal(a.valid, b.valid)
