@@ -80,11 +80,45 @@ def test_batched_path_equals_the_per_run_path_bit_for_bit(name, frame, extra):
         assert a[key].dtype == b[key].dtype and np.array_equal(a[key], b[key]), key
 
 
+class _GNNPerRun(GNN):
+    """The GNN role held to its per-run path."""
+
+    def batched(self, filt, first) -> bool:
+        return False
+
+
+@pytest.mark.parametrize("name, frame", [("kf", "cartesian"), ("cmkf-l", "polar")])
+def test_gnn_batched_path_equals_its_per_run_path_bit_for_bit(name, frame):
+    scans = _scene()
+    model = HOST.sensor("active-sonar").measurement_model(frame=frame, sigma_xy=1.0, sigma_r=1.0, sigma_b_deg=0.5)
+    filt = HOST.filter(name)
+    cfg = TrackerConfig(gate=100.0)  # a wide gate: clusters where the global and the greedy assignment differ
+    assert GNN(cfg).batched(filt, scans.scan(0).for_filter())
+    logs = [run(filt, scans, MOTION, model, association=role, rng=generator(5, "t", "run"))
+            for role in (GNN(cfg, 5, ("t",), True), _GNNPerRun(cfg, 5, ("t",), True), MofN(cfg, 5, ("t",), True))]
+    a, b, greedy = (_log_arrays(log) for log in logs)
+    assert a.keys() == b.keys() and a["run"].size > 50 and np.any(a["status"] == 1)
+    assert a["mean"].shape != greedy["mean"].shape or not np.array_equal(a["mean"], greedy["mean"])
+    for key in a:
+        assert a[key].dtype == b[key].dtype and np.array_equal(a[key], b[key]), key
+
+
 def test_only_deterministic_filters_and_the_greedy_assignment_are_batched():
     first = Scan(np.zeros((2, 1, 2)), np.ones((2, 1), dtype=bool))
     own_cov = Scan(np.zeros((2, 1, 2)), np.ones((2, 1), dtype=bool), cov=np.broadcast_to(np.eye(2), (2, 1, 2, 2)))
     assert MofN().batched(HOST.filter("kf"), first)
     assert not MofN().batched(HOST.filter("kf"), own_cov)  # each detection's own covariance: per run
-    assert not GNN().batched(HOST.filter("kf"), first)  # its own assignment: per run
+    assert GNN().batched(HOST.filter("kf"), first)  # its clustered assignment keeps runs apart: declared
+
+    class OwnAssign(MofN):
+        def assign(self, rows, cols, d2):
+            return rows[:0], cols[:0]
+
+    class OwnGNN(GNN):
+        def assign(self, rows, cols, d2):
+            return rows[:0], cols[:0]
+
+    assert not OwnAssign().batched(HOST.filter("kf"), first)  # its own assignment, undeclared: per run
+    assert not OwnGNN().batched(HOST.filter("kf"), first)  # the declaration is not inherited by a new assign
     stochastic = [name for name in HOST.filters if "stochastic" in HOST.filter(name).capabilities]
     assert stochastic and not MofN().batched(HOST.filter(stochastic[0]), first)

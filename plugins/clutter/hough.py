@@ -60,7 +60,9 @@ and (detection, support) pairs of the inverse step) come from neighbouring squar
 bounded.  Both routes yield the same pairs, hence the same decisions (tested).  The local rule runs in a
 compiled kernel (:mod:`workbench_clutter.hough_numba`) where the backend policy picks Numba (``backend="auto"``); the
 vectorised NumPy code here is its twin, and both are held to the brute-force reference of the tests.  Runs are
-processed one after another.
+processed one after another; where Numba runs (and a ping holds at most :data:`RUN_KERNEL_MAX_DETECTIONS`
+detections) each run is one compiled call, :func:`workbench_clutter.hough_numba.remove_run` (every ping's steps
+above, the same decisions), instead of this module's per-ping calls.
 """
 
 from __future__ import annotations
@@ -981,6 +983,11 @@ def hough_remove_run(z: np.ndarray, valid: np.ndarray, grid: HoughGrid, window: 
 
 
 SUPPORTS = ("local", "latest", "any")
+#: The whole-run kernel (``hough_numba.remove_run``) votes every point of the group afresh at each ping into
+#: cell-indexed arrays; above this many detections in a ping of the batch the per-ping path's incremental counts and
+#: grid passes are faster (10^4 detections per ping over a wide area: about 3x), so it takes those scans.  Both
+#: paths decide alike; this only picks the faster.
+RUN_KERNEL_MAX_DETECTIONS = 2000
 BACKENDS = ("auto", "numba", "numpy")
 NEW_MEASUREMENTS = ("detections", "projected")
 
@@ -1034,6 +1041,33 @@ def remove(scans: Scans, window: int = 5, shift: int = 1, v_max: float = 8.0, dt
     grid = make_grid(d_rho, d_theta_deg, extent)
     keep = np.zeros(valid.shape, dtype=bool)
     new_z = np.array(scans.z, copy=True) if new_measurements == "projected" else None
+    sr = int(np.floor(sim_rho / grid.d_rho + 1e-9))
+    st = int(np.floor(np.deg2rad(sim_theta_deg) / grid.d_theta + 1e-9))
+    e = int(np.floor(eps / grid.d_rho + 1e-9))
+    most = int(valid.sum(axis=2).max()) if valid.size else 0
+    if kernel == "numba" and trace is None and st < grid.n_theta and (support != "local" or 2 * e + 1 < 64) \
+            and most <= RUN_KERNEL_MAX_DETECTIONS:
+        # every ping of a run in one compiled call (hough_numba.remove_run: the same decisions)
+        from . import hough_numba
+
+        reach_arr = np.zeros(int(window))
+        for g, r in support_reaches(int(window), v_max, dt, support, support_reach).items():
+            reach_arr[g] = r
+        th = grid.theta
+        cos, sin = np.cos(th), np.sin(th)
+        z_all = np.ascontiguousarray(scans.z, dtype=float)
+        project = new_measurements == "projected"
+        for b in range(scans.batch):
+            keep[b], z_b = hough_numba.remove_run(
+                z_all[b], np.ascontiguousarray(valid[b]), int(window), int(shift), float(v_max * dt), int(gate_gap),
+                int(v_min), sr, st, e, reach_arr, SUPPORTS.index(support),
+                -1.0 if vel_gate is None else float(vel_gate), float(sigma_pos), float(dt), bool(require_chain),
+                warmup == "keep", project, grid.n_rho, grid.n_theta, int(grid.off), float(grid.d_rho),
+                float(grid.d_theta), cos, sin, hough_numba.CTZ)
+            if new_z is not None:
+                new_z[b] = z_b
+        out = scans.with_valid(keep)
+        return dataclasses.replace(out, z=np.where(out.valid[..., None], new_z, out.z)) if project else out
     for b in range(scans.batch):
         keep[b], z_b = hough_remove_run(scans.z[b], valid[b], grid, window, shift, v_max, dt, gate_gap, v_min,
                                         sim_rho, sim_theta_deg, eps, support_reach, support, vel_gate, sigma_pos,

@@ -11,6 +11,11 @@ support: a triple of an older ping is skipped (the pair was decided there).  The
 support's own latest local support on ``L`` the same way.  A detection leaves the loops as soon as it is kept.
 Every comparison uses the same floating-point operations as the NumPy twin, so the decisions are identical.
 
+:func:`remove_run` is the whole remover for one run in one call (the gate, the votes, the peaks, the similar lines,
+then :func:`local_keep` or the latest / any rules, and the projection), the twin of ``hough.hough_remove_run``
+with this kernel: ``hough.remove`` uses it where Numba runs and a ping holds at most
+``hough.RUN_KERNEL_MAX_DETECTIONS`` detections.
+
 Module-level functions, so that Numba's on-disk cache holds across processes.
 """
 
@@ -254,3 +259,370 @@ def rho_rows(points, cos, sin, d_rho, off, out):
                 r = r / d_rho
             out[i, j] = np.int32(np.rint(r)) + off
     return out
+
+
+# -- the whole run in one call (the remover's default path: the detections themselves as the output) -------------
+
+
+@numba.njit(cache=True)
+def _has_partner(a, b, box, out):
+    """``out[i] |= some point of b lies in the box |dx|, |dy| <= box around a[i]`` (the exact test of
+    ``hough._has_partner``), by a sweep over ``b`` sorted by x (the sorted window only narrows the candidates; a
+    margin keeps every pair the exact test accepts)."""
+    n, m = a.shape[0], b.shape[0]
+    if n == 0 or m == 0:
+        return
+    order = np.argsort(b[:, 0])
+    bx = b[order, 0]
+    for i in range(n):
+        if out[i]:
+            continue
+        ax, ay = a[i, 0], a[i, 1]
+        margin = 1e-9 * (abs(ax) + box) + 1e-300
+        j = np.searchsorted(bx, ax - box - margin)
+        while j < m and bx[j] <= ax + box + margin:
+            jj = order[j]
+            if abs(ax - b[jj, 0]) <= box and abs(ay - b[jj, 1]) <= box:
+                out[i] = True
+                break
+            j += 1
+
+
+@numba.njit(cache=True)
+def _neighbour(row, col, dr, dc, n_rho, n_theta):
+    """The flat cell ``(row + dr, col + dc)`` across the ``theta = 0 / pi`` seam (``-1`` outside the grid); the
+    twin of ``hough._neighbour_cells``."""
+    r = row + dr
+    c = col + dc
+    if c < 0 or c >= n_theta:
+        r = n_rho - 1 - r
+        c = c % n_theta
+    if r < 0 or r >= n_rho:
+        return -1
+    return r * n_theta + c
+
+
+@numba.njit(cache=True)
+def _gated_points(pts, mask):
+    n = 0
+    for i in range(mask.shape[0]):
+        n += mask[i]
+    out = np.empty((n, 2))
+    sel = np.empty(n, dtype=np.int64)
+    n = 0
+    for i in range(mask.shape[0]):
+        if mask[i]:
+            out[n, 0] = pts[i, 0]
+            out[n, 1] = pts[i, 1]
+            sel[n] = i
+            n += 1
+    return out, sel
+
+
+@numba.njit(cache=True)
+def _local_inputs(pts_k, gated, earlier, reach, W):
+    """The support arrays ``hough._local_numba`` builds for :func:`local_keep` (the same grid, order and slots)."""
+    n_all = pts_k.shape[0]
+    for s in range(len(earlier)):
+        n_all += gated[s][0].shape[0]
+    lo0, lo1 = pts_k[:, 0].min(), pts_k[:, 1].min()
+    hi0, hi1 = pts_k[:, 0].max(), pts_k[:, 1].max()
+    for s in range(len(earlier)):
+        g = gated[s][0]
+        if g.shape[0]:
+            lo0, lo1 = min(lo0, g[:, 0].min()), min(lo1, g[:, 1].min())
+            hi0, hi1 = max(hi0, g[:, 0].max()), max(hi1, g[:, 1].max())
+    rmin = np.inf
+    for gap in range(1, reach.shape[0]):
+        rmin = min(rmin, reach[gap])
+    h = rmin * (1.0 + 2.0 ** -20)
+    while (np.floor((hi0 - lo0) / h) + 1) * (np.floor((hi1 - lo1) / h) + 1) > 8 * n_all + 1024:
+        h *= 2.0
+    nx = np.int64(np.floor((hi0 - lo0) / h)) + 1
+    ny = np.int64(np.floor((hi1 - lo1) / h)) + 1
+    S = len(earlier)
+    N = n_all - pts_k.shape[0]
+    sup_xy = np.empty((N, 2))
+    sup_ring = np.empty(N, dtype=np.int64)
+    sup_idx = np.empty(N, dtype=np.int64)
+    starts = np.empty((S, nx * ny + 1), dtype=np.int64)
+    offset = 0
+    for s in range(S):
+        g, sel = gated[s]
+        n = g.shape[0]
+        kk = np.empty(n, dtype=np.int64)
+        for i in range(n):
+            cx = min(np.int64(np.floor((g[i, 0] - lo0) / h)), nx - 1)
+            cy = min(np.int64(np.floor((g[i, 1] - lo1) / h)), ny - 1)
+            kk[i] = cx * ny + cy
+        order = np.argsort(kk, kind="mergesort")
+        count = np.zeros(nx * ny, dtype=np.int64)
+        for i in range(n):
+            count[kk[i]] += 1
+        starts[s, 0] = offset
+        for c in range(nx * ny):
+            starts[s, c + 1] = starts[s, c] + count[c]
+        for t in range(n):
+            i = order[t]
+            sup_xy[offset + t, 0] = g[i, 0]
+            sup_xy[offset + t, 1] = g[i, 1]
+            sup_idx[offset + t] = sel[i]
+            sup_ring[offset + t] = earlier[s] % W
+        offset += n
+    return sup_xy, sup_ring, sup_idx, starts, lo0, lo1, h, nx, ny
+
+
+@numba.njit(cache=True)
+def _rule_keep(pts_k, rows_k, k, gated, earlier, reach, ring, W, line_r, line_c, line_latest, e, any_rule):
+    """The ``"latest"`` (``any_rule`` False) and ``"any"`` rules of ``hough._inverse``: detection ``z`` of ping k is
+    kept when a gated point ``s`` of an earlier ping ``p`` of B within ``reach[k - p]`` (``dx^2 + dy^2 <= r^2``)
+    and ``z`` both lie within ``e`` rows of a similar line cell ``L`` and (``"latest"``) ``p`` is the latest
+    earlier ping of B with a gated point within ``e`` rows of ``L`` (``line_latest[L]``)."""
+    n_k = pts_k.shape[0]
+    keep = np.zeros(n_k, dtype=np.bool_)
+    S = earlier.shape[0]
+    for zi in range(n_k):
+        zx, zy = pts_k[zi, 0], pts_k[zi, 1]
+        for rank in range(S):
+            s = S - 1 - rank
+            p = earlier[s]
+            r = reach[k - p]
+            r2 = r * r
+            g, sel = gated[s]
+            for t in range(g.shape[0]):
+                ddx = zx - g[t, 0]
+                ddy = zy - g[t, 1]
+                if ddx * ddx + ddy * ddy > r2:
+                    continue
+                srow = ring[p % W, sel[t]]
+                for L in range(line_r.shape[0]):
+                    c = line_c[L]
+                    lr = line_r[L]
+                    if abs(np.int64(rows_k[zi, c]) - lr) <= e and abs(np.int64(srow[c]) - lr) <= e:
+                        if any_rule or line_latest[L] == p:
+                            keep[zi] = True
+                            break
+                if keep[zi]:
+                    break
+            if keep[zi]:
+                break
+    return keep
+
+
+@numba.njit(cache=True)
+def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach, rule, vel_gate, sigma_pos, dt,
+               require_chain, warmup_keep, project, n_rho, n_theta, off, d_rho, d_theta, cos, sin, ctz):
+    """The keep mask ``(T, M)`` and the output positions ``(T, M, 2)`` of one run, every ping in one call: the twin of
+    ``hough.hough_remove_run`` with the Numba kernel (the same steps in the same order, on the same rows and grids;
+    every decision an integer or the same floating-point comparison, so the masks are identical).  ``project``:
+    ``new_measurements="projected"`` (each kept detection moved onto its nearest similar line, as
+    ``hough._project``); else the positions are ``z``.
+
+    ``box1 = v_max dt`` (the gate between pings ``q`` and ``p`` is ``box1 |q - p|``); ``sr, st, e``: the similarity
+    and line tolerances in bins; ``reach (window,)`` by ping gap; ``rule``: 0 local, 1 latest, 2 any;
+    ``vel_gate < 0``: no velocity check.
+    """
+    T, M = valid.shape
+    W = window
+    keep_out = np.zeros((T, M), dtype=np.bool_)
+    z_out = z.copy()
+    first_output = W - 1 + shift
+    # the valid detections of each ping (slots) and their points
+    slots = []
+    pts = []
+    most = 1
+    for k in range(T):
+        sl = np.flatnonzero(valid[k])
+        slots.append(sl)
+        pk = np.empty((sl.shape[0], 2))
+        for i in range(sl.shape[0]):
+            pk[i, 0] = z[k, sl[i], 0]
+            pk[i, 1] = z[k, sl[i], 1]
+        pts.append(pk)
+        most = max(most, sl.shape[0])
+    ring = np.empty((W, most, n_theta), dtype=np.int32)
+    ring_t = np.empty((W, n_theta, most), dtype=np.int32)  # the same rows column by column, for the votes
+    ring_ping = np.full(W, -1, dtype=np.int64)
+    n_cells = n_rho * n_theta
+    # the accumulator column by column (cell (row, col) at col n_rho + row: a column's votes stay in cache); the
+    # peaks and lines handed on are flat row n_theta + col as everywhere else
+    votes = np.zeros(n_cells, dtype=np.int32)
+    n_pings = np.zeros(n_cells, dtype=np.int32)
+    last = np.full(n_cells, -1, dtype=np.int32)    # the last (iteration, ping) stamp that voted in a cell
+    mark = np.full(n_cells, -1, dtype=np.int32)    # group A's peaks of the current ping
+    touched = np.empty(min(W * most * n_theta, n_cells), dtype=np.int64)  # each cell once per group
+    stamp = np.full(n_cells, -1, dtype=np.int64)   # local_keep's stamps, kept for the whole run
+    tag = 0
+    peaks = [np.zeros(0, dtype=np.int64) for _ in range(T)]
+    for k in range(T):
+        if k < first_output and warmup_keep:
+            for i in range(M):
+                keep_out[k, i] = valid[k, i]
+        if k < W - 1:
+            continue
+        g0 = k - W + 1
+        for p in range(g0, k + 1):  # the vote rows of the group's pings, in the ring
+            slot = p % W
+            if ring_ping[slot] != p:
+                n_p = pts[p].shape[0]
+                rho_rows(pts[p], cos, sin, d_rho, off, ring[slot, :n_p])
+                for i in range(n_p):
+                    for j in range(n_theta):
+                        ring_t[slot, j, i] = ring[slot, i, j]
+                ring_ping[slot] = p
+        # step 2: the rectangular gate within the group
+        gated = []
+        for p in range(g0, k + 1):
+            mask = np.zeros(pts[p].shape[0], dtype=np.bool_)
+            for q in range(g0, k + 1):
+                if q != p and abs(q - p) <= gate_gap:
+                    _has_partner(pts[p], pts[q], box1 * abs(q - p), mask)
+            gated.append(_gated_points(pts[p], mask))
+        # steps 3-4: votes, distinct pings per cell, and the peaks (3 x 3 maxima of support * top + votes)
+        n_touched = 0
+        fresh = k * W
+        for j in range(n_theta):
+            base = j * n_rho
+            for gi in range(W):
+                label = k * W + gi
+                sel = gated[gi][1]
+                rows_j = ring_t[(g0 + gi) % W, j]
+                for t in range(sel.shape[0]):
+                    cell = base + np.int64(rows_j[sel[t]])
+                    if last[cell] < fresh:  # first vote of this ping's group: a fresh cell
+                        votes[cell] = 0
+                        n_pings[cell] = 0
+                        touched[n_touched] = cell
+                        n_touched += 1
+                    votes[cell] += 1
+                    if last[cell] != label:
+                        last[cell] = label
+                        n_pings[cell] += 1
+        top = np.int64(1)
+        for t in range(n_touched):
+            top = max(top, np.int64(votes[touched[t]]) + 1)
+        cand = np.empty(n_touched, dtype=np.int64)
+        n_cand = 0
+        for t in range(n_touched):
+            cell = touched[t]
+            if n_pings[cell] < v_min:
+                continue
+            own = np.int64(n_pings[cell]) * top + votes[cell]
+            row, col = cell % n_rho, cell // n_rho
+            ok = True
+            inner = 0 < row < n_rho - 1 and 0 < col < n_theta - 1
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    if inner:  # no seam and no edge: the neighbour's offset in the column-by-column layout
+                        nb = cell + dc * n_rho + dr
+                    else:
+                        nb = _neighbour(row, col, dr, dc, n_rho, n_theta)
+                        if nb < 0:
+                            continue  # outside the grid
+                        nb = (nb % n_theta) * n_rho + nb // n_theta
+                    if last[nb] < fresh:
+                        continue  # no vote (key 0)
+                    if np.int64(n_pings[nb]) * top + votes[nb] > own:
+                        ok = False
+            if ok:
+                cand[n_cand] = row * n_theta + col
+                n_cand += 1
+        pk_cells = np.sort(cand[:n_cand])
+        peaks[k] = pk_cells
+        if k < first_output:
+            continue
+        # step 5: B peaks with a vote from ping k, similar to an A peak
+        for t in range(peaks[k - shift].shape[0]):
+            a = peaks[k - shift][t]
+            mark[(a % n_theta) * n_rho + a // n_theta] = k
+        k_label = k * W + W - 1
+        sim = np.empty(pk_cells.shape[0], dtype=np.int64)
+        n_sim = 0
+        for t in range(pk_cells.shape[0]):
+            cell = pk_cells[t]
+            row, col = cell // n_theta, cell % n_theta
+            if last[col * n_rho + row] != k_label:
+                continue  # no vote from ping k
+            found = False
+            for dr in range(-sr, sr + 1):
+                for dc in range(-st, st + 1):
+                    nb = _neighbour(row, col, dr, dc, n_rho, n_theta)
+                    if nb >= 0 and mark[(nb % n_theta) * n_rho + nb // n_theta] == k:
+                        found = True
+                        break
+                if found:
+                    break
+            if found:
+                sim[n_sim] = cell
+                n_sim += 1
+        sim = sim[:n_sim]
+        # step 6: the inverse transform and the support rule
+        n_k = pts[k].shape[0]
+        if n_k == 0 or n_sim == 0:
+            continue
+        earlier = np.arange(g0, k)
+        gated_e = gated[:W - 1]
+        line_r = sim // n_theta
+        line_c = sim % n_theta
+        if rule == 0:
+            col_slot = np.full(n_theta, -1, dtype=np.int64)
+            n_used = 0
+            for c in range(n_theta):  # the columns holding a line, ascending
+                for L in range(n_sim):
+                    if line_c[L] == c:
+                        col_slot[c] = n_used
+                        n_used += 1
+                        break
+            slot_of_line = np.empty(n_sim, dtype=np.int64)
+            for L in range(n_sim):
+                slot_of_line[L] = col_slot[line_c[L]]
+            bits = line_bits(line_r, slot_of_line, n_used, n_rho // 64 + 2)
+            sup_xy, sup_ring, sup_idx, starts, x0, y0, h, nx, ny = _local_inputs(pts[k], gated_e, earlier, reach, W)
+            tag0 = tag
+            tag = tag + n_k + 1
+            keep = local_keep(pts[k], ring[k % W, :n_k], np.arange(n_k), sup_xy, sup_ring, sup_idx, starts,
+                              earlier, k, bits, n_rho, col_slot, ring, e, reach, x0, y0, h, nx, ny, vel_gate,
+                              sigma_pos, dt, require_chain, stamp, tag0, ctz, d_rho, d_theta)
+        else:
+            line_latest = np.full(n_sim, -(2 ** 40), dtype=np.int64)
+            for L in range(n_sim):
+                for s in range(W - 1):
+                    g, sel = gated_e[s]
+                    rows = ring[earlier[s] % W]
+                    for t in range(sel.shape[0]):
+                        if abs(np.int64(rows[sel[t], line_c[L]]) - line_r[L]) <= e:
+                            line_latest[L] = earlier[s]
+                            break
+            keep = _rule_keep(pts[k], ring[k % W, :n_k], k, gated_e, earlier, reach, ring, W, line_r, line_c,
+                              line_latest, e, rule == 2)
+        for i in range(n_k):
+            if keep[i]:
+                keep_out[k, slots[k][i]] = True
+        if project:
+            _project_kept(pts[k], ring[k % W], keep, slots[k], line_r, line_c, e, off, d_rho, cos, sin, z_out[k])
+    return keep_out, z_out
+
+
+@numba.njit(cache=True)
+def _project_kept(pts_k, rows_k, keep, slots_k, line_r, line_c, e, off, d_rho, cos, sin, out):
+    """``hough._project``: each kept detection of ping k onto the nearest similar line within ``e`` rows (ties: the
+    lowest column, then the lowest rho bin), ``d = x cos + y sin - rho``, ``(x, y) - d (cos, sin)`` into ``out``."""
+    for i in range(pts_k.shape[0]):
+        if not keep[i]:
+            continue
+        x, y = pts_k[i, 0], pts_k[i, 1]
+        best = -1
+        best_d, best_abs = 0.0, np.inf
+        for L in range(line_r.shape[0]):
+            c = line_c[L]
+            if abs(np.int64(rows_k[i, c]) - line_r[L]) > e:
+                continue
+            bins = line_r[L] - off
+            d = x * cos[c] + y * sin[c] - bins * d_rho
+            a = abs(d)
+            if best < 0 or a < best_abs or (a == best_abs and (c < line_c[best] or (c == line_c[best]
+                                                                                      and line_r[L] < line_r[best]))):
+                best, best_d, best_abs = L, d, a
+        c = line_c[best]
+        out[slots_k[i], 0] = x - best_d * cos[c]
+        out[slots_k[i], 1] = y - best_d * sin[c]

@@ -44,6 +44,7 @@ for adaptive birth, a linear measurement model (``H``); scans without per-detect
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -177,6 +178,56 @@ def phd_update(mix: Mixture, state: Any, scan: Scan, model: MeasurementModel, fi
     return Mixture.join([missed, detected])
 
 
+def _merge_candidates(m: np.ndarray, A: np.ndarray, lam: np.ndarray, have: np.ndarray, merge: float):
+    """The pairs ``(r, i, j)`` (components ``i``, ``j`` of run ``r``, both present) whose computed merging distance
+    ``d2 = a_i - 2 b_ij + c_ij`` (:func:`prune_merge`) may be ``<= merge``; for every other pair it is above.
+
+    The exact ``Q = (m_i - m_j)^T A_i (m_i - m_j)`` is at least ``lambda_min(A_i) |m_i - m_j|^2``, and the computed
+    ``d2`` differs from ``Q`` by at most ``tol = 1e-13 max|A_i| (sum|m_i| + sum|m_j|)^2`` (rounding of sums of
+    at most 16 products, about 25 units of round-off against the 450 allowed), so a pair with
+    ``lambda_lo |m_i - m_j|^2 > merge + tol`` (``lambda_lo = lam``, the computed smallest eigenvalue, less its own
+    round-off bound) is not within the threshold.  The others (pairs within a radius of ``m_i``, from one k-d tree
+    of every run's means, the runs kept apart by a fifth coordinate, the radius widened by 1e-6) are returned; a
+    row whose ``lambda_lo`` is not positive pairs with every component of its run."""
+    from scipy.spatial import cKDTree
+
+    R, width, n = m.shape
+    big = np.abs(A).reshape(R, width, n * n).max(axis=2)
+    lam = lam - 1e-12 * n * big
+    l1 = np.abs(m).sum(axis=2)
+    l1_max = np.where(have, l1, 0.0).max(axis=1)
+    tol = 1e-13 * big * (l1 + l1_max[:, None]) ** 2
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        radius = np.where(lam > 0, np.sqrt((merge + tol) / (lam * (1.0 - 1e-12))) * (1.0 + 1e-6), np.inf)
+    r_of, i_of = np.nonzero(have)
+    rad = radius[r_of, i_of]
+    finite = np.isfinite(rad)
+    out_r, out_i, out_j = [], [], []
+    if finite.any():
+        pts = m[r_of, i_of]
+        gap = 4.0 * (float(rad[finite].max()) + float(np.abs(pts).max()) + 1.0)  # runs farther apart than any radius
+        tree = cKDTree(np.concatenate([pts, (r_of * gap)[:, None]], axis=1))
+        q = np.flatnonzero(finite)
+        near = tree.query_ball_point(tree.data[q], rad[q])
+        counts = np.fromiter(map(len, near), dtype=np.intp, count=q.size)
+        a = np.repeat(q, counts)
+        b = np.fromiter(itertools.chain.from_iterable(near), dtype=np.intp, count=int(counts.sum()))
+        same = r_of[a] == r_of[b]
+        out_r.append(r_of[a[same]])
+        out_i.append(i_of[a[same]])
+        out_j.append(i_of[b[same]])
+    for c in np.flatnonzero(~finite):  # no usable bound: every component of its run
+        r = r_of[c]
+        js = np.flatnonzero(have[r])
+        out_r.append(np.full(js.size, r))
+        out_i.append(np.full(js.size, i_of[c]))
+        out_j.append(js)
+    if not out_r:
+        e = np.zeros(0, dtype=np.intp)
+        return e, e, e
+    return np.concatenate(out_r), np.concatenate(out_i), np.concatenate(out_j)
+
+
 def prune_merge(mix: Mixture, prune: float, merge: float, max_components: int) -> Mixture:
     """Vo & Ma's pruning and merging (Table II), per run, all runs at once: components lighter than ``prune`` are
     dropped; then, repeatedly, the heaviest remaining component of each run and every remaining component of that
@@ -204,11 +255,18 @@ def prune_merge(mix: Mixture, prune: float, merge: float, max_components: int) -
     A = P_inv[ti]                                                     # (R, width, n, n)
     Am = (A @ m[..., None])[..., 0]
     a_i = np.einsum("rin,rin->ri", Am, m)
-    b_ij = np.einsum("rik,rjk->rij", Am, m)                           # (R, width, width)
-    c_ij = np.einsum("rik,rjk->rij", A.reshape(R, width, n * n), (m[..., :, None] * m[..., None, :]).reshape(
-        R, width, n * n))
-    d2 = a_i[:, :, None] - 2.0 * b_ij + c_ij
-    absorb = (d2 <= merge) & have[:, :, None] & have[:, None, :]     # absorb[r, i, j]: i within the threshold of j
+    # d2 = a_i - 2 b_ij + c_ij is computed only for the pairs that can be within the threshold (_merge_candidates:
+    # a bound that the others' computed d2 exceeds it), each by the same product as the (R, width, width) einsum
+    # (the same inner loop per element, so the same bits); every other pair is not absorbed
+    absorb = np.zeros((R, width, width), dtype=bool)                  # absorb[r, i, j]: i within the threshold of j
+    lam = np.linalg.eigvalsh(P_inv)[:, 0][ti]                         # the smallest eigenvalue of each A_i
+    r_p, i_p, j_p = _merge_candidates(m, A, lam, have, merge)
+    if r_p.size:
+        b_p = np.einsum("pk,pk->p", Am[r_p, i_p], m[r_p, j_p])
+        c_p = np.einsum("pk,pk->p", A.reshape(R, width, n * n)[r_p, i_p],
+                        (m[r_p, j_p, :, None] * m[r_p, j_p, None, :]).reshape(-1, n * n))
+        d2 = a_i[r_p, i_p] - 2.0 * b_p + c_p
+        absorb[r_p, i_p, j_p] = d2 <= merge
     group = np.full(C, -1)
     leaders = []
     remaining = table >= 0

@@ -31,6 +31,10 @@ class GNN(MofN):
     (:func:`run_gnn` sets it from a gate probability)."""
 
     who = "GNN tracker"
+    #: :func:`gnn_assign` solves each cluster of tracks linked through shared detections alone, and pairs of two
+    #: runs share neither, so one call on every run's pairs is each run's own assignment: the batched path of
+    #: :meth:`MofN.batched` (one filter batch per ping for all runs), bit for bit the per-run path
+    assign_runs_apart = True
 
     def assign(self, rows: np.ndarray, cols: np.ndarray, d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The least-cost one-to-one assignment of the gated pairs (:func:`gnn_assign`, a miss costing the gate)."""

@@ -322,9 +322,12 @@ class MofN:
         ping for all runs, gating and assignment of all runs at once, pairs never across runs): for a filter that
         draws no random numbers (a stochastic one draws from each run's own stream, so its runs stay apart), the
         greedy assignment (a subclass's own ``assign`` keeps the per-run path) and scans without their own
-        covariances.  The numbers are those of the per-run path, bit for bit (``tests/test_mofn_batched.py``)."""
+        covariances.  The numbers are those of the per-run path, bit for bit (``tests/test_mofn_batched.py``).
+        A subclass with its own ``assign`` takes it only where its class declares ``assign_runs_apart = True``
+        (its assignment of several runs' pairs at once is each run's own: the GNN's, solved per cluster)."""
+        own = getattr(type(self).assign, "__func__", type(self).assign) is not MofN.assign
         return ("stochastic" not in filt.capabilities and first.cov is None
-                and getattr(type(self).assign, "__func__", type(self).assign) is MofN.assign)
+                and (not own or type(self).__dict__.get("assign_runs_apart", False) is True))
 
     def predict(self, carry: _MofNCarry, motion: MotionModel, k: int) -> _MofNCarry:
         carry.motion = motion
@@ -359,7 +362,7 @@ class MofN:
             pred = filt.estimate(state)
             rows, cols, d2 = _gated_pairs_runs(pred, run, positions, det_run, zm, model, config, B)
             near[cols] = True
-            a_rows, a_cols = greedy_assign(rows, cols, d2)  # runs never share a pair: each run's own assignment
+            a_rows, a_cols = self.assign(rows, cols, d2)  # runs never share a pair: each run's own assignment
             hit = np.zeros(K, dtype=bool)
             hit[a_rows] = True
             z = np.zeros((K, 1, model.dim))

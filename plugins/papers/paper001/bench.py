@@ -18,7 +18,7 @@
 
 Every timed call is warmed up: the remover's compiled kernel and the tracker run once on the same detections
 before the clock starts; each figure is the median of ``repeat`` timings.  The tracker settings are the paper
-rows' (:data:`.recipe.TRACKER`), the remover's the recipe's (:data:`.recipe.HOUGH`).
+rows' (:data:`.scenario.TRACKER`), the remover's the recipe's (:data:`.scenario.HOUGH`).
 """
 
 from __future__ import annotations
@@ -40,15 +40,15 @@ WIDE_SIDE = 4472.0  # 5e-4 x 4472^2 = 10^4 clutter detections per ping
 
 
 def _scans(host, detections: float, pings: int, seed: int = 0, side: float = 250.0) -> Scans:
-    from . import recipe as paper001
+    from . import scenario
 
-    one = paper001.target_truth(1)
+    one = scenario.target_truth(1)
     one = type(one)(one.states[:, :pings], one.times[:pings])
     rng = generator(seed, "bench-paper001", detections, side)
-    sensor = host.sensor(paper001.SENSOR)
-    clutter = {**paper001.SIM_CLUTTER, "pfa": detections / (side * side), "area": [0.0, side, 0.0, side]}
-    return sensor.simulate(one, rng, **paper001.SONAR).merge(
-        host.clutter_generator(paper001.CLUTTER_GEN).generate(one, rng, **clutter))
+    sensor = host.sensor(scenario.SENSOR)
+    clutter = {**scenario.SIM_CLUTTER, "pfa": detections / (side * side), "area": [0.0, side, 0.0, side]}
+    return sensor.simulate(one, rng, **scenario.SONAR).merge(
+        host.clutter_generator(scenario.CLUTTER_GEN).generate(one, rng, **clutter))
 
 
 def _median_times(fn, repeat: int) -> tuple[float, float]:
@@ -63,15 +63,15 @@ def _median_times(fn, repeat: int) -> tuple[float, float]:
 
 
 def _per_ping(host, detections: float, extra: int, repeat: int, side: float = 250.0, raw: bool = False) -> dict:
-    from . import recipe as paper001
+    from . import scenario
 
-    first = paper001.HOUGH["window"] - 1 + paper001.HOUGH["shift"] + 1  # pings up to the first output
+    first = scenario.HOUGH["window"] - 1 + scenario.HOUGH["shift"] + 1  # pings up to the first output
     scans = _scans(host, detections, first + extra, side=side)
-    remover = host.clutter_remover(paper001.REMOVER)
-    filt = host.filter(paper001.PAPER_FILTER)
-    model = host.sensor(paper001.SENSOR).measurement_model(**paper001.SONAR, **paper001.POLAR)
-    motion = paper001.motion_model()
-    cfg = TrackerConfig(**paper001.TRACKER)
+    remover = host.clutter_remover(scenario.REMOVER)
+    filt = host.filter(scenario.PAPER_FILTER)
+    model = host.sensor(scenario.SENSOR).measurement_model(**scenario.SONAR, **scenario.POLAR)
+    motion = scenario.motion_model()
+    cfg = TrackerConfig(**scenario.TRACKER)
 
     def cut(T):
         return Scans(scans.z[:, :T], scans.valid[:, :T], scans.times[:T], snr=scans.snr[:, :T])
@@ -82,9 +82,9 @@ def _per_ping(host, detections: float, extra: int, repeat: int, side: float = 25
         return (t1[0] - t0[0]) / extra, (t1[1] - t0[1]) / extra
 
     # warm-up: the remover's compiled kernel and the tracker run once before any clock starts
-    removed = {T: remover.remove(cut(T), **paper001.HOUGH) for T in (first, first + extra)}
+    removed = {T: remover.remove(cut(T), **scenario.HOUGH) for T in (first, first + extra)}
     run_tracker(removed[first], filt, motion, model, cfg)
-    hough, hough_cpu = per_ping(lambda T: remover.remove(cut(T), **paper001.HOUGH))
+    hough, hough_cpu = per_ping(lambda T: remover.remove(cut(T), **scenario.HOUGH))
     track, track_cpu = per_ping(lambda T: run_tracker(removed[T], filt, motion, model, cfg))
     kept = removed[first + extra].valid[:, first:].sum() / max(scans.valid[:, first:].sum(), 1)
     out = {"hough_s": hough, "tracker_s": track, "total_s": hough + track,

@@ -12,7 +12,9 @@ from workbench.plugins import load_host
 from workbench.recorded.sonar import load_sonar_csv
 from workbench.specs import RecipeOptions, TaskContext
 from workbench.testing.bootstrap import loop_statistics
-from workbench_papers.paper001 import recipe as paper001
+from workbench_papers.paper001 import judging, scenario
+from workbench_papers.paper001 import tables as paper_tables
+from workbench_papers.paper001 import tasks as paper_tasks
 
 HOST = load_host()
 #: criterion 1's verdict below its population minimum: never met, never not met
@@ -20,19 +22,19 @@ UNJUDGED = "not judgeable"
 
 
 def test_shipped_surrogate_is_labelled_and_reproducible(tmp_path):
-    text = paper001.SURROGATE_FILE.read_text()
+    text = scenario.SURROGATE_FILE.read_text()
     assert text.splitlines()[0].startswith("# SYNTHETIC SURROGATE")
-    scans = load_sonar_csv(paper001.SURROGATE_FILE, pings=20)
+    scans = load_sonar_csv(scenario.SURROGATE_FILE, pings=20)
     assert scans.steps == 20 and 55 < scans.valid.sum(axis=2).mean() < 80 and scans.origin is None
-    again = paper001.write_surrogate(tmp_path / "s.csv", host=HOST)
+    again = scenario.write_surrogate(tmp_path / "s.csv", host=HOST)
     assert again.read_text() == text
     doc = (Path(__file__).parents[4] / "docs" / "recorded-data.md").read_text()
     assert "## Active sonar detections" in doc and "SYNTHETIC SURROGATE" in doc
 
 
 def test_simulated_runs_hold_the_target_and_the_clutter_the_brief_describes():
-    scans, sites = paper001.simulate_scans(HOST, 3, "surrogate", 40, sites=True)
-    truth = paper001.target_truth(40).states[..., :2]
+    scans, sites = scenario.simulate_scans(HOST, 3, "surrogate", 40, sites=True)
+    truth = scenario.target_truth(40).states[..., :2]
     tgt = scans.valid & (scans.origin == 0)
     assert abs(tgt.any(axis=2).mean() - 0.8) < 0.05  # P_D 0.8
     err = (scans.z[..., 0, :] - truth)[tgt[..., 0]]
@@ -40,19 +42,19 @@ def test_simulated_runs_hold_the_target_and_the_clutter_the_brief_describes():
     # the site mask marks 5 columns per run, seen 70 % of the time, each scattered around one place
     assert sites.shape == scans.valid.shape and abs(sites.sum(axis=2).mean() - 3.5) < 0.3
     assert not np.any(sites & (scans.origin == 0))
-    plain = paper001.simulate_scans(HOST, 3, "sim", 40)
+    plain = scenario.simulate_scans(HOST, 3, "sim", 40)
     clutter = plain.valid & (plain.origin != 0)
     assert abs(clutter.sum(axis=2).mean() - 31.25) < 0.6
 
 
 def test_the_stated_accuracy_row_reads_the_sensors_declared_model():
-    sensor = HOST.sensor(paper001.SENSOR)
-    declared = sensor.measurement_model(**paper001.SONAR, frame="cartesian").std
-    assert paper001.stated_accuracy(HOST) == declared[0] == paper001.SONAR["sigma_pos"]
-    cfg = paper001._tracker_config(HOST, "stated")
+    sensor = HOST.sensor(scenario.SENSOR)
+    declared = sensor.measurement_model(**scenario.SONAR, frame="cartesian").std
+    assert scenario.stated_accuracy(HOST) == declared[0] == scenario.SONAR["sigma_pos"]
+    cfg = scenario._tracker_config(HOST, "stated")
     assert cfg.detection_sigma == declared[0] and cfg.gate_sigma is None
-    assert paper001._tracker_config(HOST, "min-speed").min_speed == paper001.MIN_SPEED
-    assert paper001._tracker_config(HOST, "paper").detection_sigma is None
+    assert scenario._tracker_config(HOST, "min-speed").min_speed == scenario.MIN_SPEED
+    assert scenario._tracker_config(HOST, "paper").detection_sigma is None
 
 
 # -- the report ----------------------------------------------------------------------------------------------
@@ -78,7 +80,7 @@ def test_xy_figures_show_the_simulated_and_recorded_detections(report):
     figs = {f.id: f.data(results) for f in recipe.figures}
     assert set(figs) == {f"fig{i}" for i in range(3, 13)} | {"gospa-per-ping", "gospa-trackers"}
     # Figs 5-6: exactly the detections of run 0 of the first seed block, drawn again here
-    scans = paper001.simulate_scans(HOST, 1, "sim", 1)
+    scans = scenario.simulate_scans(HOST, 1, "sim", 1)
     v = scans.valid[0]
     for fid in ("fig5", "fig6"):
         np.testing.assert_array_equal(figs[fid]["det_xy"], scans.z[0][v])
@@ -86,7 +88,7 @@ def test_xy_figures_show_the_simulated_and_recorded_detections(report):
     assert figs["fig5"]["det_kept"].all() and 0 < figs["fig6"]["det_kept"].sum() < figs["fig6"]["det_kept"].size
     assert not figs["fig6"]["det_kept"][figs["fig6"]["det_ping"] < 5].any()  # the warm-up keeps nothing
     # Figs 7-8: exactly the detections of the shipped file
-    rec = load_sonar_csv(paper001.SURROGATE_FILE, pings=20)
+    rec = load_sonar_csv(scenario.SURROGATE_FILE, pings=20)
     for fid in ("fig7", "fig8"):
         np.testing.assert_array_equal(figs[fid]["det_xy"], rec.z[0][rec.valid[0]])
     # confirmed tracks marked true stay within 6 units of the truth for most of their life
@@ -94,7 +96,7 @@ def test_xy_figures_show_the_simulated_and_recorded_detections(report):
         f = figs[fid]
         true = f["trk_true"].astype(bool)
         d = np.linalg.norm(f["trk_xy"][true] - f["truth_xy"][f["trk_ping"][true]], axis=1)
-        assert d.size == 0 or np.mean(d <= paper001.TRUE_RADIUS) >= paper001.TRUE_FRACTION
+        assert d.size == 0 or np.mean(d <= scenario.TRUE_RADIUS) >= scenario.TRUE_FRACTION
 
 
 def test_count_figures_agree_with_the_xy_figures(report):
@@ -117,7 +119,7 @@ def test_count_figures_agree_with_the_xy_figures(report):
     for fid in ("fig9", "fig10"):
         f = figs[fid]
         phase = "before" if fid == "fig9" else "after"
-        c = _counts(results, paper001.FIG_ARM, phase).confirmed  # the labelled row the figures draw
+        c = _counts(results, scenario.FIG_ARM, phase).confirmed  # the labelled row the figures draw
         assert c.shape[0] == RUNS and np.any(np.ptp(c, axis=0) > 0)  # runs whose counts differ somewhere
         for key, p in (("q10", 0.1), ("q90", 0.9)):
             np.testing.assert_allclose(f[key], [_order_statistic(sorted(c[:, k].tolist()), p)
@@ -173,8 +175,8 @@ def test_criteria_recomputed_from_the_raw_counts(report):
     after = sum(int(a.false[r, k]) for r in range(RUNS) for k in range(20) if post[k])
     assert before > 0 and np.isclose(crit["1"].ours, 1 - after / before) and crit["1"].n == RUNS
     pre = crit["1"].extra["precondition"]
-    assert pre["has"] == before and pre["needs"] == paper001.MIN_FALSE_BEFORE
-    assert pre["holds"] == (before >= paper001.MIN_FALSE_BEFORE)
+    assert pre["has"] == before and pre["needs"] == scenario.MIN_FALSE_BEFORE
+    assert pre["holds"] == (before >= scenario.MIN_FALSE_BEFORE)
     assert np.isclose(crit["1"].extra["false_per_ping_before"], before / (RUNS * 15))
     assert f"{before} false tracks before removal summed" in crit["1"].detail
     k = int(np.sum(continuity(a.held) >= 0.8))
@@ -212,7 +214,7 @@ def test_tables_hold_every_row_and_the_tuning_choice(report):
     chosen = int(np.flatnonzero(held == held.max())[0])
     assert int(results["tuning"]["tuning/chosen"]) == chosen
     assert [r[3] for r in tables["tuning"].rows[:-1]].index("chosen") == chosen
-    cand = paper001.TUNING_CANDIDATES[chosen]
+    cand = scenario.TUNING_CANDIDATES[chosen]
     assert f"delete after {cand['delete_misses']} misses" in rows[4]
     assert "rule" in tables["tuning"].rows[-1][0] and "never reported" in tables["tuning"].rows[-1][2]
     # surrogate rows are labelled, the extension too
@@ -220,8 +222,8 @@ def test_tables_hold_every_row_and_the_tuning_choice(report):
     assert all("SYNTHETIC" in r[0] for r in removal if "surrogate" in r[0])
     assert any("EXTENSION" in r[1] for r in removal)
     # remover variants: the share of target detections kept after a miss, recomputed from the raw counts
-    for i, name in enumerate(paper001.VARIANTS):
-        res = results["sim/0" if name in paper001.VARIANTS_IN_SIM else "variants/0"]  # the main remover: sim's rows
+    for i, name in enumerate(scenario.VARIANTS):
+        res = results["sim/0" if name in scenario.VARIANTS_IN_SIM else "variants/0"]  # the main remover: sim's rows
         n, kept = res[f"rem/{name}/miss_n"].sum(), res[f"rem/{name}/miss_kept"].sum()
         assert tables["remover-variants"].rows[i][2].startswith(f"{100 * kept / n:.1f} %")
     assert len(tables["seed-blocks"].rows) == 1 and len(tables["removal-per-ping"].rows) == 21
@@ -252,13 +254,13 @@ def test_notes_and_published_values_are_stated(report):
 def test_gospa_terms_agree_with_the_track_counts(report):
     recipe, results = report
     res = results["sim/0"]
-    half = paper001.GOSPA_C ** paper001.GOSPA_P / 2
+    half = scenario.GOSPA_C ** scenario.GOSPA_P / 2
     for arm in ("paper", "stated", "previous"):
         for phase in ("before", "after"):
             counts = _counts(results, arm, phase)
             g = {t: res[f"{arm}/{phase}/{t}"] for t in ("gospa", "gospa_loc", "gospa_missed", "gospa_false")}
             # the decomposition: distance^p = localisation + missed + false
-            np.testing.assert_allclose(g["gospa"] ** paper001.GOSPA_P, g["gospa_loc"] + g["gospa_missed"]
+            np.testing.assert_allclose(g["gospa"] ** scenario.GOSPA_P, g["gospa_loc"] + g["gospa_missed"]
                                        + g["gospa_false"], rtol=1e-9, atol=1e-9)
             # one target at every ping: estimates = confirmed tracks = assigned + false, and assigned + missed = 1
             np.testing.assert_allclose((g["gospa_false"] - g["gospa_missed"]) / half, counts.confirmed - 1)
@@ -269,8 +271,8 @@ def test_gospa_terms_agree_with_the_track_counts(report):
     post = np.arange(20) >= 5
     for phase in ("before", "after"):
         mean = res[f"paper/{phase}/gospa"][:, post].mean(axis=1).mean()
-        row = rows[(paper001.ARM_LABELS["paper"], phase)]
-        assert row[2].startswith(paper001._f(mean)) and row[6] == RUNS
+        row = rows[(scenario.ARM_LABELS["paper"], phase)]
+        assert row[2].startswith(judging._f(mean)) and row[6] == RUNS
     # removal takes false tracks away: GOSPA's false-track part falls (its missed part may rise: the remover also
     # drops some of the target's detections, so the distance itself need not fall)
     fig = next(f for f in recipe.figures if f.id == "gospa-per-ping").data(results)
@@ -296,18 +298,18 @@ def _identical_runs(runs=60):
 
 def test_c1_is_the_ratio_of_sums_and_its_interval_resamples_runs():
     before, after, post = _identical_runs()
-    c = paper001.c1_criterion(before, after, post, "hand-made")
+    c = judging.c1_criterion(before, after, post, "hand-made")
     assert np.isclose(c.ours, 1 - 2 / 10) and c.n == 60
     # every run has the same counts: a bootstrap over runs cannot vary (one over pings would)
     assert c.interval[0] == c.interval[1] == pytest.approx(0.8)
     assert c.verdict == "met" and c.extra["precondition"] == {"name": "false tracks before removal, summed",
-                                                               "needs": paper001.MIN_FALSE_BEFORE, "has": 600,
+                                                               "needs": scenario.MIN_FALSE_BEFORE, "has": 600,
                                                                "holds": True}
     assert np.isclose(c.extra["false_per_ping_before"], 10 / 15)
     assert "false tracks per ping before removal 0.667" in c.detail and "600 false tracks before" in c.detail
     # runs that differ give an interval that is not a point
     rng = np.random.default_rng(3)
-    varied = paper001.c1_criterion(rng.poisson(0.7, (60, 20)), rng.poisson(0.15, (60, 20)), post)
+    varied = judging.c1_criterion(rng.poisson(0.7, (60, 20)), rng.poisson(0.15, (60, 20)), post)
     assert varied.interval[0] < varied.ours < varied.interval[1]
 
 
@@ -326,8 +328,9 @@ def test_batched_statistics_give_the_per_resample_loops_tables_and_criteria(repo
         intervals.append(wc.bootstrap_interval(*args, **{"resamples": 300, **kwargs}))
         return intervals[-1]
 
-    monkeypatch.setattr(paper001, "bootstrap_interval", recorded)
-    monkeypatch.setattr(paper001, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
+    for module in (judging, paper_tables):  # the statistics' and the tables' intervals
+        monkeypatch.setattr(module, "bootstrap_interval", recorded)
+    monkeypatch.setattr(judging, "criterion_from_runs", partial(wc.criterion_from_runs, resamples=300))
 
     def everything():
         intervals.clear()
@@ -352,9 +355,9 @@ def test_batched_statistics_give_the_per_resample_loops_tables_and_criteria(repo
     sq_b[np.isnan(sq_a)] = np.nan
     sq_a[3], sq_b[3] = np.nan, np.nan  # a run with no pair held
     monkeypatch.undo()
-    fast = wc.bootstrap_interval((sq_b, sq_a), paper001._rmse_diff, resamples=400)
+    fast = wc.bootstrap_interval((sq_b, sq_a), judging._rmse_diff, resamples=400)
     monkeypatch.setattr(wc, "_batched_statistics", loop_statistics)
-    slow = wc.bootstrap_interval((sq_b, sq_a), paper001._rmse_diff, resamples=400)
+    slow = wc.bootstrap_interval((sq_b, sq_a), judging._rmse_diff, resamples=400)
     assert np.all(np.isfinite(slow)) and fast == pytest.approx(slow, rel=1e-12, abs=0.0)
 
 
@@ -362,18 +365,18 @@ def test_c1_counts_false_tracks_after_removal_on_pings_without_one_before():
     before, after, post = _identical_runs()
     after = after.copy()
     after[:, 16] = 3  # ping 17: none before, three after, in every run -> 5 after for 10 before: 50 %, not met
-    c = paper001.c1_criterion(before, after, post)
+    c = judging.c1_criterion(before, after, post)
     assert np.isclose(c.ours, 0.5) and c.verdict == "not met"
 
 
 def test_c1_is_not_judgeable_below_its_population_minimum():
     before, after, post = _identical_runs()
-    c = paper001.c1_criterion(before, after, post, min_false=601)  # 600 false tracks before removal
+    c = judging.c1_criterion(before, after, post, min_false=601)  # 600 false tracks before removal
     assert c.interval == pytest.approx((0.8, 0.8)) and c.verdict == UNJUDGED
     assert c.extra["precondition"]["holds"] is False and "NOT JUDGEABLE: 600 false tracks" in c.detail
     after = after.copy()
     after[:, 16] = 3
-    c = paper001.c1_criterion(before, after, post, min_false=601)  # never "not met" either
+    c = judging.c1_criterion(before, after, post, min_false=601)  # never "not met" either
     assert c.verdict == UNJUDGED and "'not met' from the interval alone set aside" in c.detail
     assert c.extra["verdict_if_judged"] == "not met"
 
@@ -382,20 +385,20 @@ def test_c1_is_not_judgeable_below_its_population_minimum():
 
 
 def test_paper_rows_use_the_papers_initial_covariance_and_the_mofn_row_counts_initiation():
-    paper = paper001._tracker_config(HOST, "paper")
+    paper = scenario._tracker_config(HOST, "paper")
     assert (paper.prior, paper.sigma_v, paper.sigma_c, paper.initiation_hits) == ("speed-course", 1.0, 1.0, 0)
     assert paper.detection_sigma is None  # the paper's own R (the filter's polar model)
-    mofn = paper001._tracker_config(HOST, "paper-mofn")
+    mofn = scenario._tracker_config(HOST, "paper-mofn")
     assert mofn.initiation_hits == 2 and mofn.detection_sigma == pytest.approx(2.0)  # R matched to the sensor
     assert (mofn.prior, mofn.sigma_v, mofn.sigma_c) == ("speed-course", 1.0, 1.0)
-    assert paper001._tracker_config(HOST, "two-point").prior == "two-point"
+    assert scenario._tracker_config(HOST, "two-point").prior == "two-point"
 
 
 def test_c2_states_its_cap_from_the_target_detections_the_remover_drops(report):
     """The numbers in criterion 2's detail, counted here detection by detection from the scans and the remover."""
     recipe, results = report
-    scans = paper001.simulate_scans(HOST, 1, "sim", RUNS)
-    after = HOST.clutter_remover(paper001.REMOVER).remove(scans, **paper001.HOUGH)
+    scans = scenario.simulate_scans(HOST, 1, "sim", RUNS)
+    after = HOST.clutter_remover(scenario.REMOVER).remove(scans, **scenario.HOUGH)
     counts = {"miss_n": 0, "miss_dropped": 0, "hit_n": 0, "hit_dropped": 0}
     for r in range(RUNS):
         for k in range(5, 20):
@@ -407,7 +410,7 @@ def test_c2_states_its_cap_from_the_target_detections_the_remover_drops(report):
             counts[f"{name}_n"] += 1
             counts[f"{name}_dropped"] += not any(after.valid[r, k, j] for j in here)
     assert counts["miss_n"] > 0 and counts["hit_n"] > 0
-    assert paper001.remover_cap(results["sim/0"]) == counts
+    assert judging.remover_cap(results["sim/0"]) == counts
     c2 = {c.id: c for c in recipe.criteria(results)}["2"]
     m = counts
     assert (f"drops {100 * m['miss_dropped'] / m['miss_n']:.1f} % ({m['miss_dropped']} of {m['miss_n']}) of the "
@@ -418,28 +421,28 @@ def test_c2_states_its_cap_from_the_target_detections_the_remover_drops(report):
 
 def test_declared_unknowns_are_judged_across_their_grids_on_the_same_runs(report):
     recipe, results = report
-    assert recipe.unknowns == paper001.UNKNOWNS
+    assert recipe.unknowns == scenario.UNKNOWNS
     crit = recipe.criteria(results)
     post = np.arange(20) >= 5
     for c in crit:
-        for u in paper001.UNKNOWNS:
+        for u in scenario.UNKNOWNS:
             at = {a.value: a for a in c.across if a.unknown == u.name}
             assert list(at) == list(u.grid)
             assert at[u.primary].verdict == c.verdict and at[u.primary].ours == c.ours
     c1 = {a.value: a for a in crit[0].across if a.unknown == "clutter per ping"}
     for value in (15.625, 62.5):
-        res = results[paper001._unknown_key(paper001.CLUTTER_PER_PING, value, 0)]
+        res = results[scenario._unknown_key(scenario.CLUTTER_PER_PING, value, 0)]
         b, a = (TrackCounts.from_arrays(res, f"paper/{ph}/") for ph in ("before", "after"))
         before = sum(int(b.false[r, k]) for r in range(RUNS) for k in range(20) if post[k])
         after = sum(int(a.false[r, k]) for r in range(RUNS) for k in range(20) if post[k])
         assert before == 0 or np.isclose(c1[value].ours, 1 - after / before)
         # the grid value's clutter per ping: lambda + P_D on average (Poisson over 100 pings: within 5 sigma)
-        lam = value + paper001.SONAR["pd"]
+        lam = value + scenario.SONAR["pd"]
         assert abs(float(res["clutter_per_ping"]) - lam) < 5 * np.sqrt(value / (RUNS * 20))
     # the same target detections at every grid value (the clutter is drawn after them)
-    base = paper001.simulate_scans(HOST, 1, "sim", 2)
-    dense = paper001.simulate_scans(HOST, 1, "sim", 2, clutter=paper001._unknown_changes(
-        paper001.CLUTTER_PER_PING, 62.5)["clutter"])
+    base = scenario.simulate_scans(HOST, 1, "sim", 2)
+    dense = scenario.simulate_scans(HOST, 1, "sim", 2, clutter=scenario._unknown_changes(
+        scenario.CLUTTER_PER_PING, 62.5)["clutter"])
     for s in (base, dense):
         assert (s.origin == 0).sum() == (base.origin == 0).sum()
     np.testing.assert_array_equal(dense.z[dense.origin == 0], base.z[base.origin == 0])
@@ -475,20 +478,20 @@ def test_the_rows_shared_with_the_sim_blocks_are_those_a_task_of_their_own_compu
     value's settings, and the variants task run on the main remover alone: equal bit for bit."""
     _, results = report
     sim = results["sim/0"]
-    scans = paper001.simulate_scans(HOST, 1, "sim", RUNS)  # block 0 of seed 1
-    after = HOST.clutter_remover(paper001.REMOVER).remove(scans, **paper001.HOUGH)
+    scans = scenario.simulate_scans(HOST, 1, "sim", RUNS)  # block 0 of seed 1
+    after = HOST.clutter_remover(scenario.REMOVER).remove(scans, **scenario.HOUGH)
     for value in ("2 of 4", "4 of 6"):
         m, n = (int(v) for v in value.split(" of "))
-        cfg = paper001._tracker_config(HOST, "paper", {"confirm_hits": m, "confirm_window": n})
+        cfg = scenario._tracker_config(HOST, "paper", {"confirm_hits": m, "confirm_window": n})
         for phase, data in (("before", scans), ("after", after)):
-            _, counts, _ = paper001._track(HOST, data, paper001.PAPER_FILTER, cfg, 1, ("paper", phase))
+            _, counts, _ = scenario._track(HOST, data, scenario.PAPER_FILTER, cfg, 1, ("paper", phase))
             prefix = f"unknown/mofn/{value.replace(' ', '')}/paper/{phase}/"
             for name, arr in counts.to_arrays("").items():
                 np.testing.assert_array_equal(sim[prefix + name], arr)
-    own = paper001._variants_task(TaskContext(params={**_sim_params(), "variants": {"main": {}}}, seed=1,
+    own = paper_tasks._variants_task(TaskContext(params={**_sim_params(), "variants": {"main": {}}}, seed=1,
                                               host=HOST))
     for arm in ("paper", "stated"):
-        for name in paper001.FIELDS:
+        for name in scenario.FIELDS:
             np.testing.assert_array_equal(own[f"main/{arm}/after/{name}"], sim[f"{arm}/after/{name}"])
     for name in ("miss_n", "miss_kept", "hit_n", "hit_kept", "clutter_n", "clutter_kept"):
         np.testing.assert_array_equal(own[f"rem/main/{name}"], sim[f"rem/main/{name}"])
@@ -496,4 +499,37 @@ def test_the_rows_shared_with_the_sim_blocks_are_those_a_task_of_their_own_compu
 
 
 def _sim_params() -> dict:
-    return {"runs": RUNS, "hough": paper001.HOUGH, "block": 0}
+    return {"runs": RUNS, "hough": scenario.HOUGH, "block": 0}
+
+
+def test_sensitivity_tasks_feed_only_the_across_verdicts(report):
+    """The tasks declared ``sensitivity=True`` are exactly the clutter grid's non-primary values, and no criterion's
+    verdict at the primary values reads them: with their false-track counts replaced, every criterion's verdict,
+    statistic, interval and detail are unchanged while the clutter grid's ``across`` entries change."""
+    recipe, results = report
+    values = {**recipe.sizes["quick"], "runs": RUNS, "tuning_runs": RUNS}
+    listed = recipe.tasks(RecipeOptions(size="test", values=values, seed=1, filters=recipe.default_filters))
+    marked = {t.key for t in listed if t.sensitivity}
+    assert marked == {scenario._unknown_key(scenario.CLUTTER_PER_PING, v, 0) for v in (15.625, 62.5)}
+    base = recipe.criteria(results)
+    changed = dict(results)
+    for key in marked:  # every false track doubled, plus one at every ping after removal
+        res = dict(results[key])
+        res["paper/before/false"] = 2 * res["paper/before/false"] + 3
+        res["paper/after/false"] = res["paper/after/false"] + 1
+        res["paper/after/held"] = np.zeros_like(res["paper/after/held"])
+        changed[key] = res
+    again = recipe.criteria(changed)
+    assert [c.id for c in again] == [c.id for c in base]
+    moved = 0
+    for a, b in zip(base, again):
+        assert (a.verdict, a.detail) == (b.verdict, b.detail), a.id
+        np.testing.assert_array_equal(np.asarray(a.ours, dtype=float), np.asarray(b.ours, dtype=float))
+        np.testing.assert_array_equal(np.asarray(a.interval, dtype=float), np.asarray(b.interval, dtype=float))
+        for x, y in zip(a.across, b.across):
+            assert x.unknown == y.unknown and x.value == y.value
+            if x.unknown == scenario.CLUTTER_PER_PING.name and x.value != scenario.CLUTTER_PER_PING.primary:
+                moved += (x.ours, x.verdict) != (y.ours, y.verdict)
+            else:
+                assert (x.ours, x.verdict) == (y.ours, y.verdict) or x.ours != x.ours  # NaN stays NaN
+    assert moved >= 2  # the perturbed grid values' own verdicts read the marked tasks

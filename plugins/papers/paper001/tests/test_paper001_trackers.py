@@ -16,7 +16,9 @@ from workbench.plugins import load_host
 from workbench.report.engine import resolve_trackers
 from workbench.specs import RecipeOptions, TaskContext, TrackerSpec
 from workbench.tracking import CONFIRMED, TrackLog
-from workbench_papers.paper001 import recipe as paper001
+from workbench_papers.paper001 import recipe as paper_recipe
+from workbench_papers.paper001 import scenario
+from workbench_papers.paper001 import tasks as paper_tasks
 
 
 def _echo(scans, filt, motion, model, *, seed=0, key=(), **params):
@@ -36,8 +38,8 @@ class EchoTracker:
 HOST = load_host(extra_plugins=[("echo", EchoTracker())])
 #: runs of the comparison below (the quick size has 10; the checks recompute from these runs whatever their count)
 RUNS = 3
-C, P = paper001.GOSPA_C, paper001.GOSPA_P
-POST = np.arange(paper001.PINGS) >= 5  # the pings after the Hough warm-up (pings 6-20)
+C, P = scenario.GOSPA_C, scenario.GOSPA_P
+POST = np.arange(scenario.PINGS) >= 5  # the pings after the Hough warm-up (pings 6-20)
 
 
 @pytest.fixture(scope="module")
@@ -85,8 +87,8 @@ def _counts_by_definition(log: TrackLog, truth: np.ndarray):
     held = np.zeros(truth.shape[:2], bool)
     for run, tid in sorted({(int(r), int(t)) for r, t in zip(log.run, log.track_id)}):
         rows = np.flatnonzero((log.run == run) & (log.track_id == tid) & (log.status == CONFIRMED))
-        near = [np.hypot(*(log.mean[i, :2] - truth[run, log.ping[i]])) <= paper001.TRUE_RADIUS for i in rows]
-        true = np.mean(near) >= paper001.TRUE_FRACTION
+        near = [np.hypot(*(log.mean[i, :2] - truth[run, log.ping[i]])) <= scenario.TRUE_RADIUS for i in rows]
+        true = np.mean(near) >= scenario.TRUE_FRACTION
         for i in rows:
             if true:
                 held[run, log.ping[i]] = True
@@ -103,11 +105,11 @@ def test_the_trackers_table_is_gospa_and_counts_of_the_saved_tracks(compared):
     recipe, results = compared
     table = _table(recipe, results)
     rows = {(r[0], r[3]): r for r in table.rows}
-    truth = paper001.target_truth(RUNS).states[..., :2]
+    truth = scenario.target_truth(RUNS).states[..., :2]
     for ref in ("gnn", "jipda", "gm-phd", "echo"):
         for phase in ("before", "after"):
             log = _saved_log(results, ref, phase)
-            assert log.runs == RUNS and log.pings == paper001.PINGS
+            assert log.runs == RUNS and log.pings == scenario.PINGS
             assert ref == "echo" or log.cov.shape == (log.run.size, 4, 4)
             g = _gospa_one_target(log, truth)
             np.testing.assert_allclose(results["trackers/0"][f"tracker:{ref}/{phase}/gospa"], g, rtol=1e-12,
@@ -124,7 +126,7 @@ def test_the_trackers_table_is_gospa_and_counts_of_the_saved_tracks(compared):
                     assert row[8].startswith(f"{100 * (1 - false[:, POST].sum() / before[:, POST].sum()):.1f} %")
     # the paper's M-of-N rows are its judged and stated-accuracy arms, read from the simulation block
     sim = results["sim/0"]
-    for arm, label in (("paper", paper001.ARM_LABELS["paper"]), ("stated", paper001.ARM_LABELS["stated"])):
+    for arm, label in (("paper", scenario.ARM_LABELS["paper"]), ("stated", scenario.ARM_LABELS["stated"])):
         for phase in ("before", "after"):
             row = next(r for r in table.rows if r[0] == "mofn" and r[3] == phase and label in r[1])
             assert row[2].startswith("paper's method")
@@ -136,7 +138,7 @@ def test_the_trackers_figure_has_every_tracker_before_and_after(compared):
     recipe, results = compared
     fig = next(f for f in recipe.figures if f.id == "gospa-trackers").data(results)
     assert fig["rows"].tolist() == ["mofn (paper rows)", "mofn (stated R)", "gnn", "jipda", "gm-phd", "echo"]
-    truth = paper001.target_truth(RUNS).states[..., :2]
+    truth = scenario.target_truth(RUNS).states[..., :2]
     for i, ref in enumerate(fig["rows"].tolist()):
         for phase in ("before", "after"):
             if ref.startswith("mofn"):
@@ -160,10 +162,10 @@ def test_the_extension_rows_see_the_paper_rows_detections(compared):
     per_ping = {}
     for phase in ("before", "after"):
         log = _saved_log(results, "echo", phase)
-        per_ping[phase] = np.bincount(log.ping, minlength=paper001.PINGS) / RUNS
+        per_ping[phase] = np.bincount(log.ping, minlength=scenario.PINGS) / RUNS
     np.testing.assert_allclose(per_ping["after"], results["sim/0"]["detections_per_ping"], rtol=1e-12)
     assert np.all(per_ping["after"][:5] == 0)  # the warm-up keeps nothing
-    scans = paper001.simulate_scans(HOST, 2, "sim", RUNS)  # the report's seed, block 0
+    scans = scenario.simulate_scans(HOST, 2, "sim", RUNS)  # the report's seed, block 0
     np.testing.assert_allclose(per_ping["before"], scans.valid.sum(axis=2).mean(axis=0), rtol=1e-12)
     params = next(t.params for t in recipe.tasks(RecipeOptions("test", {**recipe.sizes["quick"], "runs": RUNS}, 2,
                                                                recipe.default_filters, trackers=("gnn",)))
@@ -179,10 +181,10 @@ class SmallPaper001:
 
     @hookimpl
     def workbench_report_recipes(self):
-        r = paper001.RECIPE
+        r = paper_recipe.RECIPE
         small = {"quick": {**r.sizes["quick"], "runs": 2}, "full": {**r.sizes["quick"], "runs": 2}}
         return [replace(r, sizes=small, criteria=None,
-                        tasks=lambda o: [t for t in paper001.tasks(o) if t.key in ("sim/0", "trackers/0")],
+                        tasks=lambda o: [t for t in paper_tasks.tasks(o) if t.key in ("sim/0", "trackers/0")],
                         tables=tuple(t for t in r.tables if t.id == "trackers"),
                         figures=tuple(f for f in r.figures if f.id == "gospa-trackers"))]
 
@@ -199,8 +201,8 @@ class BoomTracker:
 
 def test_a_tracker_that_raises_loses_its_own_rows_only():
     host = load_host(extra_plugins=[("echo", EchoTracker()), ("boom", BoomTracker())])
-    options = RecipeOptions("test", {**paper001.SIZES["quick"], "runs": 1}, 2, ("cmkf-l",), trackers=("boom", "echo"))
-    task = next(t for t in paper001.tasks(options) if t.key == "trackers/0")
+    options = RecipeOptions("test", {**scenario.SIZES["quick"], "runs": 1}, 2, ("cmkf-l",), trackers=("boom", "echo"))
+    task = next(t for t in paper_tasks.tasks(options) if t.key == "trackers/0")
     results = {"trackers/0": task.run(TaskContext(params=task.params, seed=2, host=host))}
     assert str(results["trackers/0"]["error/tracker:boom"]) == "RuntimeError: boom at the first scan"
     rows = _table(host.recipe("001"), results).rows
@@ -213,7 +215,7 @@ def test_trackers_option_adds_an_installed_tracker_and_removes_a_default_one(mon
     host = load_host(block=("paper001",), extra_plugins=[("small001", SmallPaper001()), ("echo", EchoTracker())])
     monkeypatch.setattr(cli, "load_host", lambda block=(): host)
     # -gnn alone: the trackers block runs the others
-    chosen = resolve_trackers(paper001.DEFAULT_TRACKERS, "-gnn", host)
+    chosen = resolve_trackers(scenario.DEFAULT_TRACKERS, "-gnn", host)
     assert chosen == ("mofn", "jipda", "gm-phd")
     out = tmp_path / "r"
     assert main(["report", "--paper", "001", "--quick", "--out", str(out), "--no-progress",
