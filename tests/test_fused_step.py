@@ -231,3 +231,48 @@ def test_the_kit_check_fails_a_fused_turn_pass_that_is_not_the_two_calls(monkeyp
     monkeypatch.setattr(motion_numba, "ct_rate_propagate_range_bearing", off_by_an_ulp)
     with pytest.raises(AssertionError, match="step's state differs from predict"):
         check_step_matches_three_calls(_served_turn(HOST.filter("sir").configure(particles=300)))
+
+
+@needs_numba
+def test_the_gather_with_the_estimate_s_sums_is_taken_and_equals_the_three_calls_over_several_tiles(monkeypatch):
+    # resampling at every update: the estimate's sums are taken in the gather (particle_core.reweight_estimate),
+    # tile by tile; more particles than two tiles of those sums, the last tile partial
+    from workbench.kernels import particle_numba
+
+    import workbench_filters.particle as sir_module
+
+    taken = []
+    real = core.reweight_estimate
+
+    def spy(*args, **kwargs):
+        out = real(*args, **kwargs)
+        taken.append(out is not None)
+        return out
+
+    monkeypatch.setattr(sir_module, "reweight_estimate", spy)
+    spec = HOST.filter("sir").configure(particles=2 * particle_numba.MOMENT_TILE + 300, threshold=2.0)
+    assert "bit for bit" in check_step_matches_three_calls(spec)
+    assert taken == [True, False, True, True]  # range-bearing scans 1, 4, 5; scan 2 is partly measured (reweight)
+    # where it does not apply it declines: the NumPy backend, a threshold that may keep the weights, an item without
+    # a measurement
+    rng = np.random.default_rng(1)
+    x = _cloud(rng, 2, 300)
+    log_w, prev = np.log(rng.random((2, 300))), np.full((2, 300), -np.log(300))
+    for args in [(2.0, "numpy", [True, True]), (0.5, "numba", [True, True]), (2.0, "numba", [True, False])]:
+        assert real(x, log_w, prev, np.array(args[2]), args[0], rng, args[1]) is None
+
+
+@needs_numba
+def test_the_kit_check_fails_a_gather_whose_estimate_is_not_the_estimate_s(monkeypatch):
+    from workbench.kernels import particle_numba
+
+    real = particle_numba.systematic_gather_moments
+
+    def off_by_an_ulp(*args):  # the covariance one ulp up: sums that are not the estimate's bit for bit
+        out = real(*args)
+        args[-1][...] = np.nextafter(args[-1], np.inf)
+        return out
+
+    monkeypatch.setattr(particle_numba, "systematic_gather_moments", off_by_an_ulp)
+    with pytest.raises(AssertionError, match="step's estimate differs"):
+        check_step_matches_three_calls(HOST.filter("sir").configure(particles=300, threshold=2.0))

@@ -53,7 +53,7 @@ from .types import Gaussian, InputError, Particles
 
 __all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "propagate_f", "noise_columns",
            "log_likelihood", "weighted_log_likelihood", "predict_log_weights", "log_likelihood_cov", "reweight",
-           "estimate", "diagnostics", "compiled"]
+           "reweight_estimate", "estimate", "diagnostics", "compiled"]
 
 
 @dataclass(frozen=True)
@@ -494,6 +494,46 @@ def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, pre
     if threshold <= 1.0:
         out[rows] = -np.log(N)
     return moved.transpose(1, 2, 0), out, resample, dead
+
+
+def reweight_estimate(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, present: np.ndarray,
+                      threshold: float, rng: np.random.Generator, backend: str = "numpy",
+                      top: np.ndarray | None = None):
+    """:func:`reweight` and :func:`estimate` of its result in one pass over the resampled particles, or ``None`` where
+    that pass does not apply (then call the two): it needs the compiled backend, resampling at every update
+    (``threshold > 1``), a measurement for every item and the planar state (``n = 4``).  The gather sums each tile
+    of particles it has written while the tile is in L1
+    (:func:`~workbench.kernels.particle_numba.systematic_gather_moments`), the tiles and sums of
+    :func:`~workbench.kernels.particle_numba.moments`, so the numbers are the two calls' bit for bit: the same draw
+    of the offsets, particles, weights, counters and estimate.
+
+    Returns ``(particles, log_w, resampled, dead, estimate)`` (:func:`reweight`'s, then a
+    :class:`~workbench.types.Gaussian`).  Shapes as :func:`reweight`'s.
+    """
+    B, N = np.shape(log_w)
+    present = np.asarray(present, dtype=bool)
+    if not compiled(backend) or not threshold > 1.0 or not present.all() or np.shape(particles)[-1] != 4 or N == 0:
+        return None
+    need_rng(rng, "particle_core.reweight_estimate")
+    previous = np.ascontiguousarray(previous, dtype=float)
+    if top is None:
+        top = np.max(log_w, axis=1)
+    # as reweight: an item whose every weight underflowed (or holds a NaN/inf) is resampled from its previous weights
+    dead = ~np.isfinite(top)
+    weights = log_w
+    if dead.any():
+        weights = np.where(dead[:, None], previous, log_w)
+        top = np.max(weights, axis=1)
+    u0 = rng.random((B, 1))
+    src = _rows(particles)
+    moved = np.empty((4, B, N))
+    mean = np.empty((B, 4))
+    cov = np.empty((B, 4, 4))
+    lw_equal = -np.log(N)
+    _kernels().systematic_gather_moments(np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(top), u0[:, 0],
+                                         src, moved, _scratch("cdf", N), _scratch("parent", N + 1, np.int64),
+                                         lw_equal, mean, cov)
+    return (moved.transpose(1, 2, 0), np.full((B, N), lw_equal), present, dead, Gaussian.trusted(mean, cov))
 
 
 def estimate(state: ParticleState, backend: str = "numpy") -> Gaussian:

@@ -35,7 +35,7 @@ from workbench.kalman_core import measurement_covariance
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
 from workbench.particle_core import (ParticleState, diagnostics, estimate, init, log_likelihood_cov, predict,
-                                     predict_log_weights, reweight, weighted_log_likelihood)
+                                     predict_log_weights, reweight, reweight_estimate, weighted_log_likelihood)
 from workbench.specs import FilterSpec
 from workbench.types import InputError, Particles, Scan
 
@@ -97,8 +97,11 @@ def step(state: ParticleState, motion: MotionModel, scan: Scan, model: Measureme
     state) and the measurement model is the planar range-bearing one without a per-detection covariance, the
     propagation, the likelihood and the rows' max are one pass
     (:func:`~workbench.particle_core.predict_log_weights`), and with resampling at every update (``threshold > 1``)
-    the predicted particles, which never outlive the step, live in a reused work array; normalising, resampling
-    and the estimate are the three-call path's own code.  Otherwise it is the three calls."""
+    the predicted particles, which never outlive the step, live in a reused work array; with a measurement for every
+    item and the planar state, the estimate's sums are taken in the resampling's gather, tile by tile while the
+    particles are in L1 (:func:`~workbench.particle_core.reweight_estimate`, the same tiles and sums as the
+    estimate's); otherwise normalising, resampling and the estimate are the three-call path's own code.  Elsewhere
+    it is the three calls."""
     z, present = _measurement(scan)
     fused = None
     if present.any() and scan.cov is None:
@@ -113,10 +116,16 @@ def step(state: ParticleState, motion: MotionModel, scan: Scan, model: Measureme
     x, log_w, top = fused
     previous = state.cloud.log_weights
     before = estimate(ParticleState(Particles.trusted(x, previous)), backend) if predicted else None
-    x, log_w, resampled, dead = reweight(x, log_w, previous, present, threshold, rng, backend, top)
+    # resampling every item with the estimate's sums in the gather's pass, where it applies (the same numbers)
+    done = reweight_estimate(x, log_w, previous, present, threshold, rng, backend, top)
+    if done is not None:
+        x, log_w, resampled, dead, est = done
+    else:
+        x, log_w, resampled, dead = reweight(x, log_w, previous, present, threshold, rng, backend, top)
+        est = None
     after = ParticleState(Particles.trusted(x, log_w), state.resamples + int(resampled.sum()),
                           state.underflows + int(dead.sum()))
-    return after, estimate(after, backend), before
+    return after, estimate(after, backend) if est is None else est, before
 
 
 def make_sir(particles: int = 500, threshold: float = 0.5, name: str | None = None,

@@ -61,16 +61,34 @@ def _as_double(typingctx, bits):  # reinterpret int64 bits as float64
     return types.float64(types.int64), codegen
 
 
+@intrinsic
+def _as_int64(typingctx, value):  # reinterpret float64 bits as int64
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.int64))
+
+    return types.int64(types.float64), codegen
+
+
+#: ``1.5 * 2^52``: for a whole ``n`` with ``|n| < 2^51``, ``n + ROUND_SHIFT`` is exact and its bits are
+#: ``bits(ROUND_SHIFT) + n``, whose low 12 bits are those of ``n``.
+ROUND_SHIFT = 6755399441055744.0
+
+
 @jit(inline="always")
 def exp(x):
     """``exp(x)`` for ``x <= 0``, the steps of :func:`.particle_numpy.poly_exp`: ``0`` below ``EXP_UNDERFLOW``
-    (and for ``-inf``), NaN for NaN."""
+    (and for ``-inf``), NaN for NaN.
+
+    No conversion between double and integer (on a CPU without AVX-512DQ, x86 has no vector instruction for
+    it, and the loop would run lane by lane): ``n`` is rounded to the nearest whole double, ties to even, as
+    Python's ``round`` and ``np.round`` do (``np.rint``), and ``2^n`` is built from the bits of ``n +``
+    :data:`ROUND_SHIFT` (the same ``(n + 1023) << 52`` in the exponent field, all other bits shifted out)."""
     y = max(x, underflow)
-    n = round(y * inv_ln2)
+    n = np.rint(y * inv_ln2)
     r = (y - n * ln2_hi) - n * ln2_lo
     p = ((((((((((((e0 * r + e1) * r + e2) * r + e3) * r + e4) * r + e5) * r + e6) * r + e7) * r + e8) * r + e9)
              * r + e10) * r + e11) * r + e12) * r + e13
-    v = p * _as_double((np.int64(n) + 1023) << 52)
+    v = p * _as_double((_as_int64(n + ROUND_SHIFT) + 1023) << 52)
     return v if x >= underflow else (0.0 if x < underflow else x)
 
 
@@ -200,7 +218,7 @@ def _range_bearing_term(dx, dy, zr, zb, l00, l10, l11, cross):
     nr = zr - math.sqrt(dx * dx + dy * dy)
     a = zb - atan2(dy, dx)
     # wrap to (-pi, pi]: a - 2 pi ceil((a - pi) / 2 pi)
-    nb = a - two_pi * math.ceil((a - pi) * inv_two_pi)
+    nb = a - two_pi * np.ceil((a - pi) * inv_two_pi)
     # white = L^-1 nu;  -1/2 nu^T R^-1 nu = -1/2 |white|^2
     w0 = l00 * nr
     w1 = l10 * nr + l11 * nb if cross else l11 * nb
@@ -357,6 +375,36 @@ def _take_first_parents(dst, src, parent):
 
 
 @jit
+def _parents(row, m, u, cdf, parent):
+    """The systematic draws of one item as parent slots: ``c_i = sum_{k<=i} w_k / sum_k w_k`` with ``w = exp(row -
+    m)`` (uniform where ``m``, the row's max, is not finite), ``edge_i = ceil(N c_i - u)`` clipped to ``[0, N]``,
+    and ``parent[edge_{i-1}] = i`` for every ``i`` in order (other slots 0), so that the running max of ``parent``
+    is the particle of each draw.  ``cdf (N,)`` and ``parent (N + 1,)`` are work arrays."""
+    N = row.shape[0]
+    if math.isfinite(m):
+        _exp_shifted(row, m, cdf)
+    else:
+        cdf[:] = 1.0
+    # c_i = sum_{k <= i} w_k in index order, then / c_{N-1}
+    acc = 0.0
+    for i in range(N):
+        acc += cdf[i]
+        cdf[i] = acc
+    last = cdf[N - 1]
+    # #{j : (u0 + j) / N < c_i} = ceil(N c_i - u0), clipped to [0, N]
+    for i in range(N):
+        cdf[i] = min(max(np.ceil((cdf[i] / last) * N - u), 0.0), float(N))
+    # parent[edge_{i-1}] = i for every i in order: the last writer of a slot is the particle whose draws
+    # start there (those with no draw share the slot with it and come before); then a running max, taken
+    # as the particles are gathered, fills the slots of repeated draws.  No branch on the counts.
+    parent[:] = 0
+    start = 0
+    for i in range(N):
+        parent[start] = i
+        start = int(cdf[i])
+
+
+@jit
 def systematic_gather(log_w, top, rows, u0, x, out, cdf, parent):
     """Systematic resampling of the items ``rows``, gathered into ``out``; other items copied unchanged.
 
@@ -372,34 +420,48 @@ def systematic_gather(log_w, top, rows, u0, x, out, cdf, parent):
     r = 0
     for b in range(B):
         if r < rows.shape[0] and rows[r] == b:
-            m = top[b]
-            if math.isfinite(m):
-                _exp_shifted(log_w[b], m, cdf)
-            else:
-                cdf[:] = 1.0
-            # c_i = sum_{k <= i} w_k in index order, then / c_{N-1}
-            acc = 0.0
-            for i in range(N):
-                acc += cdf[i]
-                cdf[i] = acc
-            last = cdf[N - 1]
-            u = u0[r]
-            # #{j : (u0 + j) / N < c_i} = ceil(N c_i - u0), clipped to [0, N]
-            for i in range(N):
-                cdf[i] = min(max(math.ceil((cdf[i] / last) * N - u), 0.0), float(N))
-            # parent[edge_{i-1}] = i for every i in order: the last writer of a slot is the particle whose draws
-            # start there (those with no draw share the slot with it and come before); then a running max, taken
-            # as the particles are gathered, fills the slots of repeated draws.  No branch on the counts.
-            parent[:] = 0
-            start = 0
-            for i in range(N):
-                parent[start] = i
-                start = int(cdf[i])
+            _parents(log_w[b], top[b], u0[r], cdf, parent)
             _take_first_parents(out[:, b], x[:, b], parent[:N])
             r += 1
         else:
             for c in range(n):
                 _copy(out[c, b], x[c, b])
+    return out
+
+
+@jit
+def systematic_gather_moments(log_w, top, u0, x, out, cdf, parent, lw_equal, mean, cov):
+    """:func:`systematic_gather` of every item of the planar state (``n = 4``) and :func:`moments` of the result
+    with the equal weights ``exp(lw_equal)`` (``-log N``, what the resampled items' log-weights are), in the
+    gather's pass: each tile of :data:`MOMENT_TILE` gathered particles is summed (:func:`_equal_weight_tile_sums`)
+    while it is in L1, instead of being read back from memory by the estimate.  The same tiles, sums and pivot (the
+    first particle: every weight is the largest) as :func:`moments`, so ``mean`` and ``cov`` are its numbers bit for
+    bit, and ``out`` is :func:`systematic_gather`'s.
+
+    Shapes: ``log_w (B, N)``; ``top (B,)``; ``u0 (B,)``; ``x, out (4, B, N)``; ``cdf (N,)``, ``parent (N + 1,)``
+    int64 scratch; ``mean (B, 4)``, ``cov (B, 4, 4)``.
+    """
+    n, B, N = x.shape
+    s = np.empty(4)
+    acc = np.zeros(14)
+    for b in range(B):
+        _parents(log_w[b], top[b], u0[b], cdf, parent)
+        d0, d1, d2, d3 = out[0, b], out[1, b], out[2, b], out[3, b]
+        s0, s1, s2, s3 = x[0, b], x[1, b], x[2, b], x[3, b]
+        acc[:] = 0.0
+        p = 0
+        for lo in range(0, N, MOMENT_TILE):
+            hi = min(lo + MOMENT_TILE, N)
+            for j in range(lo, hi):  # _take_first_parents' planar loop, one tile
+                p = max(p, parent[j])
+                d0[j] = s0[p]
+                d1[j] = s1[p]
+                d2[j] = s2[p]
+                d3[j] = s3[p]
+            if lo == 0:
+                s[0], s[1], s[2], s[3] = d0[0], d1[0], d2[0], d3[0]
+            _equal_weight_tile_sums(d0[lo:hi], d1[lo:hi], d2[lo:hi], d3[lo:hi], s, acc)
+        _finish_equal(float(N), lw_equal, acc, s, mean[b], cov[b])
     return out
 
 
@@ -419,23 +481,111 @@ def _dot3(w, a, b):
     return s
 
 
+#: Particles per tile of the planar moments' equal-weight sums: :func:`moments` sums each tile by
+#: :func:`_equal_weight_tile_sums` and adds the tiles' sums in order, and :func:`systematic_gather_moments` does the
+#: same on each tile it has just gathered (while it is in L1), so that both give the same bits.
+MOMENT_TILE = 1024
+
+
+@reduce_jit
+def _equal_weight_tile_sums(x0, x1, x2, x3, s, acc):
+    """``acc += [sum d_0 .. sum d_3, sum d_j d_k (j <= k, row by row)]`` over one tile of the planar state, with
+    ``d = x - s`` (``acc (14,)``): the unweighted sums of :func:`_moments_planar` for equal weights.  Its own
+    function, compiled once, so that both callers sum a tile in the same order."""
+    wide_vectors()
+    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+    a0 = a1 = a2 = a3 = 0.0
+    c00 = c01 = c02 = c03 = c11 = c12 = c13 = c22 = c23 = c33 = 0.0
+    for i in range(x0.shape[0]):
+        d0 = x0[i] - s0
+        d1 = x1[i] - s1
+        d2 = x2[i] - s2
+        d3 = x3[i] - s3
+        a0 += d0
+        a1 += d1
+        a2 += d2
+        a3 += d3
+        c00 += d0 * d0
+        c01 += d0 * d1
+        c02 += d0 * d2
+        c03 += d0 * d3
+        c11 += d1 * d1
+        c12 += d1 * d2
+        c13 += d1 * d3
+        c22 += d2 * d2
+        c23 += d2 * d3
+        c33 += d3 * d3
+    acc[0] += a0
+    acc[1] += a1
+    acc[2] += a2
+    acc[3] += a3
+    acc[4] += c00
+    acc[5] += c01
+    acc[6] += c02
+    acc[7] += c03
+    acc[8] += c11
+    acc[9] += c12
+    acc[10] += c13
+    acc[11] += c22
+    acc[12] += c23
+    acc[13] += c33
+
+
+@reduce_jit
+def _finish_planar(sw, acc, s, mean, cov):
+    """``mean = s sum w + sum w d`` and ``cov = sum w d d^T - e a^T - a e^T + e e^T sum w`` from the weighted sums
+    ``acc`` (``a = acc[:4]``, then ``sum w d d^T`` as in :func:`_equal_weight_tile_sums`) about the pivot ``s``,
+    ``e = mean - s`` (the twin's ``sum w (x - mean)(x - mean)^T`` expanded)."""
+    a0, a1, a2, a3 = acc[0], acc[1], acc[2], acc[3]
+    a = (a0, a1, a2, a3)
+    # e = mean - s
+    e = (a0 + s[0] * (sw - 1.0), a1 + s[1] * (sw - 1.0), a2 + s[2] * (sw - 1.0), a3 + s[3] * (sw - 1.0))
+    for j in range(4):
+        mean[j] = s[j] * sw + a[j]
+    t = 4
+    for j in range(4):
+        for k in range(j, 4):
+            v = acc[t] - e[j] * a[k] - a[j] * e[k] + e[j] * e[k] * sw
+            cov[j, k] = v
+            cov[k, j] = v
+            t += 1
+
+
+@reduce_jit
+def _finish_equal(count, lw, acc, s, mean, cov):
+    """:func:`_finish_planar` for ``count`` equal weights ``w = exp(lw)``: the unweighted sums ``acc`` scaled by
+    ``w`` once (summing the equal weights themselves would add up correlated round-off, N ulps), ``sum w = count
+    w``.  The ``exp`` is taken here, so that every caller gets the same bits (a caller compiled without
+    contraction would round the polynomial otherwise)."""
+    w = exp(lw)
+    for t in range(14):
+        acc[t] *= w
+    _finish_planar(count * w, acc, s, mean, cov)
+
+
 @reduce_jit
 def _moments_planar(x0, x1, x2, x3, row, s, uniform, mean, cov):
-    """:func:`moments` of one item of the planar state ``(x0..x3)`` in one pass: the weighted sums of
-    ``d = x - s`` and ``d d^T`` about a pivot particle ``s`` (every sum in registers), then
-    ``mean = s sum w + sum w d`` and ``cov = sum w d d^T - e a^T - a e^T + e e^T sum w`` with ``a = sum w d`` and
-    ``e = mean - s`` (the twin's ``sum w (x - mean)(x - mean)^T`` expanded).  The cancellation in ``cov`` grows
+    """:func:`moments` of one item of the planar state ``(x0..x3)``: the weighted sums of ``d = x - s`` and
+    ``d d^T`` about a pivot particle ``s``, then :func:`_finish_planar`.  The cancellation in ``cov`` grows
     with ``k^2``, the pivot's squared distance from the mean in standard deviations; a pivot of weight ``w_s`` adds
     ``w_s k^2`` to the normalised variance, so ``k^2 <= 1 / w_s``, at most ``N`` for the heaviest particle, which
-    :func:`moments` pivots on (round-off of order ``N`` ulps of the variance at worst, tested)."""
+    :func:`moments` pivots on (round-off of order ``N`` ulps of the variance at worst, tested).  Equal weights
+    (every step after resampling): unweighted sums, tile by tile (:func:`_equal_weight_tile_sums`), scaled once
+    (:func:`_finish_equal`)."""
     wide_vectors()
+    acc = np.zeros(14)
+    if uniform:
+        N = x0.shape[0]
+        for lo in range(0, N, MOMENT_TILE):
+            hi = min(lo + MOMENT_TILE, N)
+            _equal_weight_tile_sums(x0[lo:hi], x1[lo:hi], x2[lo:hi], x3[lo:hi], s, acc)
+        _finish_equal(float(N), row[0], acc, s, mean, cov)
+        return
     s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
     sw = a0 = a1 = a2 = a3 = 0.0
     c00 = c01 = c02 = c03 = c11 = c12 = c13 = c22 = c23 = c33 = 0.0
     for i in range(row.shape[0]):
-        # equal weights (after resampling): unweighted sums, scaled once below (LLVM unswitches the loop on
-        # ``uniform``); summing the equal weights themselves would add up correlated round-off, N ulps
-        w = 1.0 if uniform else exp(row[i])
+        w = exp(row[i])
         d0 = x0[i] - s0
         d1 = x1[i] - s1
         d2 = x2[i] - s2
@@ -459,25 +609,10 @@ def _moments_planar(x0, x1, x2, x3, row, s, uniform, mean, cov):
         c22 += w2 * d2
         c23 += w2 * d3
         c33 += w3 * d3
-    if uniform:
-        w = exp(row[0])
-        sw *= w
-        a0, a1, a2, a3 = a0 * w, a1 * w, a2 * w, a3 * w
-        c00, c01, c02, c03, c11 = c00 * w, c01 * w, c02 * w, c03 * w, c11 * w
-        c12, c13, c22, c23, c33 = c12 * w, c13 * w, c22 * w, c23 * w, c33 * w
-    a = (a0, a1, a2, a3)
-    c = (c00, c01, c02, c03, c11, c12, c13, c22, c23, c33)
-    # e = mean - s
-    e = (a0 + s0 * (sw - 1.0), a1 + s1 * (sw - 1.0), a2 + s2 * (sw - 1.0), a3 + s3 * (sw - 1.0))
-    for j in range(4):
-        mean[j] = s[j] * sw + a[j]
-    t = 0
-    for j in range(4):
-        for k in range(j, 4):
-            v = c[t] - e[j] * a[k] - a[j] * e[k] + e[j] * e[k] * sw
-            cov[j, k] = v
-            cov[k, j] = v
-            t += 1
+    acc[0], acc[1], acc[2], acc[3] = a0, a1, a2, a3
+    acc[4], acc[5], acc[6], acc[7], acc[8] = c00, c01, c02, c03, c11
+    acc[9], acc[10], acc[11], acc[12], acc[13] = c12, c13, c22, c23, c33
+    _finish_planar(sw, acc, s, mean, cov)
 
 
 @reduce_jit

@@ -63,14 +63,18 @@ PEAK_ACCUMULATORS = 12
 LIMIT_INVALID = "limit invalid"
 #: The kernels whose per-pair loop :func:`multiplies_per_pair` reads, per precision.
 KERNEL_FUNCTIONS = {"float64": "kernel", "float32": "kernel32"}
+#: The function giving one pair's log-weight in each kernel: its call sites in the loop are the pairs per iteration.
+PAIR_FUNCTIONS = {"float64": "log2_weight", "float32": "log2_weight32"}
 
 
 def multiplies_per_pair(precision: str, source: str | None = None) -> int:
     """Multiplications per particle-measurement pair in the Numba kernel of ``precision``, read from its source
     (``source``: the text of :mod:`.tbd_weights_numba` unless given): every ``*`` in the loop over particles that
-    sits inside the loop over measurements, and every ``*`` of a module function that loop calls (the inlined
-    ``2^x``).  Each is one multiply or multiply-add instruction per pair (per vector lane), the instructions
-    :func:`fma_peak` measures."""
+    sits inside the loop over measurements, and every ``*`` of the module functions that loop calls, at each call
+    site, and of those they call (the inlined log-weight, ``2^x`` and sum update), divided by the pairs one
+    iteration takes: the call sites of the kernel's pair function (:data:`PAIR_FUNCTIONS`, the log-weight of one
+    pair; one where the loop calls none).  Each ``*`` is one multiply or multiply-add instruction per pair (per
+    vector lane), the instructions :func:`fma_peak` measures."""
     if source is None:
         from . import tbd_weights_numba
 
@@ -79,8 +83,17 @@ def multiplies_per_pair(precision: str, source: str | None = None) -> int:
     functions = {node.name: node for node in tree.body if isinstance(node, ast.FunctionDef)}
     kernel = functions[KERNEL_FUNCTIONS[precision]]
 
-    def multiplies(node) -> int:
-        return sum(isinstance(n, ast.BinOp) and isinstance(n.op, ast.Mult) for n in ast.walk(node))
+    def calls(node) -> list[str]:
+        return [c.func.id for c in ast.walk(node)
+                if isinstance(c, ast.Call) and isinstance(c.func, ast.Name) and c.func.id in functions]
+
+    def multiplies(node, seen=()) -> int:
+        own = sum(isinstance(n, ast.BinOp) and isinstance(n.op, ast.Mult) for n in ast.walk(node))
+        for name in calls(node):
+            if name in seen:
+                raise ValueError(f"{kernel.name}: {name} calls itself; cannot count its multiplies")
+            own += multiplies(functions[name], seen + (name,))
+        return own
 
     pair_loops = []
 
@@ -97,10 +110,10 @@ def multiplies_per_pair(precision: str, source: str | None = None) -> int:
                          f"found {len(pair_loops)}")
     (loop,) = pair_loops
     count = sum(multiplies(stmt) for stmt in loop.body)
-    for call in ast.walk(loop):
-        if isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id in functions:
-            count += multiplies(functions[call.func.id])
-    return count
+    pairs = max(1, sum(name == PAIR_FUNCTIONS[precision] for stmt in loop.body for name in calls(stmt)))
+    if count % pairs:
+        raise ValueError(f"{kernel.name}: {count} multiplies in a loop taking {pairs} pairs per iteration")
+    return count // pairs
 
 
 _PEAK_KERNEL = None

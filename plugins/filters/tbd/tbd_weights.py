@@ -110,9 +110,9 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
 
             big = B * N * int(counts.max()) >= SERIAL_PAIRS
             if single:
-                (nb.parallel32 if big else nb.serial32)(pts, meas, counts, np.float32(beta2), out)
+                (nb.parallel32 if big else nb.serial32)(pts, meas, counts, np.float32(beta2), nb.COEFFS_F32, out)
             else:
-                (nb.parallel if big else nb.serial)(pts, meas, counts, out)
+                (nb.parallel if big else nb.serial)(pts, meas, counts, nb.COEFFS, out)
         else:
             ensure_taichi(current_arch() if arch is None else arch)
             from .tbd_weights_taichi import _taichi_kernel
