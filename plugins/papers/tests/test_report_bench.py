@@ -28,3 +28,15 @@ def test_a_failing_report_fails_the_group(monkeypatch):
     monkeypatch.setattr(report_bench, "_MAIN", "import sys; print('boom', file=sys.stderr); sys.exit(3)")
     with pytest.raises(RuntimeError, match="exit 3.*boom"):
         report_bench.bench(quick=True)
+
+
+def test_the_full_size_declares_the_main_job_s_wall_target_and_judges_it(monkeypatch):
+    monkeypatch.setattr(report_bench, "_MAIN", "import time; time.sleep(0.2); print('paper 900: fake, 0.1 s')")
+    quick = report_bench.bench(quick=True)
+    assert "target_report_wall_s" not in quick  # a smoke run has no wall target
+    monkeypatch.setattr(report_bench, "WALL_TARGET_S", 0.1)  # a child that sleeps 0.2 s misses a 0.1 s target
+    full = report_bench.bench(quick=False)
+    assert full["target_report_wall_s"] == "<= 0.1" and full["measured_report_wall_s"] >= 0.2
+    assert full["met_report_wall_s"] is False
+    monkeypatch.setattr(report_bench, "WALL_TARGET_S", 3600.0)
+    assert report_bench.bench(quick=False)["met_report_wall_s"] is True
