@@ -24,7 +24,9 @@ particles is accepted.
 Fused: :func:`predict_log_weights` is :func:`predict` and :func:`weighted_log_likelihood` in one compiled pass (a
 linear model, or a nonlinear one that declares the pass,
 :meth:`~workbench.models.MotionModel.fused_particle_propagator`; the planar range-bearing measurement), the two
-calls' numbers bit for bit; the bootstrap filter's fused step (``FilterSpec.step``) is built on it.
+calls' numbers bit for bit; for a linear model of the planar state it can also take the predicted state's estimate
+(:func:`estimate` with the previous weights, its numbers bit for bit) in the same pass, which the time loop records
+at every step.  The bootstrap filter's fused step (``FilterSpec.step``) is built on it.
 
 Backends.  :func:`predict`, :func:`weighted_log_likelihood`, :func:`reweight` and :func:`estimate` take a
 ``backend`` that the kernel policy resolves (:func:`workbench.kernels.backend.resolve`): ``"numba"`` runs the
@@ -371,7 +373,7 @@ def weighted_log_likelihood(z: np.ndarray, x: np.ndarray, model: MeasurementMode
 
 def predict_log_weights(state: ParticleState, motion: MotionModel, rng: np.random.Generator, z: np.ndarray,
                         present: np.ndarray, model: MeasurementModel, backend: str = "numpy",
-                        scratch: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                        scratch: bool = False, predicted_estimate: bool = False) -> tuple | None:
     """:func:`predict` and :func:`weighted_log_likelihood` in one compiled pass, or ``None`` where that pass does not
     apply (then call the two): it needs the compiled backend, a :attr:`~workbench.models.MotionModel.linear` motion
     model or one that declares the fused pass for the frame
@@ -384,7 +386,10 @@ def predict_log_weights(state: ParticleState, motion: MotionModel, rng: np.rando
     Returns the moved particles ``(B, N, n)`` (component-major; ``scratch``: in this thread's work array, valid
     until the next call, for a caller that resamples them into a new array at once), the log-weights ``(B, N)``
     (:func:`weighted_log_likelihood`'s for the items with ``present``, the previous ones for the others) and their
-    rows' max ``(B,)`` (``np.max(log_w, axis=1)`` where ``present``, ``-inf`` elsewhere).
+    rows' max ``(B,)`` (``np.max(log_w, axis=1)`` where ``present``, ``-inf`` elsewhere).  ``predicted_estimate``:
+    a fourth element, :func:`estimate` of the moved particles with the previous weights (the predicted state's
+    estimate, a :class:`~workbench.types.Gaussian`) where the pass takes it (a linear model and the planar state:
+    its sums taken in the same pass, :func:`estimate`'s numbers bit for bit), else ``None`` (call :func:`estimate`).
 
     Shapes: ``z (B, 2)``, ``present (B,)``.
     """
@@ -410,10 +415,21 @@ def predict_log_weights(state: ParticleState, motion: MotionModel, rng: np.rando
     out = (_scratch("predicted", n * B * N) if scratch else np.empty(n * B * N)).reshape(n, B, N)
     log_w = np.empty((B, N))
     top = np.full(B, -np.inf)
-    run(out.reshape(n, B * N), _rows(x).reshape(n, B * N), rng, k, *_plan_arrays(matrix.tobytes(), *matrix.shape),
-        np.ascontiguousarray(present, dtype=bool), np.ascontiguousarray(z, dtype=float), sensor,
-        _inverse_cholesky(model.R), np.ascontiguousarray(state.cloud.log_weights, dtype=float), log_w, top)
-    return out.transpose(1, 2, 0), log_w, top
+    args = (out.reshape(n, B * N), _rows(x).reshape(n, B * N), rng, k, *_plan_arrays(matrix.tobytes(), *matrix.shape),
+            np.ascontiguousarray(present, dtype=bool), np.ascontiguousarray(z, dtype=float), sensor,
+            _inverse_cholesky(model.R), np.ascontiguousarray(state.cloud.log_weights, dtype=float), log_w, top)
+    if not predicted_estimate:
+        run(*args)
+        return out.transpose(1, 2, 0), log_w, top
+    before = None
+    if motion.linear and n == 4 and N > 0:
+        # the predicted state's estimate, its sums taken in the same pass (estimate's numbers bit for bit)
+        mean, cov = np.empty((B, 4)), np.empty((B, 4, 4))
+        run(*args, mean, cov)
+        before = Gaussian.trusted(mean, cov)
+    else:
+        run(*args)
+    return out.transpose(1, 2, 0), log_w, top, before
 
 
 def log_likelihood_cov(z: np.ndarray, x: np.ndarray, model: MeasurementModel, R: np.ndarray) -> np.ndarray:

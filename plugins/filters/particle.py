@@ -96,7 +96,8 @@ def step(state: ParticleState, motion: MotionModel, scan: Scan, model: Measureme
     (:meth:`~workbench.models.MotionModel.fused_particle_propagator`: the coordinated turn with the rate in the
     state) and the measurement model is the planar range-bearing one without a per-detection covariance, the
     propagation, the likelihood and the rows' max are one pass
-    (:func:`~workbench.particle_core.predict_log_weights`), and with resampling at every update (``threshold > 1``)
+    (:func:`~workbench.particle_core.predict_log_weights`; for a linear model of the planar state it also takes the
+    predicted estimate's sums, tile by tile, where ``predicted`` asks for it), and with resampling at every update (``threshold > 1``)
     the predicted particles, which never outlive the step, live in a reused work array; with a measurement for every
     item and the planar state, the estimate's sums are taken in the resampling's gather, tile by tile while the
     particles are in L1 (:func:`~workbench.particle_core.reweight_estimate`, the same tiles and sums as the
@@ -107,15 +108,18 @@ def step(state: ParticleState, motion: MotionModel, scan: Scan, model: Measureme
     if present.any() and scan.cov is None:
         # with threshold > 1 every item with a measurement is resampled (the others copied), so the predicted cloud
         # is never returned
-        fused = predict_log_weights(state, motion, rng, z, present, model, backend, scratch=threshold > 1.0)
+        fused = predict_log_weights(state, motion, rng, z, present, model, backend, scratch=threshold > 1.0,
+                                    predicted_estimate=predicted)
     if fused is None:
         moved = predict(state, motion, rng, backend)
         before = estimate(moved, backend) if predicted else None
         after = update(moved, scan, model, rng, threshold, backend)
         return after, estimate(after, backend), before
-    x, log_w, top = fused
+    x, log_w, top = fused[:3]
     previous = state.cloud.log_weights
-    before = estimate(ParticleState(Particles.trusted(x, previous)), backend) if predicted else None
+    before = fused[3] if predicted else None
+    if predicted and before is None:  # the pass did not take the predicted estimate's sums
+        before = estimate(ParticleState(Particles.trusted(x, previous)), backend)
     # resampling every item with the estimate's sums in the gather's pass, where it applies (the same numbers)
     done = reweight_estimate(x, log_w, previous, present, threshold, rng, backend, top)
     if done is not None:

@@ -12,10 +12,13 @@ Arrays arrive component-major: particles as rows ``(n, L)`` or ``(n, B, N)`` (ro
 every particle of every item, ``L = B N``), log-weights as ``(B, N)``.  Module-level functions compiled with
 ``cache=True``, so that Numba's on-disk cache holds across processes.
 
-Random numbers.  :func:`propagate` draws its normals from the caller's ``numpy.random.Generator`` inside the
-loop, in the order ``rng.standard_normal((B, N, k))`` would (Numba's ``Generator`` runs NumPy's algorithms on
-the same bit generator and state: the same numbers, and the generator is left where NumPy would leave it; tested),
-at about a third of the time of NumPy's own call on this machine.
+Random numbers.  :func:`propagate`, :func:`propagate_range_bearing` and :func:`fill_normals` draw their normals
+from the caller's ``numpy.random.Generator`` inside the loop, in the order ``rng.standard_normal((B, N, k))``
+would: on PCG64 (every ``wb.generator``) by :mod:`.pcg_numba`, the generator's state read once per call and
+stepped in registers, else through Numba's ``Generator`` (NumPy's algorithms on the same bit generator and state,
+called through a pointer, about three times the time per normal).  Either way the same numbers, and the generator
+is left where NumPy would leave it (tested).  A tile's normals are stored by noise column (``e (k, TILE)``), so that
+each column the plan reads is contiguous.
 
 Floating point.  No fast-math where a result is held to its twin number for number: :func:`combine` and
 :func:`propagate` make the products and sums in the twin's order without fused multiply-adds, so the propagated
@@ -37,6 +40,7 @@ from numba.extending import intrinsic
 
 from .atan_poly import ATAN_P, ATAN_Q, TAN_PI_8
 from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
+from .pcg_numba import _pcg_normal, draw_tile, pcg64_stream
 from .vector_width import wide_vectors
 
 jit = functools.partial(numba.njit, error_model="numpy", cache=True)
@@ -120,6 +124,26 @@ def _combine_tile(out, x, e, lo, hi, src, coef, ptr):
                 _term(o, coef[q], e[: hi - lo, j - n], q == ptr[i])
 
 
+@jit(inline="always")
+def _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr):
+    """:func:`_combine_tile` with the tile's noise stored by column: ``e[j, t]`` noise ``j`` of particle ``lo + t``
+    (:func:`.pcg_numba.draw_tile`'s layout; each column contiguous).  The same products and sums in the same
+    order, so the same bits."""
+    n = x.shape[0]
+    m = hi - lo
+    for i in range(out.shape[0]):
+        o = out[i, lo:hi]
+        if ptr[i] == ptr[i + 1]:
+            o[:] = 0.0
+            continue
+        for q in range(ptr[i], ptr[i + 1]):
+            j = src[q]
+            if j < n:
+                _term(o, coef[q], x[j, lo:hi], q == ptr[i])
+            else:
+                _term(o, coef[q], e[j - n, :m], q == ptr[i])
+
+
 @jit
 def combine(out, x, e, src, coef, ptr):
     """``out[i] = sum_t coef[t] s_{src[t]}`` over the terms ``t`` of row ``i`` (``ptr[i]:ptr[i+1]``), in order.
@@ -138,31 +162,52 @@ def combine(out, x, e, src, coef, ptr):
     return out
 
 
-@jit
 def propagate(out, x, rng, k, src, coef, ptr):
     """:func:`combine` with ``e`` drawn here: ``e = rng.standard_normal((L, k))``, the same numbers in the same
-    order, one tile at a time (no ``(L, k)`` array).
+    order, one tile at a time (no ``(L, k)`` array); on PCG64 the state stepped in registers
+    (:func:`.pcg_numba.pcg64_stream`), else Numba's ``Generator``.
 
     Shapes: ``out (r, L)``, ``x (n, L)``; ``k`` noise columns.
     """
-    L = out.shape[1]
-    buf = np.empty((TILE, max(k, 1)))
-    for lo in range(0, L, TILE):
-        hi = min(lo + TILE, L)
-        for t in range(hi - lo):
-            for j in range(k):
-                buf[t, j] = rng.standard_normal()
-        _combine_tile(out, x, buf, lo, hi, src, coef, ptr)
+    with pcg64_stream(rng, k * out.shape[1]) as pcg:
+        _propagate(out, x, rng, pcg, k, src, coef, ptr)
     return out
 
 
 @jit
+def _propagate(out, x, rng, pcg, k, src, coef, ptr):
+    """:func:`propagate` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`)."""
+    L = out.shape[1]
+    e = np.empty((max(k, 1), TILE))
+    for lo in range(0, L, TILE):
+        hi = min(lo + TILE, L)
+        draw_tile(rng, pcg, e, hi - lo, k)
+        _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr)
+    return out
+
+
 def fill_normals(rng, out):
     """``out[...] = rng.standard_normal(out.shape)``: the draw loop of :func:`propagate` alone (the numbers NumPy
-    would draw, in C order), for the benchmark's floor.  Shapes: ``out (L, k)``."""
-    for t in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            out[t, j] = rng.standard_normal()
+    would draw, in C order, by the same code: on PCG64 the state stepped in registers), for the benchmark's floor.
+    Shapes: ``out (L, k)``, C-contiguous."""
+    with pcg64_stream(rng, out.size) as pcg:
+        _fill_normals(rng, pcg, out)
+    return out
+
+
+@jit
+def _fill_normals(rng, pcg, out):
+    """:func:`fill_normals` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`)."""
+    if pcg.shape[0] == 4:
+        hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
+        for t in range(out.shape[0]):
+            for j in range(out.shape[1]):
+                out[t, j], hi, lo = _pcg_normal(hi, lo, inc_hi, inc_lo)
+        pcg[0], pcg[1] = hi, lo
+    else:
+        for t in range(out.shape[0]):
+            for j in range(out.shape[1]):
+                out[t, j] = rng.standard_normal()
     return out
 
 
@@ -245,33 +290,63 @@ def _weigh_tile(px, py, zr, zb, sensor, linv, prev, out):
     return np.nan if nan else m
 
 
-@jit
-def propagate_range_bearing(out, x, rng, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top):
+#: Empty estimate outputs: :func:`propagate_range_bearing` without the predicted estimate (one signature either way).
+_NO_MEAN = np.zeros((0, 4))
+_NO_COV = np.zeros((0, 4, 4))
+
+
+def propagate_range_bearing(out, x, rng, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top, mean=None,
+                            cov=None):
     """:func:`propagate` and, for the items with ``present``, :func:`range_bearing_log_weights` and the rows' max
     in one pass, one tile of particles at a time: a tile's particles are moved (the normals drawn from ``rng`` in
-    the order of ``rng.standard_normal((B, N, k))``), then weighed while they are in L1, instead of read back from
-    memory by a second pass.  The arithmetic per particle is those two functions' (the same inline code), so the
-    particles and log-weights are theirs bit for bit; ``top[b]`` is ``np.max(log_w[b])`` (NaN where a log-weight
-    is NaN).  Items without ``present``: moved, ``log_w = prev``, ``top`` not written.
+    the order of ``rng.standard_normal((B, N, k))``, on PCG64 with the state in registers), then weighed while they
+    are in L1, instead of read back from memory by a second pass.  The arithmetic per particle is those two
+    functions' (the same inline code), so the particles and log-weights are theirs bit for bit; ``top[b]`` is
+    ``np.max(log_w[b])`` (NaN where a log-weight is NaN).  Items without ``present``: moved, ``log_w = prev``,
+    ``top`` not written.
+
+    ``mean (B, 4)``, ``cov (B, 4, 4)`` (the planar state only; ``None``: not computed): :func:`moments` of the moved
+    particles with the weights ``prev`` (the estimate of the predicted state), its numbers bit for bit: where an
+    item's ``prev`` are all equal, each tile's sums are taken while it is in L1, the tiles, sums and pivot of
+    :func:`moments`; otherwise :func:`moments`' weighted pass over the item right after its last tile.
 
     Shapes: ``out, x (n, L)`` component rows with ``L = B N`` (``out`` not sharing memory with ``x``); ``k`` noise
     columns; the plan ``src, coef, ptr`` of :func:`combine`; ``present (B,)``; ``z (B, 2)``; ``sensor (2,)``;
     ``linv (2, 2)``; ``prev, log_w (B, N)``; ``top (B,)``.
     """
+    if mean is None:
+        mean, cov = _NO_MEAN, _NO_COV
+    elif out.shape[0] != 4 or mean.shape != (log_w.shape[0], 4) or cov.shape != (log_w.shape[0], 4, 4):
+        raise ValueError(f"propagate_range_bearing: the predicted estimate needs the planar state (n = 4) and "
+                         f"mean (B, 4), cov (B, 4, 4); got n = {out.shape[0]}, {mean.shape}, {cov.shape}")
+    with pcg64_stream(rng, k * out.shape[1]) as pcg:
+        _propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top,
+                                 mean, cov)
+    return out
+
+
+@jit
+def _propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top, mean,
+                             cov):
+    """:func:`propagate_range_bearing` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`); the
+    estimate where ``mean`` has ``B`` rows."""
     B, N = log_w.shape
-    buf = np.empty((TILE, max(k, 1)))
+    e = np.empty((max(k, 1), TILE))
+    est = mean.shape[0] == B and N > 0
+    s = np.empty(4)
+    acc = np.zeros(14)
     for b in range(B):
         weigh = present[b]
         zr, zb = z[b, 0], z[b, 1]
         m = -np.inf
         nan = False
         wb, ob = prev[b], log_w[b]
+        pivot, uniform = _pivot(wb) if est else (0, False)
+        acc[:] = 0.0
         for lo in range(b * N, (b + 1) * N, TILE):
             hi = min(lo + TILE, (b + 1) * N)
-            for t in range(hi - lo):
-                for j in range(k):
-                    buf[t, j] = rng.standard_normal()
-            _combine_tile(out, x, buf, lo, hi, src, coef, ptr)
+            draw_tile(rng, pcg, e, hi - lo, k)
+            _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr)
             a, c = lo - b * N, hi - b * N
             if weigh:
                 v = _weigh_tile(out[0, lo:hi], out[1, lo:hi], zr, zb, sensor, linv, wb[a:c], ob[a:c])
@@ -279,9 +354,37 @@ def propagate_range_bearing(out, x, rng, k, src, coef, ptr, present, z, sensor, 
                 m = v if v > m else m
             else:
                 _copy(ob[a:c], wb[a:c])
+            if est and uniform:  # moments' equal-weight sums of this tile (pivot: the item's first particle)
+                if a == 0:
+                    s[0], s[1], s[2], s[3] = out[0, lo], out[1, lo], out[2, lo], out[3, lo]
+                _equal_weight_tile_sums(out[0, lo:hi], out[1, lo:hi], out[2, lo:hi], out[3, lo:hi], s, acc)
         if weigh:
             top[b] = np.nan if nan else m
+        if est:
+            if uniform:
+                _finish_equal(float(N), wb[0], acc, s, mean[b], cov[b])
+            else:
+                q = b * N
+                for r in range(4):
+                    s[r] = out[r, q + pivot]
+                _moments_planar(out[0, q:q + N], out[1, q:q + N], out[2, q:q + N], out[3, q:q + N], wb, s, False,
+                                mean[b], cov[b])
     return out
+
+
+@jit
+def _pivot(row):
+    """``(pivot, uniform)`` of one item's log-weights for :func:`moments`: the first heaviest particle (the first
+    one where ``row[0]`` is NaN; NaNs are never picked) and whether every entry equals ``row[0]``: one function, so
+    that :func:`moments` and :func:`propagate_range_bearing` pick the same pivot."""
+    first = row[0]
+    pivot = 0
+    uniform = True
+    for i in range(row.shape[0]):
+        if row[i] > row[pivot]:
+            pivot = i
+        uniform &= row[i] == first
+    return pivot, uniform
 
 
 @reduce_jit
@@ -482,9 +585,10 @@ def _dot3(w, a, b):
 
 
 #: Particles per tile of the planar moments' equal-weight sums: :func:`moments` sums each tile by
-#: :func:`_equal_weight_tile_sums` and adds the tiles' sums in order, and :func:`systematic_gather_moments` does the
-#: same on each tile it has just gathered (while it is in L1), so that both give the same bits.
-MOMENT_TILE = 1024
+#: :func:`_equal_weight_tile_sums` and adds the tiles' sums in order, and :func:`systematic_gather_moments` and
+#: :func:`propagate_range_bearing` (whose tiles are :data:`TILE`) do the same on each tile they have just written
+#: (while it is in L1), so that all give the same bits.
+MOMENT_TILE = TILE
 
 
 @reduce_jit
@@ -631,13 +735,7 @@ def moments(x, log_w, mean, cov, w):
         s = np.empty(4)
         for b in range(B):
             row = log_w[b]
-            pivot = 0
-            uniform = True
-            first = row[0]
-            for i in range(N):
-                if row[i] > row[pivot]:
-                    pivot = i
-                uniform &= row[i] == first
+            pivot, uniform = _pivot(row)
             for c in range(4):
                 s[c] = x[c, b, pivot]
             _moments_planar(x[0, b], x[1, b], x[2, b], x[3, b], row, s, uniform, mean[b], cov[b])
