@@ -43,7 +43,9 @@ when ``N_eff < threshold * N`` (eq 16), followed by post-regularisation (:func:`
 Le Gland's regularised particle filter): each resampled particle is jittered by ``h D e``, ``D D^T`` the cloud's
 weighted covariance before resampling, ``h = regularisation x h_opt`` (:func:`regularisation_bandwidth`), so that
 the copies of the few particles that keep up with a sharp manoeuvre become distinct particles.  The state,
-prediction and estimate are those of the bootstrap filter (:mod:`workbench.particle_core`).
+prediction and estimate are those of the bootstrap filter (:mod:`workbench.particle_core`).  Where the backend runs
+Numba, the two-mode prediction, the floor's ``logaddexp`` and the regularisation's jitter run compiled
+(:mod:`.tbd_pf_numba`), each held bit for bit to the NumPy lines it replaces, random draws included.
 
 ``sigma_vr`` (default 15 m/s) is the width of the Doppler kernel.  The sensor's radial-velocity noise is 2 m/s;
 the wider kernel is a tempering device (``N(vr; 15^2) ∝ N(vr; 2^2)^(4/225)``) that keeps a cloud of a few hundred
@@ -87,8 +89,9 @@ from workbench.kernels.backend import BACKENDS
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
-from workbench.particle_core import (ParticleState, combine_columns, component_major, diagnostics, estimate, init,
-                                     log_likelihood_cov, noise_columns, predict, propagate_f)
+from workbench.particle_core import (ParticleState, _plan_arrays, combine_columns, compiled, component_major,
+                                     diagnostics, estimate, init, log_likelihood_cov, need_rng, noise_columns, predict,
+                                     propagate_f)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
 from workbench.specs import BenchmarkSpec, FilterSpec, join_batch, take_batch
@@ -120,14 +123,19 @@ def _centre(particles: np.ndarray, log_weights: np.ndarray) -> np.ndarray:
     return np.einsum("bn,bnk->bk", np.exp(log_weights), particles[..., :3])
 
 
-def log_missed(model: MeasurementModel, particles: np.ndarray, log_weights: np.ndarray | None = None) -> np.ndarray | None:
+def log_missed(model: MeasurementModel, particles: np.ndarray, log_weights: np.ndarray | None = None, *,
+               centre: np.ndarray | None = None) -> np.ndarray | None:
     """``log(1 - P_D^T)``: the log probability that the sensor misses its design target, at the cloud's predicted
     position ``(B, 1)`` (``log_weights`` given) or at every particle ``(B, N)``; ``None`` when the model declares no
-    design target (``detection.nominal_snr_db``, ``detection.log_detection``)."""
+    design target (``detection.nominal_snr_db``, ``detection.log_detection``).  ``centre``: the cloud's weighted
+    mean position :func:`_centre` of ``particles`` and ``log_weights`` where the caller has it already."""
     detection = _detection(model)
     if detection.nominal_snr_db is None or detection.log_detection is None:
         return None
-    where = particles[..., :3] if log_weights is None else _centre(particles, log_weights)[:, None, :]
+    if log_weights is None:
+        where = particles[..., :3]
+    else:
+        where = (_centre(particles, log_weights) if centre is None else centre)[:, None, :]
     log_pd = np.minimum(detection.log_detection(detection.nominal_snr_db(where)), 0.0)
     # log(1 - P_D) = log(-expm1(log P_D))
     with np.errstate(divide="ignore"):
@@ -151,9 +159,11 @@ def log_amplitude_ratio(model: MeasurementModel, snr_db: np.ndarray, position: n
 
 def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model: MeasurementModel,
               log_pd: np.ndarray, *, floor: str, floor_density: float = 0.0, floor_scale: float = 1.0,
-              sigma_vr: float = 15.0, missed: np.ndarray | None = None) -> np.ndarray:
+              sigma_vr: float = 15.0, missed: np.ndarray | None = None,
+              centre: np.ndarray | None = None) -> np.ndarray:
     """``log eps`` of the floor ``floor`` (see the module docstring), ``(B, 1)`` or ``(B, N)``; ``-inf`` for an
-    item without a valid detection.
+    item without a valid detection.  ``centre``: :func:`_centre` of ``particles`` and ``log_weights`` where the
+    caller has it already.
 
     Shapes
     ------
@@ -179,7 +189,8 @@ def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model:
     if np.any(~np.isfinite(density) | (density < 0)):
         raise InputError("a scan's clutter_density must be finite and >= 0 at every valid detection")
     # the cloud's predicted position: the weighted mean of the predicted particles
-    centre = _centre(particles, log_weights)
+    if centre is None:
+        centre = _centre(particles, log_weights)
     log_l = log_amplitude_ratio(model, np.where(scan.valid[rows, star], snr[rows, star], 0.0), centre)
     with np.errstate(divide="ignore"):
         # log eps = log kappa + log lambda + log max_m P_D(snr_m) - log max(1, l) [+ log(1 - P_D^T(s_i))]
@@ -190,11 +201,15 @@ def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model:
 def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, sigma_vr: float,
                    floor_density: float = 0.0, backend: str = "auto", *, floor: str = "flat",
                    floor_scale: float = 1.0, log_weights: np.ndarray | None = None,
-                   missed: np.ndarray | None = None, precision: str = "float64") -> np.ndarray:
+                   missed: np.ndarray | None = None, precision: str = "float64",
+                   centre: np.ndarray | None = None) -> np.ndarray:
     """``log(eps_i + sum_m w_{m,i})`` for particles ``(B, N, 6)`` and a gated scan -> ``(B, N)``.
 
     ``-inf`` for items without a valid detection.  ``log_weights (B, N)`` are the predicted cloud's (uniform when
-    not given), ``missed`` is :func:`log_missed` (the amplitude floor's ``1 - P_D^T`` factor).
+    not given), ``missed`` is :func:`log_missed` (the amplitude floor's ``1 - P_D^T`` factor), ``centre`` the
+    cloud's weighted mean position (:func:`_centre`) where the caller has it.  Where ``backend`` runs Numba the
+    last step (``logaddexp`` of the floor and the sum) is compiled (:func:`.tbd_pf_numba.log_add_floor`, the same
+    numbers as the NumPy lines it replaces).
     """
     if scan.snr is None:
         raise InputError("tbd-pf needs the measured SNR of every detection (scan.snr, dB)")
@@ -215,7 +230,13 @@ def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, s
     if log_weights is None:
         log_weights = np.full(particles.shape[:2], -np.log(particles.shape[1]))
     log_eps = log_floor(particles, log_weights, scan, model, log_pd, floor=floor, floor_density=floor_density,
-                        floor_scale=floor_scale, sigma_vr=sigma_vr, missed=missed)
+                        floor_scale=floor_scale, sigma_vr=sigma_vr, missed=missed, centre=centre)
+    if compiled(backend):
+        from . import tbd_pf_numba
+
+        # the lines below in one compiled pass
+        return tbd_pf_numba.log_add_floor(np.asarray(log_eps, dtype=float), log_sum, scan.valid.any(axis=1),
+                                          np.empty(log_sum.shape))
     present = scan.valid.any(axis=1)[:, None]
     # log(eps + sum_m w_{m,i})  (a NaN particle, e.g. from a NaN prior, stays NaN: it reaches the estimate)
     with np.errstate(invalid="ignore"):
@@ -249,7 +270,7 @@ def join_modes(states) -> ParticleState:
 
 
 def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.random.Generator, *, switch_on: float,
-                        switch_off: float, scale: float) -> ModeState:
+                        switch_off: float, scale: float, backend: str = "auto") -> ModeState:
     """Jump-Markov (two-mode) prediction: each particle carries a mode, quiet (noise ``W``) or manoeuvre
     (noise ``scale^2 W``), that switches with ``P(quiet -> manoeuvre) = switch_on`` and
     ``P(manoeuvre -> quiet) = switch_off`` before the particle moves::
@@ -260,10 +281,42 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     A particle that the detections select during a manoeuvre keeps a large noise for its
     descendants (mean sojourn ``1 / switch_off`` scans), so the cloud can follow a sustained turn.
 
+    The draws are ``u = rng.random((B, N))``, then ``e = rng.standard_normal((B, N, k))`` (``k`` noise columns).
+    Where ``backend`` runs Numba (:func:`workbench.particle_core.compiled`) and ``rng`` is a
+    ``numpy.random.Generator``, the switches, the draws and the product run in one compiled pass
+    (:func:`.tbd_pf_numba.jump_markov`) that gives the particles, modes and generator state of the NumPy lines
+    (:func:`predict_jump_markov_numpy`) bit for bit.
+
     Shapes
     ------
     particles (B, N, n), mode (B, N)
     """
+    need_rng(rng, "the two-mode particle prediction")
+    if not (compiled(backend) and type(rng) is np.random.Generator):
+        return predict_jump_markov_numpy(state, motion, rng, switch_on=switch_on, switch_off=switch_off, scale=scale)
+    from . import tbd_pf_numba
+
+    x = state.cloud.particles
+    B, N, n = x.shape
+    mode = np.ascontiguousarray(_modes(state), dtype=float).reshape(B * N)
+    g = noise_columns(motion)
+    base, A = (x, motion.F) if motion.linear else (propagate_f(x, motion, "the two-mode particle prediction"),
+                                                   np.eye(n))
+    matrix = np.ascontiguousarray(np.hstack([A, g]), dtype=float)
+    rows = base.transpose(2, 0, 1)  # (n, B, N): no copy for a component-major array
+    rows = np.ascontiguousarray(rows, dtype=float).reshape(n, B * N)
+    out = np.empty((n, B, N))
+    new_mode = np.empty((B, N))
+    tbd_pf_numba.jump_markov(out.reshape(n, B * N), rows, mode, new_mode.reshape(B * N), rng, g.shape[1],
+                             float(switch_on), float(switch_off), float(scale),
+                             *_plan_arrays(matrix.tobytes(), *matrix.shape))
+    return ModeState(Particles.trusted(out.transpose(1, 2, 0), state.cloud.log_weights), state.resamples,
+                     state.underflows, new_mode)
+
+
+def predict_jump_markov_numpy(state: ParticleState, motion: MotionModel, rng: np.random.Generator, *,
+                              switch_on: float, switch_off: float, scale: float) -> ModeState:
+    """:func:`predict_jump_markov` in NumPy: the reference the compiled pass is held to."""
     x = state.cloud.particles
     B, N, n = x.shape
     mode = _modes(state)
@@ -291,12 +344,17 @@ def regularisation_bandwidth(particles: int, dim: int) -> float:
     return float((4.0 / (particles * (dim + 2.0))) ** (1.0 / (dim + 4.0)))
 
 
-def regularise(x: np.ndarray, cov: np.ndarray, rows: np.ndarray, scale: float, rng: np.random.Generator) -> np.ndarray:
+def regularise(x: np.ndarray, cov: np.ndarray, rows: np.ndarray, scale: float, rng: np.random.Generator,
+               backend: str = "auto") -> np.ndarray:
     """Post-regularisation of the rows just resampled: ``x_i <- x_i + h D e_i``, ``e_i ~ N(0, I)``.
 
     ``D D^T = cov`` is the weighted covariance of the cloud before resampling and ``h = scale * h_opt``
     (:func:`regularisation_bandwidth`): the resampled cloud becomes a draw from the kernel-smoothed
-    posterior instead of copies of a few particles (sample impoverishment).
+    posterior instead of copies of a few particles (sample impoverishment).  ``D`` is one batched Cholesky
+    factorisation of the rows' covariances; where ``backend`` runs Numba the jitter is added in one compiled pass
+    (:func:`.tbd_pf_numba.add_jitter`, the numbers of the NumPy line) instead of a gather and scatter of the rows, and
+    the normals are drawn compiled (:func:`.tbd_pf_numba.normals`, NumPy's numbers) where ``rng`` is a
+    ``numpy.random.Generator``.
 
     Shapes
     ------
@@ -307,10 +365,24 @@ def regularise(x: np.ndarray, cov: np.ndarray, rows: np.ndarray, scale: float, r
     B, N, n = x.shape
     h = scale * regularisation_bandwidth(N, n)
     D, _ = safe_cholesky(cov[rows])
-    e = rng.standard_normal((int(rows.sum()), N, n))
+    fast = compiled(backend) and type(rng) is np.random.Generator
+    if fast:
+        from . import tbd_pf_numba
+
+        e = tbd_pf_numba.normals(rng, (int(rows.sum()), N, n))  # the numbers of the line below
+    else:
+        e = rng.standard_normal((int(rows.sum()), N, n))
+    # D e_i for every resampled particle (one batched product)
+    y = e @ np.swapaxes(D, 1, 2)
+    if fast:
+        out = np.empty_like(x, dtype=float)  # x's memory layout, as x.copy(order="K")
+        # x_i <- x_i + h D e_i
+        tbd_pf_numba.add_jitter(out.transpose(2, 0, 1), np.asarray(x, dtype=float).transpose(2, 0, 1), y,
+                                np.flatnonzero(rows), float(h))
+        return out
     out = x.copy(order="K")
     # x_i <- x_i + h D e_i
-    out[rows] += h * (e @ np.swapaxes(D, 1, 2))
+    out[rows] += h * y
     return out
 
 
@@ -325,7 +397,7 @@ def weighted_covariance(x: np.ndarray, log_w: np.ndarray) -> np.ndarray:
 
 
 def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, threshold: float, dead: np.ndarray,
-            rng: np.random.Generator, regularisation: float = 0.0) -> ParticleState:
+            rng: np.random.Generator, regularisation: float = 0.0, backend: str = "auto") -> ParticleState:
     """Resample where ``N_eff < threshold N`` (eq 16), carrying the particles' modes along; with
     ``regularisation > 0`` the resampled rows are jittered by :func:`regularise`."""
     cloud = state.cloud
@@ -339,7 +411,7 @@ def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, thresh
     extra = () if mode is None else (mode,)
     x, log_w, *moved = resample_where(resample, cloud.particles, log_w, rng, *extra)
     if cov is not None:
-        x = regularise(x, cov, resample, regularisation, rng)
+        x = regularise(x, cov, resample, regularisation, rng, backend)
     cloud = Particles.trusted(x, log_w)
     if mode is None:
         return ParticleState(cloud, state.resamples + int(resample.sum()), state.underflows + int(dead.sum()))
@@ -376,10 +448,13 @@ def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng:
     """One (power ``power`` of the) likelihood step of :func:`update`, then resampling and regularisation."""
     present = scan.valid.any(axis=1)
     cloud = state.cloud
-    missed = None
+    missed = centre = None
     if floor == "amplitude":
         per_cloud = missed_detection == "cloud"
-        missed = log_missed(model, cloud.particles, cloud.log_weights if per_cloud else None)
+        # the cloud's predicted position, read by the missed-detection factor and by the floor: computed once
+        if per_cloud or scan.clutter_density is not None:
+            centre = _centre(cloud.particles, cloud.log_weights)
+        missed = log_missed(model, cloud.particles, cloud.log_weights if per_cloud else None, centre=centre)
     touched = present if missed is None or missed.shape[1] == 1 else np.ones_like(present)
     if not touched.any():
         return state
@@ -388,7 +463,7 @@ def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng:
         # log w_i <- log w_i + power log(eps_i + sum_m w_{m,i})
         log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend, floor=floor,
                                  floor_scale=floor_scale, log_weights=cloud.log_weights, missed=missed,
-                                 precision=precision)
+                                 precision=precision, centre=centre)
         log_w = log_w + (log_lik if power == 1.0 else power * log_lik)
     if not present.all():
         # an empty gate: log w_i <- log w_i + power log(1 - P_D^T(s_i)) (per particle), or unchanged
@@ -398,13 +473,13 @@ def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng:
     dead = touched & ~np.isfinite(np.max(log_w, axis=1))
     log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
     log_w = keep_where(touched, log_w, cloud.log_weights)
-    return _finish(state, log_w, touched, threshold, dead, rng, regularisation)
+    return _finish(state, log_w, touched, threshold, dead, rng, regularisation, backend)
 
 
-def _predict(switch_on: float, switch_off: float, scale: float):
+def _predict(switch_on: float, switch_off: float, scale: float, backend: str = "auto"):
     if switch_on <= 0.0 or scale == 1.0:
         return predict
-    return partial(predict_jump_markov, switch_on=switch_on, switch_off=switch_off, scale=scale)
+    return partial(predict_jump_markov, switch_on=switch_on, switch_off=switch_off, scale=scale, backend=backend)
 
 
 def _check_modes(who: str, switch_on: float, switch_off: float, scale: float) -> None:
@@ -440,7 +515,9 @@ TBD_PARAMETERS = (
     Param("floor_density", 5e-11, "spatial density (m^-3) of the flat floor", unit="inverse_volume", minimum=0.0),
     Param("sigma_vr", 15.0, "width of the Doppler kernel (the sensor's 2 m/s, widened as a tempering device)",
           unit="speed", above=0.0),
-    Param("backend", "auto", "kernel backend of the weights (auto: the policy's choice)", "str", choices=BACKENDS),
+    Param("backend", "auto", "kernel backend of the weights and of the compiled prediction, likelihood and "
+          "regularisation steps (auto: the policy's choice; numpy: the NumPy reference throughout)", "str",
+          choices=BACKENDS),
     *MODE_PARAMETERS,
     Param("tempering", 1, "progressive correction: the likelihood applied as this many equal powers, each followed by "
           "resampling and regularisation (1: off)", "int", unit="dimensionless", minimum=1, maximum=1000),
@@ -481,7 +558,7 @@ def make_tbd_pf(particles: int = 600, threshold: float = 0.5, floor: str = "ampl
                  f"{sigma_vr:g} m/s, two-mode CV (x{manoeuvre_scale:g} noise, on {switch_on:g}, off {switch_off:g}), "
                  f"regularised resampling ({regularisation:g} h_opt)"),
         init=partial(init, particles=particles),
-        predict=_predict(switch_on, switch_off, manoeuvre_scale),
+        predict=_predict(switch_on, switch_off, manoeuvre_scale, backend),
         update=partial(update, threshold=threshold, floor=floor, floor_scale=floor_scale,
                        missed_detection=missed_detection, floor_density=floor_density,
                        sigma_vr=sigma_vr, backend=backend, regularisation=regularisation, tempering=int(tempering),

@@ -403,3 +403,98 @@ def test_progressive_correction_applies_the_whole_likelihood_in_powers():
     assert tempered.resamples > plain.resamples
     with pytest.raises(InputError, match="tempering"):
         make_tbd_pf(tempering=0)
+
+
+# -- the compiled steps against their NumPy twins ------------------------------------------------------------------
+
+
+def _generators(seed: int):
+    """Two PCG64 generators (``wb.generator``) in the same state."""
+    return generator(seed, "twins"), generator(seed, "twins")
+
+
+def _same_position(g1, g2) -> bool:
+    """Whether two generators stand at the same place of their stream (their next raw words)."""
+    return np.array_equal(g1.bit_generator.random_raw(4), g2.bit_generator.random_raw(4))
+
+
+def _same_bits(a, b) -> bool:
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+@pytest.mark.parametrize("bits, B, N, nonlinear, plain", [
+    ("pcg64", 3, 4000, False, False),  # 48 000 draws: the PCG64 stream in registers
+    ("pcg64", 2, 50, False, True),  # a few hundred draws: Numba's Generator; a state without modes
+    ("philox", 2, 700, False, False),  # another bit generator: Numba's Generator
+    ("pcg64", 2, 3000, True, False),  # a model that overrides f (the coordinated turn with its rate)
+])
+def test_compiled_jump_markov_prediction_is_the_numpy_one_bit_for_bit(bits, B, N, nonlinear, plain):
+    from workbench.models.motion import coordinated_turn_rate
+    from workbench_filters.tbd import predict_jump_markov_numpy
+
+    motion = coordinated_turn_rate(1.0, 3.0, 0.02) if nonlinear else constant_velocity(3, 1.0, (8.0, 8.0, 4.0))
+    n = motion.Q.shape[0]
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=(B, N, n)) * 50.0
+    if nonlinear:
+        x[..., 4] = rng.normal(size=(B, N)) * 0.05
+    cloud = Particles(x, np.full((B, N), -np.log(N)))
+    state = ParticleState(cloud) if plain else ModeState(cloud, 0, 0, (rng.random((B, N)) < 0.3).astype(float))
+    def make():
+        return generator(4, "twins") if bits == "pcg64" else np.random.Generator(np.random.Philox(4))
+
+    g1, g2 = make(), make()
+    kw = dict(switch_on=0.05, switch_off=0.2, scale=4.0)
+    fast = predict_jump_markov(state, motion, g1, backend="numba", **kw)
+    ref = predict_jump_markov_numpy(state, motion, g2, **kw)
+    assert _same_bits(fast.cloud.particles, ref.cloud.particles)
+    assert _same_bits(fast.mode, ref.mode) and 0 < fast.mode.mean() < 1
+    assert fast.cloud.log_weights is state.cloud.log_weights
+    assert _same_position(g1, g2)  # the generator left where NumPy leaves it
+    # the NumPy backend is the NumPy twin
+    assert _same_bits(predict_jump_markov(state, motion, make(), backend="numpy", **kw).cloud.particles,
+                      ref.cloud.particles)
+
+
+@pytest.mark.parametrize("N, component_major", [(3000, True), (40, False)])
+def test_compiled_regularisation_is_the_numpy_one_bit_for_bit(N, component_major):
+    B, n = 4, 6
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(B, N, n)) * [400, 400, 300, 30, 30, 10]
+    if component_major:
+        x = np.ascontiguousarray(x.transpose(2, 0, 1)).transpose(1, 2, 0)
+    cov = np.stack([np.cov(x[b].T) for b in range(B)])
+    rows = np.array([True, False, True, True])
+    g1, g2 = _generators(9)
+    fast = regularise(x, cov, rows, 0.5, g1, backend="numba")
+    ref = regularise(x, cov, rows, 0.5, g2, backend="numpy")
+    assert _same_bits(fast, ref) and fast.strides == ref.strides
+    assert _same_position(g1, g2)
+    assert not np.array_equal(fast[0], x[0]) and np.array_equal(fast[1], x[1])
+
+
+def test_compiled_floor_sum_is_numpys_logaddexp_bit_for_bit():
+    from workbench_filters.tbd import tbd_pf_numba
+
+    rng = np.random.default_rng(3)
+    B, N = 8, 400
+    log_sum = rng.normal(size=(B, N)) * 40.0 - 30.0
+    wide = rng.normal(size=(B, N)) * 40.0 - 30.0
+    narrow = rng.normal(size=(B, 1)) * 10.0 - 30.0
+    # the shortcut's edges: gaps just either side of 50 with the larger term near 2^-10, and ordinary numbers
+    a = np.array([2.0**-10, 2.0**-10 * 0.999, 1.0, -1.0, 3.0**-7, 0.0, -0.0])
+    for i, d in enumerate((49.9, 50.0, 50.1, 30.0, 60.0)):
+        wide[i, : a.size], log_sum[i, : a.size] = a, a - d
+        wide[i, a.size: 2 * a.size], log_sum[i, a.size: 2 * a.size] = a - d, a
+    log_sum[5, :6] = [np.inf, -np.inf, np.nan, -0.0, 0.0, wide[5, 5]]
+    wide[6, :4] = [np.inf, -np.inf, np.nan, -np.inf]
+    log_sum[6, :4] = [np.inf, -np.inf, 1.0, 2.0]
+    narrow[7] = -np.inf
+    present = np.ones(B, dtype=bool)
+    present[4] = False
+    for log_eps in (wide, narrow):
+        with np.errstate(invalid="ignore"):
+            want = np.where(present[:, None], np.logaddexp(log_eps, log_sum), -np.inf)
+        got = tbd_pf_numba.log_add_floor(log_eps, log_sum, present, np.empty((B, N)))
+        assert _same_bits(got, want)
