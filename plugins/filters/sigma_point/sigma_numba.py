@@ -65,6 +65,26 @@ def wrap(a):
     return a - TWO_PI * math.ceil((a - math.pi) * (1.0 / TWO_PI))
 
 
+@numba.njit(inline="always", error_model="numpy")
+def measurement_mean(Y, b, wm, angular, count):
+    """``y^ = sum Wm Y`` over item ``b``'s first ``count`` sigma points; an angular component as
+    ``y_0 + sum Wm wrap(y_s - y_0)``, wrapped."""
+    m = Y.shape[2]
+    y_hat = np.empty(m)
+    for k in range(m):
+        acc = 0.0
+        if angular[k]:
+            ref = Y[b, 0, k]
+            for s in range(count):
+                acc += wm[s] * wrap(Y[b, s, k] - ref)
+            y_hat[k] = wrap(ref + acc)
+        else:
+            for s in range(count):
+                acc += wm[s] * Y[b, s, k]
+            y_hat[k] = acc
+    return y_hat
+
+
 @numba.njit(error_model="numpy")
 def cholesky_into(A, L):
     """Lower factor of the symmetric ``A (n, n)`` into ``L``; ``False`` if a pivot is not positive."""
@@ -185,19 +205,7 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
         if not finite:  # the NumPy path names it
             ok[b] = False
             continue
-        # y^ = sum Wm Y; angular components as y_0 + sum Wm wrap(y_s - y_0), wrapped
-        y_hat = np.empty(m)
-        for k in range(m):
-            acc = 0.0
-            if angular[k]:
-                ref = Y[b, 0, k]
-                for s in range(S):
-                    acc += wm[s] * wrap(Y[b, s, k] - ref)
-                y_hat[k] = wrap(ref + acc)
-            else:
-                for s in range(S):
-                    acc += wm[s] * Y[b, s, k]
-                y_hat[k] = acc
+        y_hat = measurement_mean(Y, b, wm, angular, S)
         dY = np.empty((S, m))
         for s in range(S):
             for k in range(m):
@@ -570,19 +578,7 @@ def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, m
         if not finite:  # the NumPy path names it
             ok[b] = False
             continue
-        # y^ = sum Wm Y; angular components as y_0 + sum Wm wrap(y_s - y_0), wrapped
-        y_hat = np.empty(m)
-        for k in range(m):
-            acc = 0.0
-            if angular[k]:
-                ref = Y[b, 0, k]
-                for s in range(P):
-                    acc += wm[s] * wrap(Y[b, s, k] - ref)
-                y_hat[k] = wrap(ref + acc)
-            else:
-                for s in range(P):
-                    acc += wm[s] * Y[b, s, k]
-                y_hat[k] = acc
+        y_hat = measurement_mean(Y, b, wm, angular, P)
         q = Rs.shape[1]
         M = np.empty((2 * n + q, m))
         Pxy = np.zeros((n, m))

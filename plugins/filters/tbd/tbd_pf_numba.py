@@ -31,7 +31,7 @@ import math
 import numba
 import numpy as np
 
-from workbench.kernels.particle_numba import fill_normals
+from workbench.kernels.particle_numba import _combine_tile_cols, fill_normals
 from workbench.kernels.pcg_numba import _pcg_next_double, draw_tile, pcg64_stream
 
 jit = functools.partial(numba.njit, error_model="numpy", cache=True)
@@ -68,7 +68,6 @@ def _jump_markov(out, x, mode, new_mode, rng, pcg, k, switch_on, switch_off, sca
     """:func:`jump_markov` with the stream's words ``pcg`` (:func:`workbench.kernels.pcg_numba.pcg64_stream`: the
     PCG64 state, or empty for Numba's ``Generator``)."""
     L = mode.shape[0]
-    n = x.shape[0]
     if pcg.shape[0] == 4:
         hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
         for t in range(L):
@@ -89,24 +88,7 @@ def _jump_markov(out, x, mode, new_mode, rng, pcg, k, switch_on, switch_off, sca
             s = scale if new_mode[lo + t] > 0 else 1.0
             for j in range(k):
                 e[j, t] *= s
-        for i in range(out.shape[0]):
-            o = out[i, lo:hi]
-            if ptr[i] == ptr[i + 1]:
-                o[:] = 0.0
-                continue
-            for q in range(ptr[i], ptr[i + 1]):
-                j = src[q]
-                c = coef[q]
-                if j < n:
-                    v = x[j, lo:hi]
-                else:
-                    v = e[j - n, : hi - lo]
-                if q == ptr[i]:
-                    for t in range(hi - lo):
-                        o[t] = c * v[t]
-                else:
-                    for t in range(hi - lo):
-                        o[t] += c * v[t]
+        _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr)  # the bootstrap PF's combination, the same sums
     return out
 
 
