@@ -85,6 +85,58 @@ def measurement_mean(Y, b, wm, angular, count):
     return y_hat
 
 
+@numba.njit(inline="always", error_model="numpy")
+def gain(Pxy, L):
+    """``K = Pxy Pyy^-1`` with ``Pyy = L L^T``: ``L M = Pxy^T`` (forward), ``L^T K^T = M`` (back)."""
+    n, m = Pxy.shape
+    K = np.empty((n, m))
+    for r in range(n):
+        for k in range(m):
+            v = Pxy[r, k]
+            for l in range(k):
+                v -= L[k, l] * K[r, l]
+            K[r, k] = v / L[k, k]
+        for k in range(m - 1, -1, -1):
+            v = K[r, k]
+            for l in range(k + 1, m):
+                v -= L[l, k] * K[r, l]
+            K[r, k] = v / L[k, k]
+    return K
+
+
+@numba.njit(inline="always", error_model="numpy")
+def updated_mean_into(x, b, K, z, y_hat, angular, mean):
+    """``mean[b] = x[b] + K wrap(z[b] - y^)`` (angular components wrapped)."""
+    n, m = K.shape
+    for r in range(n):
+        v = x[b, r]
+        for k in range(m):
+            d = z[b, k] - y_hat[k]
+            v += K[r, k] * (wrap(d) if angular[k] else d)
+        mean[b, r] = v
+
+
+@numba.njit(inline="always", error_model="numpy")
+def downdated_cov_into(P, b, K, L, cov):
+    """``cov[b] = sym(P[b]) - (K L)(K L)^T``, written symmetric."""
+    n, m = K.shape
+    KL = np.zeros((n, m))
+    for r in range(n):
+        for k in range(m):
+            v = 0.0
+            for l in range(k, m):
+                v += K[r, l] * L[l, k]
+            KL[r, k] = v
+    for r in range(n):
+        for c in range(r + 1):
+            v = 0.0
+            for k in range(m):
+                v += KL[r, k] * KL[c, k]
+            w = 0.5 * (P[b, r, c] + P[b, c, r]) - v
+            cov[b, r, c] = w
+            cov[b, c, r] = w
+
+
 @numba.njit(error_model="numpy")
 def cholesky_into(A, L):
     """Lower factor of the symmetric ``A (n, n)`` into ``L``; ``False`` if a pivot is not positive."""
@@ -232,44 +284,11 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
             ok[b] = False
             continue
         # K = Pxy Pyy^-1: L M = Pxy^T (forward), L^T K^T = M (back)
-        K = np.empty((n, m))
-        for r in range(n):
-            for k in range(m):
-                v = Pxy[r, k]
-                for l in range(k):
-                    v -= L[k, l] * K[r, l]
-                K[r, k] = v / L[k, k]
-            for k in range(m - 1, -1, -1):
-                v = K[r, k]
-                for l in range(k + 1, m):
-                    v -= L[l, k] * K[r, l]
-                K[r, k] = v / L[k, k]
+        K = gain(Pxy, L)
         # x = x- + K wrap(z - y^)
-        nu = np.empty(m)
-        for k in range(m):
-            d = z[b, k] - y_hat[k]
-            nu[k] = wrap(d) if angular[k] else d
-        for r in range(n):
-            v = x[b, r]
-            for k in range(m):
-                v += K[r, k] * nu[k]
-            mean[b, r] = v
+        updated_mean_into(x, b, K, z, y_hat, angular, mean)
         # P = sym(P- - (K L)(K L)^T)
-        KL = np.zeros((n, m))
-        for r in range(n):
-            for k in range(m):
-                v = 0.0
-                for l in range(k, m):
-                    v += K[r, l] * L[l, k]
-                KL[r, k] = v
-        for r in range(n):
-            for c in range(r + 1):
-                v = 0.0
-                for k in range(m):
-                    v += KL[r, k] * KL[c, k]
-                w = 0.5 * (P[b, r, c] + P[b, c, r]) - v
-                cov[b, r, c] = w
-                cov[b, c, r] = w
+        downdated_cov_into(P, b, K, L, cov)
     return ok.all()
 
 
@@ -357,18 +376,7 @@ def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, c
         if not cholesky_into(P[b], Sx):
             ok[b] = False
             continue
-        y_hat = np.empty(m)
-        for k in range(m):
-            acc = 0.0
-            if angular[k]:
-                ref = Y[b, 0, k]
-                for s in range(Sp):
-                    acc += wm[s] * wrap(Y[b, s, k] - ref)
-                y_hat[k] = wrap(ref + acc)
-            else:
-                for s in range(Sp):
-                    acc += wm[s] * Y[b, s, k]
-                y_hat[k] = acc
+        y_hat = measurement_mean(Y, b, wm, angular, Sp)
         A = np.empty((n, m))
         D = np.empty((n, m))
         for i in range(n):
@@ -406,39 +414,9 @@ def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, c
         if not cholesky_into(Pyy, L):
             ok[b] = False
             continue
-        K = np.empty((n, m))
-        for r in range(n):
-            for k in range(m):
-                v = Pxy[r, k]
-                for l in range(k):
-                    v -= L[k, l] * K[r, l]
-                K[r, k] = v / L[k, k]
-            for k in range(m - 1, -1, -1):
-                v = K[r, k]
-                for l in range(k + 1, m):
-                    v -= L[l, k] * K[r, l]
-                K[r, k] = v / L[k, k]
-        for r in range(n):
-            v = x[b, r]
-            for k in range(m):
-                d = z[b, k] - y_hat[k]
-                v += K[r, k] * (wrap(d) if angular[k] else d)
-            mean[b, r] = v
-        KL = np.zeros((n, m))
-        for r in range(n):
-            for k in range(m):
-                v = 0.0
-                for l in range(k, m):
-                    v += K[r, l] * L[l, k]
-                KL[r, k] = v
-        for r in range(n):
-            for c in range(r + 1):
-                v = 0.0
-                for k in range(m):
-                    v += KL[r, k] * KL[c, k]
-                w = 0.5 * (P[b, r, c] + P[b, c, r]) - v
-                cov[b, r, c] = w
-                cov[b, c, r] = w
+        K = gain(Pxy, L)
+        updated_mean_into(x, b, K, z, y_hat, angular, mean)
+        downdated_cov_into(P, b, K, L, cov)
     return ok.all()
 
 
@@ -632,24 +610,8 @@ def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, m
             ok[b] = False
             continue
         # K = Pxy (S_y S_y^T)^-1: S_y M = Pxy^T (forward), S_y^T K^T = M (back)
-        K = np.empty((n, m))
-        for r in range(n):
-            for k in range(m):
-                v = Pxy[r, k]
-                for l in range(k):
-                    v -= Sy[k, l] * K[r, l]
-                K[r, k] = v / Sy[k, k]
-            for k in range(m - 1, -1, -1):
-                v = K[r, k]
-                for l in range(k + 1, m):
-                    v -= Sy[l, k] * K[r, l]
-                K[r, k] = v / Sy[k, k]
-        for r in range(n):  # x = x- + K wrap(z - y^)
-            v = x[b, r]
-            for k in range(m):
-                d = z[b, k] - y_hat[k]
-                v += K[r, k] * (wrap(d) if angular[k] else d)
-            mean[b, r] = v
+        K = gain(Pxy, Sy)
+        updated_mean_into(x, b, K, z, y_hat, angular, mean)  # x = x- + K wrap(z - y^)
         u = np.empty(n)
         for j in range(m):  # S = cholupdate(S-, (K S_y)_j, -1), one column at a time
             for r in range(n):
