@@ -259,3 +259,18 @@ def test_the_crpf_backend_argument_reaches_its_normals():
         expect = "numba" if which == "auto" and backend.numba_available() else "numpy"
         assert {k: v for k, v in ran.items() if v} == {expect: 3}, ran  # the three propagations
     np.testing.assert_array_equal(out["numpy"].mean, out["auto"].mean)
+
+
+@pytest.mark.skipif(not backend.numba_available(), reason="Numba is not installed")
+def test_threaded_asks_for_items_and_more_than_one_thread():
+    import numba
+
+    saved = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert not backend.threaded(10 ** 9, 16)  # one thread: never the threaded compilation
+        if numba.config.NUMBA_NUM_THREADS > 1:
+            numba.set_num_threads(2)
+            assert backend.threaded(16, 16) and not backend.threaded(15, 16)
+    finally:
+        numba.set_num_threads(saved)

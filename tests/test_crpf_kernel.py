@@ -217,3 +217,31 @@ def test_plugin_gives_the_same_run_with_and_without_the_kernel(monkeypatch):
         for b in BACKENDS:
             assert np.allclose(runs[b].mean, runs["numpy"].mean, rtol=1e-9, atol=1e-9)
             assert np.allclose(runs[b].cov, runs["numpy"].cov, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
+def test_one_numba_thread_runs_the_serial_compilation_at_any_batch(monkeypatch):
+    # a report worker has one Numba thread: the threaded compilation would never run anything in parallel there,
+    # so it is never called (nor compiled); the numbers are the threaded path's
+    import numba
+    from workbench_filters.crpf import crpf_numba
+
+    x, c, s2, t, z, key, u0, shape = _inputs(B=40, N=30, seed=4)
+    args = (x, c, s2, t, F, z, key, u0, shape, 0.95, 2.0, 0.3, 2.0, True, (0.0, 0.0), True, True)
+    saved = numba.get_num_threads()
+    whole = crpf_step(*args, backend="numba")
+
+    def refuse(*a):
+        raise AssertionError("the threaded compilation ran on one thread")
+
+    monkeypatch.setattr(crpf_numba, "kernel_parallel", refuse)
+    numba.set_num_threads(1)
+    try:
+        serial = crpf_step(*args, backend="numba")
+    finally:
+        numba.set_num_threads(saved)
+    for a, b in zip(whole, serial):
+        assert np.array_equal(a, b)
+    if saved > 1:  # more than one thread: a batch this size takes the threaded compilation
+        with pytest.raises(AssertionError, match="threaded compilation ran"):
+            crpf_step(*args, backend="numba")

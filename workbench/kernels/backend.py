@@ -36,7 +36,7 @@ from collections import Counter
 from typing import Iterator
 
 __all__ = ["BACKENDS", "ARCHES", "GPU_ARCHES", "RUN_ARCHES", "ENV", "numba_available", "current_arch", "using",
-           "set_arch", "default_backend", "preferring", "resolve", "runs_numba", "BackendRecord"]
+           "set_arch", "default_backend", "preferring", "resolve", "runs_numba", "threaded", "BackendRecord"]
 
 #: Backend names a kernel call or a filter parameter may give.
 BACKENDS = ("auto", "numba", "taichi", "numpy")
@@ -154,6 +154,20 @@ def runs_numba(backend: str = "auto", arch: str | None = None) -> bool:
     """Whether a module that has only a Numba version and its NumPy twin runs the Numba one: :func:`resolve`
     gives ``"numba"`` (``"taichi"``, off the CPU or without Numba, means the NumPy twin there)."""
     return resolve(backend, arch) == "numba"
+
+
+def threaded(items: int, threshold: int) -> bool:
+    """Whether a compiled kernel with a threaded and a serial compilation of the same loops (the same numbers
+    either way: one item per parallel iteration, no reduction across items) should run the threaded one: at least
+    ``threshold`` items (below that, waking the thread pool costs more than the work) and more than one Numba
+    thread in this process.  A report's worker processes run one thread each (:data:`workbench.report.engine.
+    ONE_THREAD_ENV`): there the threaded compilation would only cost its compile time (a parallel region is
+    compiled, cached and loaded apart from the serial one) and never run anything in parallel."""
+    if items < threshold:
+        return False
+    import numba
+
+    return numba.get_num_threads() > 1
 
 
 class _PerThread(threading.local):

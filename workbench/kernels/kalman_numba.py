@@ -95,8 +95,10 @@ def update_items(x, P, z, hx, angular, H, R, present, x_out, P_out):
     KR = np.empty((n, m))
     for b in range(B):
         if not present[b]:
-            x_out[b] = x[b]
-            P_out[b] = P[b]
+            for i in range(n):  # copied element by element: an array assignment compiles Numba's shape-mismatch
+                x_out[b, i] = x[b, i]  # message (its string formatting: seconds of compile time per process)
+                for j in range(n):
+                    P_out[b, i, j] = P[b, i, j]
             if not _finite(x_out, P_out, b):
                 return False
             continue

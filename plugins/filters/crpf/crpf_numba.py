@@ -11,6 +11,7 @@ import math
 import numba
 import numpy as np
 
+from workbench.kernels.backend import threaded
 from workbench.kernels.counter_normals_numba import row_normals
 from workbench.kernels.particle_numba import atan2  # the select-only atan2 (Cephes' rational approximation) both kernels use
 from workbench.kernels.vector_width import wide_vectors
@@ -273,6 +274,7 @@ PARALLEL_FROM = 16
 
 
 def kernel(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
-    """The step of every run: a thread per run from :data:`PARALLEL_FROM` runs on, else one thread."""
-    run = kernel_parallel if x.shape[0] >= PARALLEL_FROM else kernel_serial
+    """The step of every run: a thread per run from :data:`PARALLEL_FROM` runs on where Numba has more than one
+    thread (:func:`workbench.kernels.backend.threaded`), else one thread: the same numbers either way."""
+    run = kernel_parallel if threaded(x.shape[0], PARALLEL_FROM) else kernel_serial
     run(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch)

@@ -37,7 +37,7 @@ import annotations`` here: Taichi reads the kernel annotations as objects.)
 
 import numpy as np
 
-from workbench.kernels.backend import BACKENDS, current_arch, numba_available, resolve
+from workbench.kernels.backend import BACKENDS, current_arch, numba_available, resolve, threaded
 from workbench.kernels.runtime import ensure_taichi
 
 from .reference import tbd_log_weight_sums_reference
@@ -108,7 +108,7 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
         if which == "numba":
             from . import tbd_weights_numba as nb
 
-            big = B * N * int(counts.max()) >= SERIAL_PAIRS
+            big = threaded(B * N * int(counts.max()), SERIAL_PAIRS)  # threaded and serial: the same numbers
             if single:
                 (nb.parallel32 if big else nb.serial32)(pts, meas, counts, np.float32(beta2), nb.COEFFS_F32, out)
             else:

@@ -27,8 +27,9 @@ def normal_sums(S, R, E, with_e, block):
                 acc_b[f - lo] += S[b, f] * cr
                 if with_e:
                     acc_e[f - lo] += E[b, f] * cr
-        bs[lo:hi] = acc_b
-        ae[lo:hi] = acc_e
+        for f in range(lo, hi):  # element by element: a slice assignment compiles Numba's shape-mismatch message
+            bs[f] = acc_b[f - lo]
+            ae[f] = acc_e[f - lo]
     return bs, ae
 
 
