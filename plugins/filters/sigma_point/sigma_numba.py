@@ -26,8 +26,9 @@ takes the NumPy path, which adds and counts jitter.  So does a present measureme
 path refuses it by name (:func:`workbench.filtering.require_finite`).
 
 Each loop is compiled twice, threaded and serial (``prange`` is ``range`` there), and called serial below
-:data:`PARALLEL_MIN` items: for one track, waking the thread pool costs more than the work (milliseconds on a
-loaded machine).  Both give the same numbers (each item is computed alone).
+:data:`PARALLEL_MIN` items (for one track, waking the thread pool costs more than the work: milliseconds on a
+loaded machine) and wherever Numba has one thread (:func:`workbench.kernels.backend.threaded`: a report worker never
+compiles the threaded one).  Both give the same numbers (each item is computed alone).
 """
 
 import math
@@ -35,6 +36,8 @@ import types as pytypes
 
 import numba
 import numpy as np
+
+from workbench.kernels.backend import threaded as threaded_policy
 
 TWO_PI = 2.0 * math.pi
 #: Batches of at least this many items run threaded.
@@ -51,7 +54,9 @@ def _dispatch(fn, name: str):
     threaded, serial = _compiled(fn, name, True), _compiled(fn, f"{name}_serial", False)
 
     def call(*args):
-        return (threaded if args[0].shape[0] >= PARALLEL_MIN else serial)(*args)
+        # threaded from PARALLEL_MIN items where Numba has more than one thread (a report worker has one: its
+        # threaded compilation would never be called, nor compiled)
+        return (threaded if threaded_policy(args[0].shape[0], PARALLEL_MIN) else serial)(*args)
 
     call.__name__ = call.__qualname__ = name
     call.__doc__ = fn.__doc__
