@@ -3,6 +3,15 @@
 The functions live at module level, not in a factory, so that Numba's on-disk cache finds them again
 in a new process (a closure's cache key includes its cells, which differ from process to process, and
 every process compiled the kernel anew: 7-12 s).  See :mod:`workbench_filters.crpf.crpf_step` for the step.
+
+Where a step's time goes (B = 250 runs of N = 500 particles, n = 4, one thread of a 2-core AMD EPYC Zen 1, AVX2 on
+128-bit units; ns per particle-step, from variants cut short after each phase): the four propagation normals
+38 (9.5 each, :mod:`workbench.kernels.counter_normals_numba`), the two costs 12 each (two thirds of it the
+select-only atan2), the propagation's gather from the parents 9, the selection 5, the first pass (``F x``,
+``sigma``, ``lam C``) 4, the two PMFs with their sums 3-4 each, the weighted mean and covariance 10; about
+800 ns per run besides (calls, views, loop set-up), 8 ns per particle-step at N = 100.  Every number is the
+previous kernel's bit for bit (117 ns per particle-step before; the normals then cost 13 ns each, computed
+inside ``one_run``).
 """
 
 import functools
@@ -37,9 +46,12 @@ def cost(px, py, zr, zt, sx, sy, arc):
     return dr * dr + dt * dt
 
 
-@jit(inline="always")
+@jit
 def costs_into(out, base, px, py, zr, zt, sx, sy, q, arc):
-    """out_i = base_i + dC(p_i | z) over contiguous rows: one vectorisable loop (q = 2), then the power."""
+    """out_i = base_i + dC(p_i | z) over contiguous rows: one vectorisable loop (q = 2), then the power.  (A
+    function of its own, called twice, not inlined into ``one_run`` by Numba: the same speed, and 1.5 s less to
+    compile than two inlined copies.)"""
+    wide_vectors()
     N = out.shape[0]
     for i in range(N):
         out[i] = cost(px[i], py[i], zr, zt, sx, sy, arc)
@@ -53,9 +65,10 @@ def costs_into(out, base, px, py, zr, zt, sx, sy, q, arc):
 
 @jit(inline="always")
 def pmf(vals, N, beta, delta, relative, w):
-    """w_i ~ (v_i - min v + delta_v)^-beta (scaled so the best is 1); returns the sum.  ``delta_v = delta``, or
-    for ``relative`` ``delta`` times the mean gap of the finite values above their minimum (``delta`` where
-    there is no gap): the twin's :func:`~workbench_filters.crpf.crpf_step_numpy.pmf_offset`."""
+    """w_i ~ (v_i - min v + delta_v)^-beta (scaled so the best is 1); ``delta_v = delta``, or for ``relative``
+    ``delta`` times the mean gap of the finite values above their minimum (``delta`` where there is no gap): the
+    twin's :func:`~workbench_filters.crpf.crpf_step_numpy.pmf_offset`.  Rows with a NaN or no finite value get
+    ``w = 1``.  (The sum is the caller's: :func:`running_sum` or :func:`total_of`.)"""
     m = math.inf
     bad = False
     total = 0.0
@@ -73,7 +86,7 @@ def pmf(vals, N, beta, delta, relative, w):
     if bad:
         for i in range(N):
             w[i] = 1.0
-        return float(N)
+        return
     if relative:
         # delta_v = delta * (mean_i v_i - min_i v_i)
         gap = total / count - m
@@ -88,25 +101,42 @@ def pmf(vals, N, beta, delta, relative, w):
     else:
         for i in range(N):
             w[i] = ((vals[i] - m + delta) * inv) ** (-beta)
+
+
+@jit(inline="always")
+def running_sum(w, cum):
+    """``cum_i = w_0 + ... + w_i`` in order (the one serial chain the selection needs); returns the total."""
     total = 0.0
-    for i in range(N):
+    for i in range(w.shape[0]):
+        total += w[i]
+        cum[i] = total
+    return total
+
+
+@jit(inline="always")
+def total_of(w):
+    total = 0.0
+    for i in range(w.shape[0]):
         total += w[i]
     return total
 
 
 @jit(inline="always")
-def select(w, total, u0, parent, edges):
+def select(cum, total, u0, parent, edges, ef):
     """Systematic selection without a data-dependent branch: with ``e_i = clip(ceil(N cdf_i - u0), 0, N)``
     (non-decreasing, ``e_{N-1} = N``), particle ``i`` fills the slots ``[e_{i-1}, e_i)``, so the parent
-    of slot ``j`` is ``#{i : e_i <= j}``: a histogram of the edges and its running sum."""
-    N = w.shape[0]
+    of slot ``j`` is ``#{i : e_i <= j}``: a histogram of the edges and its running sum.  ``cdf_i = cum_i / total``
+    (``cum`` from :func:`running_sum`), the last one exactly 1; the edges are computed in one vectorisable loop
+    (``ef``, as floats), then scattered."""
+    N = cum.shape[0]
+    fN = float(N)
+    for i in range(N - 1):
+        ef[i] = min(max(math.ceil(N * (cum[i] / total) - u0), 0.0), fN)
+    ef[N - 1] = min(max(math.ceil(N * 1.0 - u0), 0.0), fN)
     for j in range(N + 1):
         edges[j] = 0
-    cum = 0.0
     for i in range(N):
-        cum += w[i]
-        frac = 1.0 if i == N - 1 else cum / total  # the last cdf entry is exactly 1
-        edges[int(min(max(math.ceil(N * frac - u0), 0.0), float(N)))] += 1
+        edges[int(ef[i])] += 1
     run = 0
     for j in range(N):
         run += edges[j]
@@ -114,10 +144,14 @@ def select(w, total, u0, parent, edges):
 
 
 @jit
-def one_run(xb, cb, s2b, t, F, zr, zt, key, b, u0, shape, scal, xn, cn, s2n, mean, cov, w):
-    """The step of one run.  (Compiled as a function of its own: written inline in the prange body,
-    its loops vectorised less and the kernel was 1.5x slower.)  The common state is 4-D
-    ``[x, y, vx, vy]``; that case has its loops over components written out (2x faster)."""
+def one_run(xb, cb, s2b, t, F, zr, zt, eb, u0, shape, scal, xn, cn, s2n, mean, cov, w, sc, ic):
+    """The step of one run, with its propagation normals ``eb`` (``e[j, r] = eb[j n + r]``) and scratch
+    ``sc`` (``(n + 6) N`` floats) and ``ic`` (``2 N + 1`` ints).  (Compiled as a function of its own: written
+    inline in the prange body, its loops vectorised less and the kernel was 1.5x slower.)  The common state is
+    4-D ``[x, y, vx, vy]``; that case has its loops over components written out (2x faster).
+
+    Every per-particle quantity the propagation gathers from its parent (``F x``, ``sigma``, ``lam C``) is
+    computed once per particle, in the vectorisable first pass, so the gathering loop only adds the noise."""
     wide_vectors()  # the cost, PMF, normals and moment loops: the CPU's full vector width
     N, n = xb.shape
     lam, beta, delta, q = scal[0], scal[1], scal[2], scal[3]
@@ -128,77 +162,92 @@ def one_run(xb, cb, s2b, t, F, zr, zt, key, b, u0, shape, scal, xn, cn, s2n, mea
     # sigma'^2 = a sigma_parent^2 + ||dev||^2 b  with a = (t - 1) / t, b = 1 / (t n); fixed: a = 1, b = 0
     a = (t - 1.0) / t if adaptive else 1.0
     bn = 1.0 / (t * n) if adaptive else 0.0
-    px = np.empty(N)
-    py = np.empty(N)
-    base = np.empty(N)
-    parent = np.empty(N, dtype=np.int64)
-    edges = np.empty(N + 1, dtype=np.int64)
-    eb = np.empty(N * n)
-    row_normals(key, b, eb)  # this run's propagation normals, e[j, r] = eb[j n + r]
+    px = sc[0:N]
+    py = sc[N:2 * N]
+    base = sc[2 * N:3 * N]  # lam C_i, then lam C_parent(j)
+    lamc = sc[3 * N:4 * N]
+    sd = sc[4 * N:5 * N]  # sigma_i
+    cum = sc[5 * N:6 * N]  # the PMF's running sum, then the selection edges
+    fx = sc[6 * N:(6 + n) * N].reshape((N, n))  # F x_i
+    parent = ic[0:N]
+    edges = ic[N:2 * N + 1]
     # R = lam C + dC(F x | z): the noise-free positions gathered first, so the cost loop vectorises
-    for i in range(N):
-        ax = 0.0
-        ay = 0.0
-        for k in range(n):
-            ax += F[0, k] * xb[i, k]
-            ay += F[1, k] * xb[i, k]
-        px[i] = ax
-        py[i] = ay
-        base[i] = lam * cb[i]
-    costs_into(w, base, px, py, zr, zt, sx, sy, q, arc)
-    total = pmf(w, N, beta, delta, relative, w)
-    select(w, total, u0, parent, edges)
-    # dev = sigma_parent e;  x' = F x_parent + shape dev;  sigma'^2 = a sigma_parent^2 + b ||dev||^2;
-    # C' = lam C_parent + dC(x' | z)
     if n == 4:
         f00, f01, f02, f03 = F[0, 0], F[0, 1], F[0, 2], F[0, 3]
         f10, f11, f12, f13 = F[1, 0], F[1, 1], F[1, 2], F[1, 3]
         f20, f21, f22, f23 = F[2, 0], F[2, 1], F[2, 2], F[2, 3]
         f30, f31, f32, f33 = F[3, 0], F[3, 1], F[3, 2], F[3, 3]
-        g0, g1, g2, g3 = shape[0], shape[1], shape[2], shape[3]
-        for j in range(N):
-            i = parent[j]
-            v = s2b[i]
-            sd = math.sqrt(v)
+        for i in range(N):
             x0, x1, x2, x3 = xb[i, 0], xb[i, 1], xb[i, 2], xb[i, 3]
-            d0 = sd * eb[4 * j]
-            d1 = sd * eb[4 * j + 1]
-            d2 = sd * eb[4 * j + 2]
-            d3 = sd * eb[4 * j + 3]
-            y0 = f00 * x0 + f01 * x1 + f02 * x2 + f03 * x3 + g0 * d0
-            y1 = f10 * x0 + f11 * x1 + f12 * x2 + f13 * x3 + g1 * d1
-            xn[j, 0] = y0
-            xn[j, 1] = y1
-            xn[j, 2] = f20 * x0 + f21 * x1 + f22 * x2 + f23 * x3 + g2 * d2
-            xn[j, 3] = f30 * x0 + f31 * x1 + f32 * x2 + f33 * x3 + g3 * d3
-            s2n[j] = a * v + bn * (d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3)
-            px[j] = y0
-            py[j] = y1
-            base[j] = lam * cb[i]
+            y0 = f00 * x0 + f01 * x1 + f02 * x2 + f03 * x3
+            y1 = f10 * x0 + f11 * x1 + f12 * x2 + f13 * x3
+            fx[i, 0] = y0
+            fx[i, 1] = y1
+            fx[i, 2] = f20 * x0 + f21 * x1 + f22 * x2 + f23 * x3
+            fx[i, 3] = f30 * x0 + f31 * x1 + f32 * x2 + f33 * x3
+            # the risk's position is the sum started from 0.0 (0.0 + s is s, but -0.0 becomes +0.0)
+            px[i] = y0 + 0.0
+            py[i] = y1 + 0.0
+            lamc[i] = lam * cb[i]
+            sd[i] = math.sqrt(s2b[i])
     else:
-        for j in range(N):
-            i = parent[j]
-            v = s2b[i]
-            sd = math.sqrt(v)
-            ss = 0.0
+        for i in range(N):
             for r in range(n):
                 acc = 0.0
                 for k in range(n):
                     acc += F[r, k] * xb[i, k]
-                d = sd * eb[j * n + r]
+                fx[i, r] = acc
+            px[i] = fx[i, 0]
+            py[i] = fx[i, 1]
+            lamc[i] = lam * cb[i]
+            sd[i] = math.sqrt(s2b[i])
+    costs_into(w, lamc, px, py, zr, zt, sx, sy, q, arc)
+    pmf(w, N, beta, delta, relative, w)
+    total = running_sum(w, cum)
+    select(cum, total, u0, parent, edges, cum)
+    # dev = sigma_parent e;  x' = F x_parent + shape dev;  sigma'^2 = a sigma_parent^2 + b ||dev||^2;
+    # C' = lam C_parent + dC(x' | z)
+    if n == 4:
+        g0, g1, g2, g3 = shape[0], shape[1], shape[2], shape[3]
+        for j in range(N):
+            i = parent[j]
+            s = sd[i]
+            d0 = s * eb[4 * j]
+            d1 = s * eb[4 * j + 1]
+            d2 = s * eb[4 * j + 2]
+            d3 = s * eb[4 * j + 3]
+            y0 = fx[i, 0] + g0 * d0
+            y1 = fx[i, 1] + g1 * d1
+            xn[j, 0] = y0
+            xn[j, 1] = y1
+            xn[j, 2] = fx[i, 2] + g2 * d2
+            xn[j, 3] = fx[i, 3] + g3 * d3
+            s2n[j] = a * s2b[i] + bn * (d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3)
+            px[j] = y0
+            py[j] = y1
+            base[j] = lamc[i]
+    else:
+        for j in range(N):
+            i = parent[j]
+            s = sd[i]
+            ss = 0.0
+            for r in range(n):
+                d = s * eb[j * n + r]
                 ss += d * d
-                xn[j, r] = acc + shape[r] * d
-            s2n[j] = a * v + bn * ss
+                xn[j, r] = fx[i, r] + shape[r] * d
+            s2n[j] = a * s2b[i] + bn * ss
             px[j] = xn[j, 0]
             py[j] = xn[j, 1]
-            base[j] = lam * cb[i]
+            base[j] = lamc[i]
     costs_into(cn, base, px, py, zr, zt, sx, sy, q, arc)
     # estimate: pi' ~ (C' - min C' + delta_C)^-beta, weighted mean and covariance
-    total = pmf(cn, N, beta, delta, relative, w)
+    pmf(cn, N, beta, delta, relative, w)
     if n == 4:
         m0 = m1 = m2 = m3 = 0.0
+        total = 0.0  # the weights' sum, in order, beside the four weighted sums (independent chains)
         for i in range(N):
             wi = w[i]
+            total += wi
             m0 += wi * xn[i, 0]
             m1 += wi * xn[i, 1]
             m2 += wi * xn[i, 2]
@@ -233,6 +282,7 @@ def one_run(xb, cb, s2b, t, F, zr, zt, key, b, u0, shape, scal, xn, cn, s2n, mea
                 cov[t, r] = sums[k] / total
                 k += 1
         return
+    total = total_of(w)
     m = np.zeros(n)
     for i in range(N):  # every component's sum in one pass: independent chains
         for r in range(n):
@@ -256,16 +306,26 @@ def one_run(xb, cb, s2b, t, F, zr, zt, key, b, u0, shape, scal, xn, cn, s2n, mea
 
 @jit(parallel=True, cache=True)
 def kernel_parallel(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
-    for b in numba.prange(x.shape[0]):
-        one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], key, b, u0[b], shape, scal, x_new[b], c_new[b],
-                s2_new[b], mean[b], cov[b], scratch[b])
+    B, N, n = x.shape
+    for b in numba.prange(B):
+        eb = np.empty(N * n)
+        row_normals(key, b, eb)  # run b's propagation normals, computed here (see kernel_serial)
+        one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], eb, u0[b], shape, scal, x_new[b], c_new[b],
+                s2_new[b], mean[b], cov[b], scratch[b], np.empty((n + 6) * N), np.empty(2 * N + 1, dtype=np.int64))
 
 
 @jit(cache=True)
 def kernel_serial(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
-    for b in range(x.shape[0]):
-        one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], key, b, u0[b], shape, scal, x_new[b], c_new[b],
-                s2_new[b], mean[b], cov[b], scratch[b])
+    B, N, n = x.shape
+    eb = np.empty(N * n)
+    sc = np.empty((n + 6) * N)
+    ic = np.empty(2 * N + 1, dtype=np.int64)
+    for b in range(B):
+        # the normals in the loop over runs, not in one_run: there LLVM kept their loop's constants in
+        # registers it then spilled, and they cost 13 instead of 9 ns each (one AVX2 core)
+        row_normals(key, b, eb)
+        one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], eb, u0[b], shape, scal, x_new[b], c_new[b],
+                s2_new[b], mean[b], cov[b], scratch[b], sc, ic)
 
 
 #: Below this many runs the step runs on one thread: waking the thread pool costs more than the work (and on a
