@@ -19,19 +19,21 @@ with this kernel: ``hough.remove`` uses it where Numba runs and a ping holds at 
 Module-level functions, so that Numba's on-disk cache holds across processes.
 """
 
+import math
+
 import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _fetch_slot(sx, sy, slot, slot2, sup_xy, cell_start, slot_ping, reach, x0, y0, h, nx, ny, pred_idx, n):
     """Append to ``pred_idx[n:]`` the gated points of slot ``slot2`` within reach of the support ``(sx, sy)`` of
     slot ``slot``; returns the new count."""
     r = reach[slot_ping[slot] - slot_ping[slot2]]
     r2 = r * r
-    m = np.int64(np.ceil(r / h))
-    cx = np.int64(np.floor((sx - x0) / h))
-    cy = np.int64(np.floor((sy - y0) / h))
+    m = math.ceil(r / h)
+    cx = math.floor((sx - x0) / h)
+    cy = math.floor((sy - y0) / h)
     starts = cell_start[slot2]
     y_lo, y_hi = max(cy - m, 0), min(cy + m, ny - 1)
     for gx in range(max(cx - m, 0), min(cx + m, nx - 1) + 1):
@@ -44,7 +46,7 @@ def _fetch_slot(sx, sy, slot, slot2, sup_xy, cell_start, slot_ping, reach, x0, y
     return n
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _velocity_ok(zx, zy, sx, sy, sup_xy, sup_ring, sup_idx, cell_start, slot_ping, k, slot, col, lrow, ring, e,
                  reach, x0, y0, h, nx, ny, vel_gate, sigma2, dt, require_chain, pred_idx, pred_end):
     """The velocity check of triple (z, s, line ``(lrow, col)``).  The support's predecessors are fetched slot by
@@ -54,7 +56,7 @@ def _velocity_ok(zx, zy, sx, sy, sup_xy, sup_ring, sup_idx, cell_start, slot_pin
         return True
     p = slot_ping[slot]
     g2 = (k - p) * dt
-    begin = 0
+    begin = np.int64(0)
     for i in range(slot):
         slot2 = slot - 1 - i
         if pred_end[i] < 0:
@@ -86,17 +88,6 @@ def _velocity_ok(zx, zy, sx, sy, sup_xy, sup_ring, sup_idx, cell_start, slot_pin
     return not require_chain
 
 
-@numba.njit(cache=True, inline="always")
-def _window_bits(bj, lo_r, hi_r):
-    """The bits of rows ``lo_r .. hi_r`` (fewer than 64 of them) of one column's bit row, lowest row first.
-
-    Branch-free: the two words that can hold them are always read (the bit rows carry one spare word)."""
-    i = lo_r >> 6
-    s = np.uint64(lo_r & 63)
-    word = (bj[i] >> s) | ((bj[i + 1] << (np.uint64(63) - s)) << np.uint64(1))
-    return word & ((np.uint64(1) << np.uint64(hi_r - lo_r + 1)) - np.uint64(1))
-
-
 #: ``ctz(w) = CTZ[((w & -w) * DE_BRUIJN) >> 58]`` (count of trailing zeros of a nonzero 64-bit word)
 DE_BRUIJN = np.uint64(0x03F79D71B4CB0A89)
 CTZ = np.zeros(64, dtype=np.int64)
@@ -104,7 +95,7 @@ for _i in range(64):
     CTZ[((1 << _i) * 0x03F79D71B4CB0A89 % (1 << 64)) >> 58] = _i
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def local_keep(z_xy, z_rows, todo, sup_xy, sup_ring, sup_idx, cell_start, slot_ping, k, bits, n_rho, col_slot, ring,
                e, reach, x0, y0, h, nx, ny, vel_gate, sigma_pos, dt, require_chain, stamp, tag0, ctz, d_rho, d_theta):
     """Keep mask ``(n_k,)`` of the local support rule.
@@ -124,7 +115,9 @@ def local_keep(z_xy, z_rows, todo, sup_xy, sup_ring, sup_idx, cell_start, slot_p
     """
     n_k = z_xy.shape[0]
     n_theta = z_rows.shape[1]
-    keep = np.zeros(n_k, dtype=np.bool_)
+    keep = np.empty(n_k, dtype=np.bool_)
+    for i in range(n_k):
+        keep[i] = False
     S = cell_start.shape[0]
     sigma2 = sigma_pos * sigma_pos
     zero = np.uint64(0)
@@ -137,15 +130,15 @@ def local_keep(z_xy, z_rows, todo, sup_xy, sup_ring, sup_idx, cell_start, slot_p
         tag = (tag0 + zi) * 64
         zrow = z_rows[zi]
         zx, zy = z_xy[zi, 0], z_xy[zi, 1]
-        cx = np.int64(np.floor((zx - x0) / h))
-        cy = np.int64(np.floor((zy - y0) / h))
+        cx = math.floor((zx - x0) / h)
+        cy = math.floor((zy - y0) / h)
         done = False
         for rank in range(S):
             slot = S - 1 - rank
             p = slot_ping[slot]
             r = reach[k - p]
             r2 = r * r
-            m = np.int64(np.ceil(r / h))
+            m = math.ceil(r / h)
             starts = cell_start[slot]
             y_lo, y_hi = max(cy - m, 0), min(cy + m, ny - 1)
             for gx in range(max(cx - m, 0), min(cx + m, nx - 1) + 1):
@@ -162,10 +155,11 @@ def local_keep(z_xy, z_rows, todo, sup_xy, sup_ring, sup_idx, cell_start, slot_p
                     else:
                         half = np.arcsin(span / np.sqrt(d2))
                         centre = np.arctan2(ddy, ddx) + 0.5 * np.pi
-                        c_first = np.int64(np.floor((centre - half) / d_theta)) - 1
-                        c_count = min(np.int64(np.ceil(2.0 * half / d_theta)) + 3, n_theta)
+                        c_first = math.floor((centre - half) / d_theta) - 1
+                        c_count = min(math.ceil(2.0 * half / d_theta) + 3, n_theta)
                     srow = ring[sup_ring[si], sup_idx[si]]
-                    pred_end[:] = -1
+                    for i in range(S):
+                        pred_end[i] = -1
                     for cc in range(c_count):
                         c = (c_first + cc) % n_theta
                         j = col_slot[c]
@@ -177,7 +171,12 @@ def local_keep(z_xy, z_rows, todo, sup_xy, sup_ring, sup_idx, cell_start, slot_p
                         hi_r = min(min(rz, rs) + e, n_rho - 1)
                         if hi_r < lo_r:
                             continue
-                        word = _window_bits(bits[j], lo_r, hi_r)
+                        # the bits of rows lo_r .. hi_r (fewer than 64) of the column's bit row, lowest row first;
+                        # branch-free: the two words that can hold them are always read (one spare word per row)
+                        wi = lo_r >> 6
+                        sh = np.uint64(lo_r & 63)
+                        word = (bits[j, wi] >> sh) | ((bits[j, wi + 1] << (np.uint64(63) - sh)) << one)
+                        word &= (one << np.uint64(hi_r - lo_r + 1)) - one
                         while word != zero:
                             low = word & (~word + one)
                             word ^= low
@@ -206,7 +205,7 @@ def local_keep(z_xy, z_rows, todo, sup_xy, sup_ring, sup_idx, cell_start, slot_p
     return keep
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def add_votes(counts, rows, which, n_theta, add):
     """``counts[rows[i, j] n_theta + j] (+/-)= 1`` for every point ``i`` of ``which`` and column ``j`` (the twin
     of ``np.add.at`` / ``np.subtract.at`` in ``hough._RunCache._add_votes``)."""
@@ -220,7 +219,7 @@ def add_votes(counts, rows, which, n_theta, add):
                 counts[cell] -= 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def accumulate(n_pings, votes, counts):
     """``n_pings += counts > 0``, ``votes += counts`` in one pass (flat arrays; branch-free, so that the loop
     vectorises: adding 0 where a cell has no vote changes nothing)."""
@@ -230,19 +229,23 @@ def accumulate(n_pings, votes, counts):
         votes[c] += v
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def line_bits(rows, col_slot_of_line, n_used, n_words):
     """The bit map of the similar line cells: bit ``rows[L]`` of row ``col_slot_of_line[L]`` set, ``(n_used,
     n_words)`` uint64."""
-    bits = np.zeros((n_used, n_words), dtype=np.uint64)
+    bits = np.empty((n_used, n_words), dtype=np.uint64)
+    zero = np.uint64(0)
     one = np.uint64(1)
+    for j in range(n_used):
+        for w in range(n_words):
+            bits[j, w] = zero
     for L in range(rows.shape[0]):
         r = rows[L]
         bits[col_slot_of_line[L], r >> 6] |= one << np.uint64(r & 63)
     return bits
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def rho_rows(points, cos, sin, d_rho, off, out):
     """The vote row of each point in each column: ``rint((x cos theta_j + y sin theta_j) / d_rho) + off`` into
     ``out (n, n_theta)`` int32 (the twin of ``HoughGrid.rho_index``: the same operations in the same order)."""
@@ -262,33 +265,79 @@ def rho_rows(points, cos, sin, d_rho, off, out):
 
 
 # -- the whole run in one call (the remover's default path: the detections themselves as the output) -------------
+#
+# Compile time matters here as much as run time (every worker of ``workbench report`` compiles these from an empty
+# cache): the run's data are flat arrays with offsets (no lists of arrays), every loop is written out (no np.sort,
+# np.argsort, np.searchsorted, np.flatnonzero, np.full, np.arange, array min / max or slice assignment, each of
+# which instantiates a sizeable library routine), and every integer handed to another kernel is int64 from its
+# first assignment (a literal ``0`` would type the call once as ``Literal[int]`` and compile the callee twice).
 
 
-@numba.njit(cache=True)
-def _has_partner(a, b, box, out):
-    """``out[i] |= some point of b lies in the box |dx|, |dy| <= box around a[i]`` (the exact test of
-    ``hough._has_partner``), by a sweep over ``b`` sorted by x (the sorted window only narrows the candidates; a
-    margin keeps every pair the exact test accepts)."""
-    n, m = a.shape[0], b.shape[0]
-    if n == 0 or m == 0:
-        return
-    order = np.argsort(b[:, 0])
-    bx = b[order, 0]
+@numba.njit(cache=True, error_model="numpy")
+def _argsort_x(xy, lo, hi, order):
+    """``order[lo:hi]``: the rows ``lo .. hi - 1`` of ``xy`` by ascending x (a heap sort; the order among equal x
+    is unspecified, which no caller depends on)."""
+    n = hi - lo
     for i in range(n):
-        if out[i]:
+        order[lo + i] = lo + i
+    i = n // 2
+    end = n
+    while True:
+        if i > 0:  # building the heap
+            i -= 1
+            top = order[lo + i]
+        else:  # moving the largest to the end
+            end -= 1
+            if end <= 0:
+                return
+            top = order[lo + end]
+            order[lo + end] = order[lo]
+        key = xy[top, 0]
+        parent = i
+        child = 2 * i + 1
+        while child < end:
+            if child + 1 < end and xy[order[lo + child + 1], 0] > xy[order[lo + child], 0]:
+                child += 1
+            if xy[order[lo + child], 0] > key:
+                order[lo + parent] = order[lo + child]
+                parent = child
+                child = 2 * parent + 1
+            else:
+                break
+        order[lo + parent] = top
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _has_partner(pts, a0, a1, bx, border, b0, b1, box, out):
+    """``out[i - a0] |= some row of pts in b0 .. b1 - 1 lies in the box |dx|, |dy| <= box around pts[i]`` for
+    ``i`` in ``a0 .. a1 - 1`` (the exact test of ``hough._has_partner``), by a sweep over those rows by ascending x
+    (``bx[b0:b1]``, rows ``border[b0:b1]``; the sorted window only narrows the candidates, a margin keeps every
+    pair the exact test accepts)."""
+    if a1 == a0 or b1 == b0:
+        return
+    for i in range(a0, a1):
+        if out[i - a0]:
             continue
-        ax, ay = a[i, 0], a[i, 1]
+        ax, ay = pts[i, 0], pts[i, 1]
         margin = 1e-9 * (abs(ax) + box) + 1e-300
-        j = np.searchsorted(bx, ax - box - margin)
-        while j < m and bx[j] <= ax + box + margin:
-            jj = order[j]
-            if abs(ax - b[jj, 0]) <= box and abs(ay - b[jj, 1]) <= box:
-                out[i] = True
+        v = ax - box - margin
+        lo, hi = b0, b1  # the first j with bx[j] >= v
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if bx[mid] < v:
+                lo = mid + 1
+            else:
+                hi = mid
+        j = lo
+        while j < b1 and bx[j] <= ax + box + margin:
+            jj = border[j]
+            if abs(ax - pts[jj, 0]) <= box and abs(ay - pts[jj, 1]) <= box:
+                out[i - a0] = True
                 break
             j += 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _neighbour(row, col, dr, dc, n_rho, n_theta):
     """The flat cell ``(row + dr, col + dc)`` across the ``theta = 0 / pi`` seam (``-1`` outside the grid); the
     twin of ``hough._neighbour_cells``."""
@@ -302,99 +351,92 @@ def _neighbour(row, col, dr, dc, n_rho, n_theta):
     return r * n_theta + c
 
 
-@numba.njit(cache=True)
-def _gated_points(pts, mask):
-    n = 0
-    for i in range(mask.shape[0]):
-        n += mask[i]
-    out = np.empty((n, 2))
-    sel = np.empty(n, dtype=np.int64)
-    n = 0
-    for i in range(mask.shape[0]):
-        if mask[i]:
-            out[n, 0] = pts[i, 0]
-            out[n, 1] = pts[i, 1]
-            sel[n] = i
-            n += 1
-    return out, sel
-
-
-@numba.njit(cache=True)
-def _local_inputs(pts_k, gated, earlier, reach, W):
-    """The support arrays ``hough._local_numba`` builds for :func:`local_keep` (the same grid, order and slots)."""
-    n_all = pts_k.shape[0]
-    for s in range(len(earlier)):
-        n_all += gated[s][0].shape[0]
-    lo0, lo1 = pts_k[:, 0].min(), pts_k[:, 1].min()
-    hi0, hi1 = pts_k[:, 0].max(), pts_k[:, 1].max()
-    for s in range(len(earlier)):
-        g = gated[s][0]
-        if g.shape[0]:
-            lo0, lo1 = min(lo0, g[:, 0].min()), min(lo1, g[:, 1].min())
-            hi0, hi1 = max(hi0, g[:, 0].max()), max(hi1, g[:, 1].max())
+@numba.njit(cache=True, error_model="numpy")
+def _local_inputs(pts, a0, a1, g_xy, g_sel, g_start, S, g0, reach, W):
+    """The support arrays ``hough._local_numba`` builds for :func:`local_keep` (the same grid, order and slots):
+    ping k's points are rows ``a0 .. a1 - 1`` of ``pts``; the gated points of the earlier ping ``g0 + s`` of the
+    group (``s < S``) are rows ``g_start[s] .. g_start[s + 1] - 1`` of ``g_xy`` (``g_sel``: their index in the
+    ping)."""
+    n_all = a1 - a0
+    for s in range(S):
+        n_all += g_start[s + 1] - g_start[s]
+    lo0, lo1 = pts[a0, 0], pts[a0, 1]
+    hi0, hi1 = lo0, lo1
+    for i in range(a0 + 1, a1):
+        lo0, lo1 = min(lo0, pts[i, 0]), min(lo1, pts[i, 1])
+        hi0, hi1 = max(hi0, pts[i, 0]), max(hi1, pts[i, 1])
+    for t in range(g_start[0], g_start[S]):
+        lo0, lo1 = min(lo0, g_xy[t, 0]), min(lo1, g_xy[t, 1])
+        hi0, hi1 = max(hi0, g_xy[t, 0]), max(hi1, g_xy[t, 1])
     rmin = np.inf
     for gap in range(1, reach.shape[0]):
         rmin = min(rmin, reach[gap])
     h = rmin * (1.0 + 2.0 ** -20)
     while (np.floor((hi0 - lo0) / h) + 1) * (np.floor((hi1 - lo1) / h) + 1) > 8 * n_all + 1024:
         h *= 2.0
-    nx = np.int64(np.floor((hi0 - lo0) / h)) + 1
-    ny = np.int64(np.floor((hi1 - lo1) / h)) + 1
-    S = len(earlier)
-    N = n_all - pts_k.shape[0]
+    nx = math.floor((hi0 - lo0) / h) + 1
+    ny = math.floor((hi1 - lo1) / h) + 1
+    N = n_all - (a1 - a0)
+    n_c = nx * ny
     sup_xy = np.empty((N, 2))
     sup_ring = np.empty(N, dtype=np.int64)
     sup_idx = np.empty(N, dtype=np.int64)
-    starts = np.empty((S, nx * ny + 1), dtype=np.int64)
+    starts = np.empty((S, n_c + 1), dtype=np.int64)
+    kk = np.empty(N, dtype=np.int64)
+    count = np.empty(n_c, dtype=np.int64)
     offset = 0
     for s in range(S):
-        g, sel = gated[s]
-        n = g.shape[0]
-        kk = np.empty(n, dtype=np.int64)
+        b0 = g_start[s]
+        n = g_start[s + 1] - b0
+        for c in range(n_c):
+            count[c] = 0
         for i in range(n):
-            cx = min(np.int64(np.floor((g[i, 0] - lo0) / h)), nx - 1)
-            cy = min(np.int64(np.floor((g[i, 1] - lo1) / h)), ny - 1)
+            cx = min(math.floor((g_xy[b0 + i, 0] - lo0) / h), nx - 1)
+            cy = min(math.floor((g_xy[b0 + i, 1] - lo1) / h), ny - 1)
             kk[i] = cx * ny + cy
-        order = np.argsort(kk, kind="mergesort")
-        count = np.zeros(nx * ny, dtype=np.int64)
-        for i in range(n):
             count[kk[i]] += 1
         starts[s, 0] = offset
-        for c in range(nx * ny):
+        for c in range(n_c):
             starts[s, c + 1] = starts[s, c] + count[c]
-        for t in range(n):
-            i = order[t]
-            sup_xy[offset + t, 0] = g[i, 0]
-            sup_xy[offset + t, 1] = g[i, 1]
-            sup_idx[offset + t] = sel[i]
-            sup_ring[offset + t] = earlier[s] % W
+            count[c] = starts[s, c]  # now the next free row of cell c
+        for i in range(n):  # a counting sort by cell: the order of a stable argsort
+            d = count[kk[i]]
+            count[kk[i]] = d + 1
+            sup_xy[d, 0] = g_xy[b0 + i, 0]
+            sup_xy[d, 1] = g_xy[b0 + i, 1]
+            sup_idx[d] = g_sel[b0 + i]
+            sup_ring[d] = (g0 + s) % W
         offset += n
     return sup_xy, sup_ring, sup_idx, starts, lo0, lo1, h, nx, ny
 
 
-@numba.njit(cache=True)
-def _rule_keep(pts_k, rows_k, k, gated, earlier, reach, ring, W, line_r, line_c, line_latest, e, any_rule):
-    """The ``"latest"`` (``any_rule`` False) and ``"any"`` rules of ``hough._inverse``: detection ``z`` of ping k is
-    kept when a gated point ``s`` of an earlier ping ``p`` of B within ``reach[k - p]`` (``dx^2 + dy^2 <= r^2``)
-    and ``z`` both lie within ``e`` rows of a similar line cell ``L`` and (``"latest"``) ``p`` is the latest
-    earlier ping of B with a gated point within ``e`` rows of ``L`` (``line_latest[L]``)."""
-    n_k = pts_k.shape[0]
-    keep = np.zeros(n_k, dtype=np.bool_)
+@numba.njit(cache=True, error_model="numpy")
+def _rule_keep(pts, a0, rows_k, k, g_xy, g_sel, g_start, earlier, reach, ring, W, line_r, line_c, line_latest, e,
+               any_rule):
+    """The ``"latest"`` (``any_rule`` False) and ``"any"`` rules of ``hough._inverse``: detection ``z`` of ping k
+    (row ``a0 + z`` of ``pts``; ``rows_k``: its vote rows) is kept when a gated point ``s`` of an earlier ping
+    ``p`` of B within ``reach[k - p]`` (``dx^2 + dy^2 <= r^2``) and ``z`` both lie within ``e`` rows of a similar
+    line cell ``L`` and (``"latest"``) ``p`` is the latest earlier ping of B with a gated point within ``e`` rows
+    of ``L`` (``line_latest[L]``).  The gated points of ``earlier[s]`` are rows ``g_start[s] .. g_start[s + 1] - 1``
+    of ``g_xy``."""
+    n_k = rows_k.shape[0]
+    keep = np.empty(n_k, dtype=np.bool_)
+    for zi in range(n_k):
+        keep[zi] = False
     S = earlier.shape[0]
     for zi in range(n_k):
-        zx, zy = pts_k[zi, 0], pts_k[zi, 1]
+        zx, zy = pts[a0 + zi, 0], pts[a0 + zi, 1]
         for rank in range(S):
             s = S - 1 - rank
             p = earlier[s]
             r = reach[k - p]
             r2 = r * r
-            g, sel = gated[s]
-            for t in range(g.shape[0]):
-                ddx = zx - g[t, 0]
-                ddy = zy - g[t, 1]
+            for t in range(g_start[s], g_start[s + 1]):
+                ddx = zx - g_xy[t, 0]
+                ddy = zy - g_xy[t, 1]
                 if ddx * ddx + ddy * ddy > r2:
                     continue
-                srow = ring[p % W, sel[t]]
+                srow = ring[p % W, g_sel[t]]
                 for L in range(line_r.shape[0]):
                     c = line_c[L]
                     lr = line_r[L]
@@ -409,7 +451,7 @@ def _rule_keep(pts_k, rows_k, k, gated, earlier, reach, ring, W, line_r, line_c,
     return keep
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach, rule, vel_gate, sigma_pos, dt,
                require_chain, warmup_keep, project, n_rho, n_theta, off, d_rho, d_theta, cos, sin, ctz):
     """The keep mask ``(T, M)`` and the output positions ``(T, M, 2)`` of one run, every ping in one call: the twin of
@@ -424,37 +466,82 @@ def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach,
     """
     T, M = valid.shape
     W = window
-    keep_out = np.zeros((T, M), dtype=np.bool_)
+    keep_out = np.empty((T, M), dtype=np.bool_)
+    for k in range(T):
+        for i in range(M):
+            keep_out[k, i] = False
     z_out = z.copy()
     first_output = W - 1 + shift
-    # the valid detections of each ping (slots) and their points
-    slots = []
-    pts = []
-    most = 1
+    # the valid detections of each ping, flat: ping p's are rows ps[p] .. ps[p + 1] - 1 of pts (slot: their index
+    # in the ping), and the same rows by ascending x (xorder, xs: the gate's sweep)
+    ps = np.empty(T + 1, dtype=np.int64)
+    n = np.int64(0)
     for k in range(T):
-        sl = np.flatnonzero(valid[k])
-        slots.append(sl)
-        pk = np.empty((sl.shape[0], 2))
-        for i in range(sl.shape[0]):
-            pk[i, 0] = z[k, sl[i], 0]
-            pk[i, 1] = z[k, sl[i], 1]
-        pts.append(pk)
-        most = max(most, sl.shape[0])
+        ps[k] = n
+        for i in range(M):
+            if valid[k, i]:
+                n += 1
+    ps[T] = n
+    pts = np.empty((n, 2))
+    slot = np.empty(n, dtype=np.int64)
+    most = np.int64(1)
+    n = 0
+    for k in range(T):
+        for i in range(M):
+            if valid[k, i]:
+                pts[n, 0] = z[k, i, 0]
+                pts[n, 1] = z[k, i, 1]
+                slot[n] = i
+                n += 1
+        most = max(most, ps[k + 1] - ps[k])
+    xorder = np.empty(n, dtype=np.int64)
+    xs = np.empty(n)
+    for k in range(T):
+        _argsort_x(pts, ps[k], ps[k + 1], xorder)
+    for t in range(n):
+        xs[t] = pts[xorder[t], 0]
     ring = np.empty((W, most, n_theta), dtype=np.int32)
     ring_t = np.empty((W, n_theta, most), dtype=np.int32)  # the same rows column by column, for the votes
-    ring_ping = np.full(W, -1, dtype=np.int64)
+    ring_ping = np.empty(W, dtype=np.int64)
+    for i in range(W):
+        ring_ping[i] = -1
     n_cells = n_rho * n_theta
     # the accumulator column by column (cell (row, col) at col n_rho + row: a column's votes stay in cache); the
     # peaks and lines handed on are flat row n_theta + col as everywhere else
-    votes = np.zeros(n_cells, dtype=np.int32)
-    n_pings = np.zeros(n_cells, dtype=np.int32)
-    last = np.full(n_cells, -1, dtype=np.int32)    # the last (iteration, ping) stamp that voted in a cell
-    mark = np.full(n_cells, -1, dtype=np.int32)    # group A's peaks of the current ping
-    touched = np.empty(min(W * most * n_theta, n_cells), dtype=np.int64)  # each cell once per group
-    stamp = np.full(n_cells, -1, dtype=np.int64)   # local_keep's stamps, kept for the whole run
-    tag = 0
-    peaks = [np.zeros(0, dtype=np.int64) for _ in range(T)]
+    votes = np.empty(n_cells, dtype=np.int32)      # (a cell's votes and pings are reset at its first vote of
+    n_pings = np.empty(n_cells, dtype=np.int32)    # each group, when ``last`` says it is fresh)
+    last = np.empty(n_cells, dtype=np.int32)    # the last (iteration, ping) stamp that voted in a cell
+    mark = np.empty(n_cells, dtype=np.int32)    # group A's peaks of the current ping
+    stamp = np.empty(n_cells, dtype=np.int64)   # local_keep's stamps, kept for the whole run
+    for c in range(n_cells):
+        last[c] = -1
+        mark[c] = -1
+        stamp[c] = -1
+    n_max = min(W * most * n_theta, n_cells)
+    touched = np.empty(n_max, dtype=np.int64)  # each cell once per group
+    # the gated points of the current group, flat: the group's ping g0 + gi has rows g_start[gi] .. g_start[gi + 1]
+    # - 1 of g_xy (g_sel: their index in the ping)
+    g_xy = np.empty((W * most, 2))
+    g_sel = np.empty(W * most, dtype=np.int64)
+    g_start = np.empty(W + 1, dtype=np.int64)
+    gate = np.empty(most, dtype=np.bool_)
+    # the peaks of every ping, flat: ping p's are pk_buf[pk_start[p] .. pk_start[p + 1] - 1] (grown by doubling)
+    pk_buf = np.empty(max(n_max, 64), dtype=np.int64)
+    pk_start = np.empty(T + 1, dtype=np.int64)
+    pk_start[0] = 0
+    sim = np.empty(n_max, dtype=np.int64)
+    line_r = np.empty(n_max, dtype=np.int64)
+    line_c = np.empty(n_max, dtype=np.int64)
+    line_latest = np.empty(n_max, dtype=np.int64)
+    slot_of_line = np.empty(n_max, dtype=np.int64)
+    col_slot = np.empty(n_theta, dtype=np.int64)
+    earlier = np.empty(W - 1, dtype=np.int64)
+    todo = np.empty(most, dtype=np.int64)
+    for i in range(most):
+        todo[i] = i
+    tag = np.int64(0)
     for k in range(T):
+        pk_start[k + 1] = pk_start[k]
         if k < first_output and warmup_keep:
             for i in range(M):
                 keep_out[k, i] = valid[k, i]
@@ -462,22 +549,32 @@ def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach,
             continue
         g0 = k - W + 1
         for p in range(g0, k + 1):  # the vote rows of the group's pings, in the ring
-            slot = p % W
-            if ring_ping[slot] != p:
-                n_p = pts[p].shape[0]
-                rho_rows(pts[p], cos, sin, d_rho, off, ring[slot, :n_p])
+            rs = p % W
+            if ring_ping[rs] != p:
+                n_p = ps[p + 1] - ps[p]
+                rho_rows(pts[ps[p]:ps[p + 1]], cos, sin, d_rho, off, ring[rs, :n_p])
                 for i in range(n_p):
                     for j in range(n_theta):
-                        ring_t[slot, j, i] = ring[slot, i, j]
-                ring_ping[slot] = p
+                        ring_t[rs, j, i] = ring[rs, i, j]
+                ring_ping[rs] = p
         # step 2: the rectangular gate within the group
-        gated = []
-        for p in range(g0, k + 1):
-            mask = np.zeros(pts[p].shape[0], dtype=np.bool_)
+        n_g = 0
+        for gi in range(W):
+            p = g0 + gi
+            a0, a1 = ps[p], ps[p + 1]
+            for i in range(a1 - a0):
+                gate[i] = False
             for q in range(g0, k + 1):
                 if q != p and abs(q - p) <= gate_gap:
-                    _has_partner(pts[p], pts[q], box1 * abs(q - p), mask)
-            gated.append(_gated_points(pts[p], mask))
+                    _has_partner(pts, a0, a1, xs, xorder, ps[q], ps[q + 1], box1 * abs(q - p), gate)
+            g_start[gi] = n_g
+            for i in range(a1 - a0):
+                if gate[i]:
+                    g_xy[n_g, 0] = pts[a0 + i, 0]
+                    g_xy[n_g, 1] = pts[a0 + i, 1]
+                    g_sel[n_g] = i
+                    n_g += 1
+        g_start[W] = n_g
         # steps 3-4: votes, distinct pings per cell, and the peaks (3 x 3 maxima of support * top + votes)
         n_touched = 0
         fresh = k * W
@@ -485,10 +582,9 @@ def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach,
             base = j * n_rho
             for gi in range(W):
                 label = k * W + gi
-                sel = gated[gi][1]
                 rows_j = ring_t[(g0 + gi) % W, j]
-                for t in range(sel.shape[0]):
-                    cell = base + np.int64(rows_j[sel[t]])
+                for t in range(g_start[gi], g_start[gi + 1]):
+                    cell = base + np.int64(rows_j[g_sel[t]])
                     if last[cell] < fresh:  # first vote of this ping's group: a fresh cell
                         votes[cell] = 0
                         n_pings[cell] = 0
@@ -501,7 +597,12 @@ def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach,
         top = np.int64(1)
         for t in range(n_touched):
             top = max(top, np.int64(votes[touched[t]]) + 1)
-        cand = np.empty(n_touched, dtype=np.int64)
+        pk0 = pk_start[k]
+        if pk0 + n_touched > pk_buf.shape[0]:
+            grown = np.empty(max(2 * pk_buf.shape[0], pk0 + n_touched), dtype=np.int64)
+            for t in range(pk0):
+                grown[t] = pk_buf[t]
+            pk_buf = grown
         n_cand = 0
         for t in range(n_touched):
             cell = touched[t]
@@ -525,21 +626,21 @@ def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach,
                     if np.int64(n_pings[nb]) * top + votes[nb] > own:
                         ok = False
             if ok:
-                cand[n_cand] = row * n_theta + col
+                # in the order found (column by column), not sorted: every use below is independent of the
+                # order (marks, bits, any-of tests, and the projection's tie rule on (|d|, column, row))
+                pk_buf[pk0 + n_cand] = row * n_theta + col
                 n_cand += 1
-        pk_cells = np.sort(cand[:n_cand])
-        peaks[k] = pk_cells
+        pk_start[k + 1] = pk0 + n_cand
         if k < first_output:
             continue
         # step 5: B peaks with a vote from ping k, similar to an A peak
-        for t in range(peaks[k - shift].shape[0]):
-            a = peaks[k - shift][t]
+        for t in range(pk_start[k - shift], pk_start[k - shift + 1]):
+            a = pk_buf[t]
             mark[(a % n_theta) * n_rho + a // n_theta] = k
         k_label = k * W + W - 1
-        sim = np.empty(pk_cells.shape[0], dtype=np.int64)
         n_sim = 0
-        for t in range(pk_cells.shape[0]):
-            cell = pk_cells[t]
+        for t in range(pk0, pk0 + n_cand):
+            cell = pk_buf[t]
             row, col = cell // n_theta, cell % n_theta
             if last[col * n_rho + row] != k_label:
                 continue  # no vote from ping k
@@ -555,55 +656,58 @@ def remove_run(z, valid, window, shift, box1, gate_gap, v_min, sr, st, e, reach,
             if found:
                 sim[n_sim] = cell
                 n_sim += 1
-        sim = sim[:n_sim]
         # step 6: the inverse transform and the support rule
-        n_k = pts[k].shape[0]
+        a0, a1 = ps[k], ps[k + 1]
+        n_k = a1 - a0
         if n_k == 0 or n_sim == 0:
             continue
-        earlier = np.arange(g0, k)
-        gated_e = gated[:W - 1]
-        line_r = sim // n_theta
-        line_c = sim % n_theta
+        for s in range(W - 1):
+            earlier[s] = g0 + s
+        for L in range(n_sim):
+            line_r[L] = sim[L] // n_theta
+            line_c[L] = sim[L] % n_theta
+        lr = line_r[:n_sim]
+        lc = line_c[:n_sim]
         if rule == 0:
-            col_slot = np.full(n_theta, -1, dtype=np.int64)
-            n_used = 0
+            for c in range(n_theta):
+                col_slot[c] = -1
+            n_used = np.int64(0)
             for c in range(n_theta):  # the columns holding a line, ascending
                 for L in range(n_sim):
                     if line_c[L] == c:
                         col_slot[c] = n_used
                         n_used += 1
                         break
-            slot_of_line = np.empty(n_sim, dtype=np.int64)
             for L in range(n_sim):
                 slot_of_line[L] = col_slot[line_c[L]]
-            bits = line_bits(line_r, slot_of_line, n_used, n_rho // 64 + 2)
-            sup_xy, sup_ring, sup_idx, starts, x0, y0, h, nx, ny = _local_inputs(pts[k], gated_e, earlier, reach, W)
+            bits = line_bits(lr, slot_of_line[:n_sim], n_used, n_rho // 64 + 2)
+            sup_xy, sup_ring, sup_idx, starts, x0, y0, h, nx, ny = _local_inputs(pts, a0, a1, g_xy, g_sel, g_start,
+                                                                                 W - 1, g0, reach, W)
             tag0 = tag
             tag = tag + n_k + 1
-            keep = local_keep(pts[k], ring[k % W, :n_k], np.arange(n_k), sup_xy, sup_ring, sup_idx, starts,
+            keep = local_keep(pts[a0:a1], ring[k % W, :n_k], todo[:n_k], sup_xy, sup_ring, sup_idx, starts,
                               earlier, k, bits, n_rho, col_slot, ring, e, reach, x0, y0, h, nx, ny, vel_gate,
                               sigma_pos, dt, require_chain, stamp, tag0, ctz, d_rho, d_theta)
         else:
-            line_latest = np.full(n_sim, -(2 ** 40), dtype=np.int64)
             for L in range(n_sim):
+                line_latest[L] = -(2 ** 40)
                 for s in range(W - 1):
-                    g, sel = gated_e[s]
                     rows = ring[earlier[s] % W]
-                    for t in range(sel.shape[0]):
-                        if abs(np.int64(rows[sel[t], line_c[L]]) - line_r[L]) <= e:
+                    for t in range(g_start[s], g_start[s + 1]):
+                        if abs(np.int64(rows[g_sel[t], line_c[L]]) - line_r[L]) <= e:
                             line_latest[L] = earlier[s]
                             break
-            keep = _rule_keep(pts[k], ring[k % W, :n_k], k, gated_e, earlier, reach, ring, W, line_r, line_c,
-                              line_latest, e, rule == 2)
+            keep = _rule_keep(pts, a0, ring[k % W, :n_k], k, g_xy, g_sel, g_start, earlier, reach, ring, W, lr, lc,
+                              line_latest[:n_sim], e, rule == 2)
         for i in range(n_k):
             if keep[i]:
-                keep_out[k, slots[k][i]] = True
+                keep_out[k, slot[a0 + i]] = True
         if project:
-            _project_kept(pts[k], ring[k % W], keep, slots[k], line_r, line_c, e, off, d_rho, cos, sin, z_out[k])
+            _project_kept(pts[a0:a1], ring[k % W], keep, slot[a0:a1], lr, lc, e, off, d_rho, cos, sin, z_out[k])
     return keep_out, z_out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _project_kept(pts_k, rows_k, keep, slots_k, line_r, line_c, e, off, d_rho, cos, sin, out):
     """``hough._project``: each kept detection of ping k onto the nearest similar line within ``e`` rows (ties: the
     lowest column, then the lowest rho bin), ``d = x cos + y sin - rho``, ``(x, y) - d (cos, sin)`` into ``out``."""
