@@ -10,7 +10,7 @@ from workbench.models import random_walk_velocity
 from workbench.specs import FigureSpec
 from workbench.types import Truth
 
-from .reading import REFERENCE, filters_in, mc, timing
+from .reading import REFERENCE, filters_in, mc, timing, timing_arrays
 from .scenario import DT, LEVELS, NOMINAL, case_name
 from .tasks import PREVIOUS
 
@@ -174,9 +174,9 @@ def _draw_deg(data, fig) -> None:
 def fig7_data(results) -> dict:
     names = filters_in(results)
     times = np.array([timing(results, n) for n in names])
-    runs = np.array([len(results[f"timing/{n}"]["per_run_s"]) if f"timing/{n}" in results else 0 for n in names])
-    reps = np.array([len(results[f"timing/{n}"]["batched_per_run_s"]) if f"timing/{n}" in results else 0
-                     for n in names])
+    arrays = [timing_arrays(results, n) or {} for n in names]
+    runs = np.array([len(a.get("per_run_s", ())) for a in arrays])
+    reps = np.array([len(a.get("batched_per_run_s", ())) for a in arrays])
     return {"filters": np.array(names, dtype=str), "unbatched_s_per_run": times[:, 0],
             "batched_s_per_run": times[:, 1], "timing_runs": runs, "batched_repeats": reps}
 

@@ -49,7 +49,7 @@ import numpy as np
 from workbench.criteria import Criterion, Precondition, bootstrap_interval, criterion_from_runs, \
     equivalence_band, judge, judge_across, judge_equivalent, reference_converged, vectorised
 
-from .reading import REFERENCE, delta_key, diag, filters_in, mc
+from .reading import REFERENCE, delta_key, diag, filters_in, mc, timing_arrays
 from .scenario import DELTA, LEVELS, NOMINAL, READINGS, case_name
 
 __all__ = ["criteria", "checks", "MIN_RUNS", "MIN_REF_RUNS", "MIN_TIMED_RUNS", "MIN_REPEATS", "DEGENERATE_RATIO",
@@ -450,7 +450,7 @@ def _timing_criteria(results) -> list[Criterion]:
                        "R^2 >= 0.9, positive slope)",
              "slower": "CRPF-300 and CRPF-500 slower than every Kalman-type filter (median time per run)"}
     out = []
-    missing = [n for n in names if f"timing/{n}" not in results]
+    missing = [n for n in names if timing_arrays(results, n) is None]
     for key, label, min_n, how in (("per_run_s", "", _MIN["timed"], "each run alone (B = 1), warmed up"),
                                    ("batched_per_run_s", "-batched", _MIN["repeats"],
                                     "all timed runs as one batch, repeated, warmed up")):
@@ -460,8 +460,8 @@ def _timing_criteria(results) -> list[Criterion]:
             if missing:
                 out.append(_unevaluable(cid, text, "missing timings of " + ", ".join(missing)))
                 continue
-            crpf = np.stack([results[f"timing/{n}"][key] for n in CRPF_FILTERS], axis=1)
-            kf = np.stack([results[f"timing/{n}"][key] for n in KALMAN_TYPE], axis=1)
+            crpf = np.stack([timing_arrays(results, n)[key] for n in CRPF_FILTERS], axis=1)
+            kf = np.stack([timing_arrays(results, n)[key] for n in KALMAN_TYPE], axis=1)
             med_c, med_k = np.median(crpf, axis=0), np.median(kf, axis=0)
             unit = "ms" if key == "per_run_s" else "us"
             scale = 1e3 if key == "per_run_s" else 1e6
@@ -483,17 +483,17 @@ def _timing_criteria(results) -> list[Criterion]:
                                         threshold_text="min(CRPF-300, CRPF-500) / slowest Kalman-type > 1")
                 extra = (f"median {unit}/run CRPF-300/500 = {scale * med_c[1]:.4g} / {scale * med_c[2]:.4g}; slowest "
                          f"Kalman-type {KALMAN_TYPE[int(np.argmax(med_k))]} {scale * med_k.max():.4g}.")
-            runs = len(results[f"timing/{CRPF_FILTERS[0]}"]["per_run_s"])
+            runs = len(timing_arrays(results, CRPF_FILTERS[0])["per_run_s"])
             how_many = f" ({len(crpf)} timed runs)" if key == "per_run_s" else \
                 f" ({len(crpf)} batched repetitions of {runs} runs)"
             out.append(_with_detail(c, extra + how_many))
     # 6. SR vs non-SR timing: reported, not required
     pair_names = [n for pair in SR_PAIRS for n in pair]
     cid, text = "C6", "SR forms faster than their full forms, un-batched (reported only, not required in NumPy)"
-    if any(f"timing/{n}" not in results for n in pair_names):
+    if any(timing_arrays(results, n) is None for n in pair_names):
         out.append(_unevaluable(cid, text, "missing timings"))
     else:
-        arr = np.stack([results[f"timing/{n}"]["per_run_s"] for n in pair_names], axis=1)
+        arr = np.stack([timing_arrays(results, n)["per_run_s"] for n in pair_names], axis=1)
 
         def worst_one(a):
             m = np.median(a, axis=0)  # ukf, sr-ukf, cdkf, sr-cdkf

@@ -54,9 +54,23 @@ def diag(res: Mapping, key: str) -> float:
     return float(res["diag_values"][names.index(key)]) if key in names else 0.0
 
 
+#: The task that times every filter of the report, interleaved (:func:`.tasks.run_timing`).
+TIMING_TASK = "timing"
+TIMING_ARRAYS = ("per_run_s", "per_run_cpu_s", "batched_per_run_s")
+
+
+def timing_arrays(results, name) -> dict | None:
+    """Filter ``name``'s arrays of the timing task (``per_run_s``, ``per_run_cpu_s``, ``batched_per_run_s``), or
+    ``None`` where it was not timed."""
+    res = results.get(TIMING_TASK)
+    if res is None or f"{name}:per_run_s" not in res:
+        return None
+    return {k: res[f"{name}:{k}"] for k in TIMING_ARRAYS if f"{name}:{k}" in res}
+
+
 def timing(results, name) -> tuple[float, float]:
     """(un-batched median seconds per run, batched median seconds per run) of the warmed-up timing task."""
-    res = results.get(f"timing/{name}")
+    res = timing_arrays(results, name)
     if res is None:
         return np.nan, np.nan
     return float(np.median(res["per_run_s"])), float(np.median(res["batched_per_run_s"]))

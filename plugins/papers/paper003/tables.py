@@ -14,7 +14,7 @@ from workbench.specs import Table, TableSpec
 from . import judging
 from .figures import fig7_data
 from .judging import CRPF_FILTERS
-from .reading import REFERENCE, REFERENCE_4N, cases_of, delta_key, filters_in, mc
+from .reading import REFERENCE, REFERENCE_4N, cases_of, delta_key, filters_in, mc, timing_arrays
 from .scenario import DELTA, LEVELS, LOST_FACTOR, PUBLISHED, READINGS, case_name, level_sigmas
 from .tasks import (CHANGES, GRID_R, GRID_THETA, PREVIOUS, TUNE_DELTA, TUNE_SIGMA0, TUNING_RULE, TUNING_SEED,
                     TUNING_STREAM, grid_case, tuning_label)
@@ -183,7 +183,7 @@ def timing_table(results) -> Table:
               "crpf-500": "slower than the Kalman-type filters"}
     for n, ub, b, r, k in zip(data["filters"], data["unbatched_s_per_run"], data["batched_s_per_run"],
                               data["timing_runs"], data["batched_repeats"]):
-        res = results.get(f"timing/{n}", {})
+        res = timing_arrays(results, n) or {}
         mean = float(np.mean(res["per_run_s"])) if "per_run_s" in res else np.nan
         cpu = float(np.median(res["per_run_cpu_s"])) if "per_run_cpu_s" in res else np.nan
         rows.append((str(n), fmt(ub * 1e3), fmt(mean * 1e3), fmt(cpu * 1e3), int(r), fmt(b * 1e6), int(k),

@@ -37,7 +37,7 @@ from workbench.specs import RecipeOptions, Task, TaskContext
 from workbench.types import InputError, Scans
 
 from .judging import CRPF_FILTERS
-from .reading import REFERENCE, REFERENCE_4N, delta_key
+from .reading import REFERENCE, REFERENCE_4N, TIMING_TASK, delta_key
 from .scenario import (DELTA, LEVELS, NOMINAL, READINGS, STREAM, filter_models, level_sigmas, lost_threshold,
                        make_case, prior, reading_cases, sigmas_of, simulate_chunk, simulate_units, units)
 
@@ -210,38 +210,53 @@ def run_scenario(ctx: TaskContext) -> dict:
 
 
 def run_timing(ctx: TaskContext) -> dict:
-    """Warmed-up timing on ``timing_runs`` runs of L2 data (radians, mismatched models): each run alone (B = 1),
-    then all of them as one batch ``timing_repeats`` times."""
+    """Warmed-up timing on ``timing_runs`` runs of L2 data (radians, mismatched models) of every filter of the
+    report, interleaved so that they are compared in one run: each run alone (B = 1) by every filter in turn (the
+    order rotated by one filter per run), then all runs as one batch by every filter in turn, ``timing_repeats``
+    times.  A drift of the machine's load (the other worker's tasks, the VM's neighbours) then falls on every filter
+    alike instead of on whichever filter's task ran at the time.  Arrays ``"{filter}:per_run_s"``,
+    ``"{filter}:per_run_cpu_s"`` and ``"{filter}:batched_per_run_s"`` (:func:`.reading.timing_arrays`)."""
     p = ctx.params
-    spec = ctx.host.filter(p["filter"])
+    names = [str(n) for n in p["filters"]]
+    specs = [ctx.host.filter(n) for n in names]
     sigmas = level_sigmas("rad", NOMINAL)
     motion, model = filter_models(ctx.host, sigmas, "mismatched")
     truth, scans = simulate_chunk(ctx.host, ctx.seed, "timing", sigmas, 0, p["timing_runs"], p["steps"])
-    R = p["timing_runs"]
+    R, F = p["timing_runs"], len(names)
     one_prior = prior(1)
 
     def one(r):
         return Scans(scans.z[r:r + 1], scans.valid[r:r + 1], scans.times)
 
-    # warm-up outside the clock: one un-batched run and one batched call load the compiled kernels
-    run_filter(spec, one_prior, motion, model, one(0), generator(ctx.seed, STREAM, "timing", "warm-up"))
-    run_filter(spec, prior(R), motion, model, scans, generator(ctx.seed, STREAM, "timing", "warm-up-batch"))
-    per_run = np.empty(R)
-    per_run_cpu = np.empty(R)
+    # warm-up outside the clock: one un-batched run and one batched call of every filter load the compiled kernels
+    for name, spec in zip(names, specs):
+        run_filter(spec, one_prior, motion, model, one(0), generator(ctx.seed, STREAM, "timing", "warm-up", name))
+        run_filter(spec, prior(R), motion, model, scans, generator(ctx.seed, STREAM, "timing", "warm-up-batch", name))
+    per_run = np.empty((F, R))
+    per_run_cpu = np.empty((F, R))
     for r in range(R):
-        rng = generator(ctx.seed, STREAM, "timing", p["filter"], r)
-        t0, c0 = time.perf_counter(), time.process_time()
-        run_filter(spec, one_prior, motion, model, one(r), rng)
-        per_run[r], per_run_cpu[r] = time.perf_counter() - t0, time.process_time() - c0
+        for j in range(F):
+            i = (j + r) % F  # rotated: no filter always runs right after the same one
+            rng = generator(ctx.seed, STREAM, "timing", names[i], r)
+            t0, c0 = time.perf_counter(), time.process_time()
+            run_filter(specs[i], one_prior, motion, model, one(r), rng)
+            per_run[i, r], per_run_cpu[i, r] = time.perf_counter() - t0, time.process_time() - c0
         ctx.progress(0.8 * (r + 1) / R)
-    batched = np.empty(p["timing_repeats"])
+    batched = np.empty((F, p["timing_repeats"]))
     for k in range(p["timing_repeats"]):
-        rng = generator(ctx.seed, STREAM, "timing", p["filter"], "batch", k)
-        t0 = time.perf_counter()
-        run_filter(spec, prior(R), motion, model, scans, rng)
-        batched[k] = (time.perf_counter() - t0) / R
+        for j in range(F):
+            i = (j + k) % F
+            rng = generator(ctx.seed, STREAM, "timing", names[i], "batch", k)
+            t0 = time.perf_counter()
+            run_filter(specs[i], prior(R), motion, model, scans, rng)
+            batched[i, k] = (time.perf_counter() - t0) / R
     # wall time is the brief's measure; the process CPU time is shown beside it (the machine may be shared)
-    return {"per_run_s": per_run, "per_run_cpu_s": per_run_cpu, "batched_per_run_s": batched}
+    out = {}
+    for i, name in enumerate(names):
+        out[f"{name}:per_run_s"] = per_run[i]
+        out[f"{name}:per_run_cpu_s"] = per_run_cpu[i]
+        out[f"{name}:batched_per_run_s"] = batched[i]
+    return out
 
 
 def _mc_params(values: Mapping, runs: int, examples: int, **extra) -> dict:
@@ -320,7 +335,7 @@ def tasks(options: RecipeOptions) -> list[Task]:
                                            reading=reading, cases=list(cases), data_seed=TUNING_SEED,
                                            stream=TUNING_STREAM), run_cases,
                                 seeded=False))  # its own tuning seed: the confirmation reuses it
-    for filt in options.filters:
-        out.append(Task(f"timing/{filt}", {"filter": filt, "timing_runs": v["timing_runs"], "steps": v["steps"],
-                                           "timing_repeats": v["timing_repeats"]}, run_timing))
+    # every filter's timing in one task, interleaved run by run (compared in one run, :func:`run_timing`)
+    out.append(Task(TIMING_TASK, {"filters": list(options.filters), "timing_runs": v["timing_runs"],
+                                  "steps": v["steps"], "timing_repeats": v["timing_repeats"]}, run_timing))
     return out

@@ -255,31 +255,38 @@ def test_criterion_2_ordered_reversed_and_scattered():
     assert _c2((0.9,) * 3, (0.9,) * 3, n=judging.MIN_RUNS - 1).verdict == "inconclusive"
 
 
+def _timing_results(per_filter):
+    """The results of the one timing task (every filter's arrays under ``"{filter}:{array}"``)."""
+    from workbench_papers.paper003.reading import TIMING_TASK
+
+    return {TIMING_TASK: {f"{n}:{k}": v for n, arrays in per_filter.items() for k, v in arrays.items()}}
+
+
 def test_timing_criteria():
     rng = np.random.default_rng(5)
-    res = {}
+    t = {}  # filter -> its arrays, as the timing task returns them (flattened by _timing_results)
     runs = judging.MIN_TIMED_RUNS
     for n, per in zip(CRPF_FILTERS, (1.0, 3.0, 5.0)):  # ms per run: linear in N, CRPF-300/500 slowest
-        res[f"timing/{n}"] = {"per_run_s": 1e-3 * per * rng.lognormal(0, 0.05, runs),
+        t[n] = {"per_run_s": 1e-3 * per * rng.lognormal(0, 0.05, runs),
                               "batched_per_run_s": 1e-4 * per * rng.lognormal(0, 0.05, 7)}
     for k, n in enumerate(KALMAN_TYPE):
         per = 2.0 + 0.1 * k  # sr forms slower than the full forms
-        res[f"timing/{n}"] = {"per_run_s": 1e-3 * per * rng.lognormal(0, 0.05, runs),
+        t[n] = {"per_run_s": 1e-3 * per * rng.lognormal(0, 0.05, runs),
                               "batched_per_run_s": 1e-4 * per * rng.lognormal(0, 0.05, 7)}
-    c = {x.id: x for x in judging._timing_criteria(res)}
+    c = {x.id: x for x in judging._timing_criteria(_timing_results(t))}
     assert c["C5-linear"].verdict == "met" and c["C5-slower"].verdict == "met"
     assert c["C5-linear-batched"].verdict == "met" and c["C5-slower-batched"].n == 7
     assert c["C6"].verdict == "not met"
     for n, per in zip(CRPF_FILTERS, (9.0, 9.1, 9.05)):  # the per-call overhead dominates: not linear
-        res[f"timing/{n}"]["per_run_s"] = 1e-3 * per * rng.lognormal(0, 0.01, runs)
-    c = {x.id: x for x in judging._timing_criteria(res)}
+        t[n]["per_run_s"] = 1e-3 * per * rng.lognormal(0, 0.01, runs)
+    c = {x.id: x for x in judging._timing_criteria(_timing_results(t))}
     assert c["C5-linear"].verdict in ("not met", "inconclusive") and c["C5-slower"].verdict == "met"
-    res["timing/crpf-300"]["batched_per_run_s"] = res["timing/crpf-300"]["batched_per_run_s"][:3]
-    res["timing/crpf-100"]["batched_per_run_s"] = res["timing/crpf-100"]["batched_per_run_s"][:3]
-    res["timing/crpf-500"]["batched_per_run_s"] = res["timing/crpf-500"]["batched_per_run_s"][:3]
+    t["crpf-300"]["batched_per_run_s"] = t["crpf-300"]["batched_per_run_s"][:3]
+    t["crpf-100"]["batched_per_run_s"] = t["crpf-100"]["batched_per_run_s"][:3]
+    t["crpf-500"]["batched_per_run_s"] = t["crpf-500"]["batched_per_run_s"][:3]
     for n in KALMAN_TYPE:
-        res[f"timing/{n}"]["batched_per_run_s"] = res[f"timing/{n}"]["batched_per_run_s"][:3]
-    c = {x.id: x for x in judging._timing_criteria(res)}
+        t[n]["batched_per_run_s"] = t[n]["batched_per_run_s"][:3]
+    c = {x.id: x for x in judging._timing_criteria(_timing_results(t))}
     assert c["C5-slower-batched"].verdict == "inconclusive"  # 3 repetitions < MIN_REPEATS
 
 

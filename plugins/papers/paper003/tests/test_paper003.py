@@ -164,7 +164,10 @@ def test_task_layout_and_third_party_filters():
         for prefix in ("", "deg-"):
             assert f"mc/{prefix}L1/{name}/mismatched" in keys and f"mc/{prefix}L3/{name}/matched" in keys
             assert f"mc/{prefix}L2/{name}/matched" not in keys  # L2: matched = nominal
-        assert f"grid/{name}" in keys and f"timing/{name}" in keys
+        assert f"grid/{name}" in keys
+    # one timing task for every filter, the third-party one included (timed interleaved, compared in one run)
+    timing = [t for t in tasks if t.key == "timing"]
+    assert len(timing) == 1 and list(timing[0].params["filters"]) == list(RECIPE.default_filters + ("sir",))
     for case in ("L1", "L2", "L3", "deg-L1", "deg-L2", "deg-L3"):
         assert f"reference/{case}" in keys and f"ablation/{case}" in keys
     # the reference runs on a prefix of the level's runs, chunked as the other tasks are, with the true models
@@ -285,8 +288,34 @@ def test_timing_figure(tiny):
     assert np.all(data["unbatched_s_per_run"] > 0) and np.all(data["batched_s_per_run"] > 0)
     assert np.all(data["timing_runs"] == TINY["timing_runs"]) and np.all(data["batched_repeats"] == 2)
     ekf = list(data["filters"]).index("ekf")
-    assert data["unbatched_s_per_run"][ekf] == pytest.approx(np.median(results["timing/ekf"]["per_run_s"]))
-    assert data["batched_s_per_run"][ekf] == pytest.approx(np.median(results["timing/ekf"]["batched_per_run_s"]))
+    assert data["unbatched_s_per_run"][ekf] == pytest.approx(np.median(results["timing"]["ekf:per_run_s"]))
+    assert data["batched_s_per_run"][ekf] == pytest.approx(np.median(results["timing"]["ekf:batched_per_run_s"]))
+
+
+def test_timing_interleaves_the_filters_run_by_run(monkeypatch):
+    # every filter times run r before any filter times run r + 1 (the order rotated by one filter per run), and the
+    # batched repetitions likewise: a drift of the machine's load falls on every filter alike
+    calls = []
+
+    def recording(spec, prior, motion, model, scans, rng):
+        calls.append((spec.name, scans.z.shape[0]))
+        return run_filter(spec, prior, motion, model, scans, rng)
+
+    monkeypatch.setattr(p3_tasks, "run_filter", recording)
+    names = ["ekf", "ukf", "cdkf"]
+    ctx = TaskContext(params={"filters": names, "timing_runs": 4, "steps": 5, "timing_repeats": 2}, seed=0,
+                      host=load_host(), arch="cpu")
+    out = p3_tasks.run_timing(ctx)
+    timed = calls[2 * len(names):]  # after each filter's two warm-up calls
+    one_by_one = [n for n, batch in timed if batch == 1]
+    assert one_by_one == [names[(j + r) % 3] for r in range(4) for j in range(3)]
+    batched = [n for n, batch in timed if batch == 4]
+    assert batched == [names[(j + k) % 3] for k in range(2) for j in range(3)]
+    for n in names:
+        assert out[f"{n}:per_run_s"].shape == (4,) and np.all(out[f"{n}:per_run_s"] > 0)
+        assert out[f"{n}:batched_per_run_s"].shape == (2,) and np.all(out[f"{n}:per_run_cpu_s"] >= 0)
+    assert p3_reading.timing_arrays({"timing": out}, "ukf")["per_run_s"] is out["ukf:per_run_s"]
+    assert p3_reading.timing_arrays({"timing": out}, "sir") is None
 
 
 def test_example_figures(tiny):
