@@ -45,6 +45,24 @@ def _finite(x_out, P_out, b):
     return s == 0.0
 
 
+@numba.njit(inline="always", error_model="numpy")
+def gain_into(Pxy, L, K):
+    """``K = Pxy S^-1`` with ``S = L L^T`` (``L`` lower triangular), row by row: ``L y = Pxy[r]`` (forward), then
+    ``L^T k = y`` (back); ``K (n, m)`` written in place.  The Kalman update's gain and the sigma-point filters'."""
+    n, m = Pxy.shape
+    for r in range(n):
+        for i in range(m):
+            s = Pxy[r, i]
+            for k in range(i):
+                s -= L[i, k] * K[r, k]
+            K[r, i] = s / L[i, i]
+        for i in range(m - 1, -1, -1):
+            s = K[r, i]
+            for k in range(i + 1, m):
+                s -= L[k, i] * K[r, k]
+            K[r, i] = s / L[i, i]
+
+
 @jit
 def predict_items(x, P, F, Q, x_out, P_out):
     """``x_out, P_out`` = the prediction of every item; ``False`` if some number written is not finite."""
@@ -134,17 +152,7 @@ def update_items(x, P, z, hx, angular, H, R, present, x_out, P_out):
                 for k in range(j):
                     s -= L[i, k] * L[j, k]
                 L[i, j] = s / L[j, j]
-        for r in range(n):  # K^T = S^-1 (P H^T)^T: solve L y = PHt[r], then L^T k = y
-            for i in range(m):
-                s = PHt[r, i]
-                for k in range(i):
-                    s -= L[i, k] * K[r, k]
-                K[r, i] = s / L[i, i]
-            for i in range(m - 1, -1, -1):
-                s = K[r, i]
-                for k in range(i + 1, m):
-                    s -= L[k, i] * K[r, k]
-                K[r, i] = s / L[i, i]
+        gain_into(PHt, L, K)  # K = P H^T S^-1
         for i in range(n):  # x = x- + K nu
             s = x[b, i]
             for j in range(m):

@@ -108,27 +108,10 @@ def _term(o, c, s, first):
 
 
 @jit(inline="always")
-def _combine_tile(out, x, e, lo, hi, src, coef, ptr):
-    """:func:`combine` on the particles ``lo:hi``, their noise rows being ``e[0 : hi - lo]``."""
-    n = x.shape[0]
-    for i in range(out.shape[0]):
-        o = out[i, lo:hi]
-        if ptr[i] == ptr[i + 1]:
-            o[:] = 0.0
-            continue
-        for q in range(ptr[i], ptr[i + 1]):
-            j = src[q]
-            if j < n:
-                _term(o, coef[q], x[j, lo:hi], q == ptr[i])
-            else:
-                _term(o, coef[q], e[: hi - lo, j - n], q == ptr[i])
-
-
-@jit(inline="always")
 def _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr):
-    """:func:`_combine_tile` with the tile's noise stored by column: ``e[j, t]`` noise ``j`` of particle ``lo + t``
-    (:func:`.pcg_numba.draw_tile`'s layout; each column contiguous).  The same products and sums in the same
-    order, so the same bits."""
+    """:func:`combine` on the particles ``lo:hi``, the tile's noise stored by column: ``e[j, t]`` noise ``j`` of
+    particle ``lo + t`` (:func:`.pcg_numba.draw_tile`'s layout; each column contiguous).  A tile of noise stored by
+    row (``e[t, j]``) is passed transposed (a view): the same products and sums in the same order."""
     n = x.shape[0]
     m = hi - lo
     for i in range(out.shape[0]):
@@ -158,7 +141,7 @@ def combine(out, x, e, src, coef, ptr):
     L = out.shape[1]
     for lo in range(0, L, TILE):
         hi = min(lo + TILE, L)
-        _combine_tile(out, x, e[lo:hi], lo, hi, src, coef, ptr)
+        _combine_tile_cols(out, x, e[lo:hi].T, lo, hi, src, coef, ptr)  # the rows' tile, transposed: a view
     return out
 
 

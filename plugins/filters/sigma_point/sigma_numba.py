@@ -38,6 +38,7 @@ import numba
 import numpy as np
 
 from workbench.kernels.backend import threaded as threaded_policy
+from workbench.kernels.kalman_numba import gain_into
 
 TWO_PI = 2.0 * math.pi
 #: Batches of at least this many items run threaded.
@@ -92,20 +93,9 @@ def measurement_mean(Y, b, wm, angular, count):
 
 @numba.njit(inline="always", error_model="numpy")
 def gain(Pxy, L):
-    """``K = Pxy Pyy^-1`` with ``Pyy = L L^T``: ``L M = Pxy^T`` (forward), ``L^T K^T = M`` (back)."""
-    n, m = Pxy.shape
-    K = np.empty((n, m))
-    for r in range(n):
-        for k in range(m):
-            v = Pxy[r, k]
-            for l in range(k):
-                v -= L[k, l] * K[r, l]
-            K[r, k] = v / L[k, k]
-        for k in range(m - 1, -1, -1):
-            v = K[r, k]
-            for l in range(k + 1, m):
-                v -= L[l, k] * K[r, l]
-            K[r, k] = v / L[k, k]
+    """``K = Pxy Pyy^-1`` with ``Pyy = L L^T`` (:func:`workbench.kernels.kalman_numba.gain_into`)."""
+    K = np.empty(Pxy.shape)
+    gain_into(Pxy, L, K)
     return K
 
 
