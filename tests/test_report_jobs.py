@@ -18,7 +18,7 @@ from workbench import hookimpl
 from workbench.cli import EXIT, main
 from workbench.report.cache import load_arrays
 from workbench.report.engine import (InProcess, LocalProcesses, WorkerHostMismatch, longest_first, previous_seconds,
-                                     run_recipe, run_report)
+                                     run_recipe, run_report, side_by_side)
 from workbench.specs import Task
 from workbench.types import InputError
 
@@ -306,11 +306,15 @@ def test_papers_run_side_by_side_in_one_batch_per_seed_with_the_numbers_of_one_p
                         progress=False, executor=recording)
     keys = [e["key"] for e in report.papers[0].tasks if not e["key"].startswith("confirmation/")]
     assert keys == ["mse-kf", "mse-ekf", "mse-sir"]
-    # one call per seed, whatever the number of papers; never run before here, so in the declared order
-    assert len(recording.order) == 2 and recording.order[0] == keys * 2
+    # one call per seed, whatever the number of papers; never run before here, so in the declared order, the papers'
+    # tasks in turn
+    assert len(recording.order) == 2 and recording.order[0] == [k for k in keys for _ in range(2)]
     read = [e["key"].removeprefix("confirmation/") for e in report.papers[0].tasks
             if e["key"].startswith("confirmation/") and not e.get("reused")]
-    assert read and recording.order[1] == read * 2
+    # the confirmation: the longest first by the seconds the same tasks just took on the reported seed
+    took = [{e["key"]: e["seconds"] for e in paper.tasks} for paper in report.papers]
+    expected = sorted(((-took[p][k], p, i, k) for p in range(2) for i, k in enumerate(read)))
+    assert read and recording.order[1] == [k for *_, k in expected]
     for paper in report.papers:
         alone = run_recipe(replace(demo_plugin.RECIPE, paper=paper.paper), host, tmp_path / f"alone-{paper.paper}",
                            size="full", filters="+sir", progress=False)
@@ -324,3 +328,15 @@ def test_papers_run_side_by_side_in_one_batch_per_seed_with_the_numbers_of_one_p
     run_report(host, tmp_path / "both", papers=["twin-a", "twin-b"], size="full", filters="+sir", progress=False,
                executor=recording)
     assert all(not batch for batch in recording.order)
+
+
+def test_side_by_side_takes_the_untimed_tasks_of_each_batch_in_turn_then_the_longest():
+    a = [_task(k) for k in ("a1", "a2", "a3", "a4")]
+    b = [_task(k) for k in ("b1", "b2")]
+    c = [_task(k) for k in ("c1", "c2", "c3")]
+    # a new folder: no times at all -> a1 b1 c1 a2 b2 c2 a3 c3 a4 (written out by hand)
+    assert [t.key for t in side_by_side([(a, {}), (b, {}), (c, {})])] == [
+        "a1", "b1", "c1", "a2", "b2", "c2", "a3", "c3", "a4"]
+    # timed tasks after every untimed one, the longest first; a tie keeps the batches' order
+    got = side_by_side([(a, {"a1": 3.0, "a3": 9.0}), (b, {"b1": 3.0, "b2": 1.0}), (c, {"c2": 20.0})])
+    assert [t.key for t in got] == ["c1", "a2", "c3", "a4", "c2", "a3", "a1", "b1", "b2"]

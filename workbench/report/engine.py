@@ -83,7 +83,7 @@ from .tables import TASK_STATUSES, _jsonable, _task_status, paper_time_table, ta
 __all__ = ["resolve_filters", "resolve_trackers", "tracker_request", "tracker_papers", "PaperOutcome", "ReportOutcome", "run_recipe", "run_report", "figure_data_csv",
            "save_outcome", "load_outcome", "saved_outcomes", "OUTCOME_FILE", "InProcess", "DaskExecutor",
            "dask_executor", "component_failure", "component_errors", "COMPONENT_ERROR_PREFIX", "LOCK_FILE", "ReportFolderBusy",
-           "report_lock", "recording_host", "LocalProcesses", "WorkerHostMismatch", "usable_cores", "ONE_THREAD_ENV", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats",
+           "report_lock", "recording_host", "side_by_side", "LocalProcesses", "WorkerHostMismatch", "usable_cores", "ONE_THREAD_ENV", "DaskClusterLost", "NO_WORKER_GRACE", "FIGURE_FORMATS", "FORMATS_VARIABLE", "figure_formats",
            "CONFIRMATION_SEED", "CONFIRMATION_SPAN", "check_report_seed", "judged_tasks", "task_time_table",
            "paper_time_table", "TASK_STATUSES"]
 
@@ -672,8 +672,12 @@ def _confirmation_batch(pr: _PaperRun) -> _Batch | None:
     pr.reused = [(t, why_reused(t)) for t in wanted if why_reused(t)]
     tasks = [t for t in wanted if not why_reused(t)]
     note = PaperOutcome(pr.recipe.paper, pr.recipe.title, pr.options.size, pr.options.filters, "", {})
+    # the order on side-by-side workers: the seconds each task took on the confirmation seed in the last report
+    # into this folder, else the seconds the same task just took on the reported seed (the same work on other data)
+    just = {e["key"]: float(e["seconds"]) for e in pr.outcome.tasks
+            if _task_status(e) == "computed" and float(e.get("seconds") or 0.0) > 0.0}
     pr.confirmation = _Batch(pr.recipe, tasks, seed, pr.options.size, pr.options.arch, pr.version, note,
-                             pr.previous_confirmation)
+                             {**just, **pr.previous_confirmation})
     return pr.confirmation
 
 
@@ -779,16 +783,29 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
     return [_finish(pr, out) for pr in runs]
 
 
-def _task_cost(task: Task, seconds: Mapping[str, float], i: int) -> tuple:
+def _task_cost(task: Task, seconds: Mapping[str, float], i: int, batch: int = 0) -> tuple:
+    """The sort key of ``task``, the ``i``-th of batch ``batch``: the tasks without a time first, the batches taken
+    in turn (the first task of every batch, then the second of every batch...), then the longest first; ties keep
+    the declared order."""
     known = seconds.get(task.key)
-    return (0, 0.0, i) if known is None else (1, -float(known), i)
+    return (0, i, batch) if known is None else (1, -float(known), batch, i)
+
+
+def side_by_side(batches: Sequence[tuple[Sequence[Task], Mapping[str, float]]]) -> list[Task]:
+    """The tasks of several batches (each its tasks and ``seconds``, task key -> the seconds it took last time) in
+    the order a pool of workers should take them: the tasks without a time first, a task of each batch in turn
+    (each batch's in its declared order), so that workers starting side by side mostly run different batches'
+    tasks; then every timed task, the longest first (ties: the batches' order, then the declared order)."""
+    keyed = [(_task_cost(task, seconds, i, b), task) for b, (tasks, seconds) in enumerate(batches)
+             for i, task in enumerate(tasks)]
+    return [task for _, task in sorted(keyed, key=lambda item: item[0])]
 
 
 def longest_first(tasks: Sequence[Task], seconds: Mapping[str, float]) -> list[Task]:
     """``tasks`` in the order a pool of workers should take them so that they finish together: the longest first,
     by ``seconds`` (task key -> the seconds it took last time).  A task without a time (never computed here) goes
     first, in the declared order (it may be long); ties keep the declared order."""
-    return [t for _, t in sorted(enumerate(tasks), key=lambda item: _task_cost(item[1], seconds, item[0]))]
+    return side_by_side([(tasks, seconds)])
 
 
 def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float]:
@@ -817,7 +834,9 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
     one reused; each batch's results (in its declared order) in ``batch.results``, its tasks' timing in its
     ``outcome.tasks`` and failures in its ``outcome.errors``.  An executor that runs tasks side by side gets the
     tasks of every batch in one call, the longest first (by each batch's ``previous``: the seconds each took in the
-    last report into this folder), so that its workers finish together."""
+    last report into this folder), so that its workers finish together; the tasks without a time (a new folder) go
+    first, a task of each batch in turn, so that workers starting side by side mostly run different papers' tasks
+    (which compile different kernels) instead of two neighbours of one paper (which compile the same ones twice)."""
     if not batches:
         return
     if len({(b.seed, b.arch) for b in batches}) != 1:
@@ -825,9 +844,8 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
     seed, arch = batches[0].seed, batches[0].arch
     bar = _progress_bar(sum(len(b.tasks) for b in batches), label, progress)
     owner: dict[int, tuple[_Batch, str]] = {}  # id(task) -> its batch and cache digest (keys repeat across papers)
-    order: list[Task] = []
-    costs: list[tuple] = []
-    for batch in batches:
+    pending: list[list[Task]] = [[] for _ in batches]
+    for b, batch in enumerate(batches):
         recipe, outcome = batch.recipe, batch.outcome
         for task in batch.tasks:
             digest = task_key(recipe.paper, task.key, task.params, seed, batch.version, size=batch.size, arch=arch)
@@ -847,10 +865,11 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
                 bar.update(1)
             else:
                 owner[id(task)] = (batch, digest)
-                costs.append(_task_cost(task, batch.previous, len(order)))
-                order.append(task)
-    if not isinstance(run, InProcess):  # one after another: the order changes nothing; side by side: longest first
-        order = [t for _, t in sorted(zip(costs, order), key=lambda item: item[0])]
+                pending[b].append(task)
+    if isinstance(run, InProcess):  # one after another: the order changes nothing
+        order = [task for tasks in pending for task in tasks]
+    else:  # side by side: longest first, the batches of tasks without a time in turn
+        order = side_by_side([(tasks, batch.previous) for tasks, batch in zip(pending, batches)])
     for task, arrays, seconds, error in run.execute(order, seed, arch, on_task):
         batch, digest = owner[id(task)]
         recipe, outcome = batch.recipe, batch.outcome
