@@ -206,3 +206,20 @@ def test_the_fused_linear_ukf_predict_equals_the_generic_compiled_one_and_the_nu
     # the unscented transform of a linear map is exact: F x, F P F^T + Q
     np.testing.assert_allclose(fused.mean, state.mean @ motion.F.T, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(fused.cov, motion.F @ state.cov @ motion.F.T + motion.Q, rtol=1e-11, atol=1e-11)
+
+
+def test_a_scan_cut_from_a_batch_hands_the_kernels_a_contiguous_mask():
+    """``single_measurement`` gives ``present`` contiguous whether the scan is one track or a column of a (B, T, M)
+    batch (there a strided view): a compiled update then sees one array layout, so one compilation serves both
+    (a strided mask had compiled the Kalman and unscented updates a second time in every process)."""
+    from workbench.filtering import single_measurement
+
+    rng = np.random.default_rng(3)
+    valid = rng.random((5, 4, 1)) < 0.7
+    scans = Scans(rng.standard_normal((5, 4, 1, 2)), valid, np.arange(4, dtype=float))
+    for k in range(4):
+        scan = scans.scan(k).for_filter()
+        z, present = single_measurement(scan)
+        assert present.flags.c_contiguous and present.dtype == bool
+        np.testing.assert_array_equal(present, valid[:, k, 0])
+        np.testing.assert_array_equal(z, scans.z[:, k, 0])

@@ -20,7 +20,9 @@ def single_measurement(scan: Scan, who: str = "this filter") -> tuple[np.ndarray
     single-measurement filter needs an association or pseudo-measurement step before it.
     """
     if scan.z.shape[1] == 1:  # the common case (one row per item): no counting needed
-        return scan.z[:, 0], scan.valid[:, 0]
+        # present contiguous whatever the scan's layout (a scan cut from a (B, T, M) array has strided columns): a
+        # compiled kernel taking it then has one signature, not a second compilation for strided masks
+        return scan.z[:, 0], np.ascontiguousarray(scan.valid[:, 0])
     counts = scan.counts
     if np.any(counts > 1):
         item = int(np.argmax(counts > 1))
