@@ -44,7 +44,7 @@ Shapes: particles ``(B, N, n)``, costs and variances ``(B, N)``, step counts ``(
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 
@@ -258,6 +258,24 @@ def _blind_move(state: CRPFState, rng: np.random.Generator, params: CRPFParams) 
                      state.blind_moves + rows.size)
 
 
+@lru_cache(maxsize=64)
+def _shape_squared(params: CRPFParams, n: int) -> np.ndarray:
+    """``diag(s^2)`` of the propagation noise's scale ``s`` (:meth:`CRPFParams.shape`), ``(n, n)``, read-only: the
+    same for every step of a setting."""
+    out = np.diag(params.shape(n) ** 2)
+    out.setflags(write=False)
+    return out
+
+
+def _kernel_belief(mean: np.ndarray, cov: np.ndarray) -> Gaussian:
+    """The fused kernel's weighted moments (float64 arrays it allocated, of the state's shapes; symmetric positive
+    semi-definite by construction) as the belief, once every number is checked finite; a non-finite one goes to
+    :meth:`Gaussian.trusted`, which names it."""
+    if np.isfinite(mean).all() and np.isfinite(cov).all():
+        return Gaussian.kernel_output(mean, cov)
+    return Gaussian.trusted(mean, cov)
+
+
 def predict(state: CRPFState, motion: MotionModel, rng: np.random.Generator, params: CRPFParams,
             who: str = "crpf") -> CRPFState:
     """Record ``F``; the predicted belief is ``N(F m, F P F^T + mean_i sigma_i^2 diag(s^2))``.  A motion model that
@@ -266,9 +284,11 @@ def predict(state: CRPFState, motion: MotionModel, rng: np.random.Generator, par
     if state.pending.any():
         state = _blind_move(state, rng, params)
     n = F.shape[0]
-    spread = np.mean(state.variances, axis=1)  # (B,): the particles' mean propagation variance
+    v = state.variances
+    # (B,): the particles' mean propagation variance (np.mean's sum and division, without its Python layers)
+    spread = np.add.reduce(v, axis=1) / v.shape[1]
     mean = state.belief.mean @ F.T
-    cov = F @ state.belief.cov @ F.T + spread[:, None, None] * np.diag(params.shape(n) ** 2)
+    cov = F @ state.belief.cov @ F.T + spread[:, None, None] * _shape_squared(params, n)
     # F P F^T + a non-negative diagonal is symmetric positive semi-definite: no eigenvalue test needed
     return CRPFState(state.particles, state.costs, state.variances, state.steps, Gaussian.trusted(mean, cov),
                      np.ones(state.pending.shape, dtype=bool), F, state.selections, state.blind_moves)
@@ -300,8 +320,7 @@ def update(state: CRPFState, scan: Scan, model: MeasurementModel, rng: np.random
             x, c, s2, steps, state.F, z, key, u0, params.shape(n), lam, params.beta, params.delta, params.q,
             params.cost == "arc-length", model.sensor_position, params.adaptive, params.relative,
             backend=params.backend)
-        # the kernel's weighted moments are symmetric positive semi-definite by construction
-        return CRPFState(new_x, costs, new_s2, steps, Gaussian.trusted(mean, cov), np.zeros(B, dtype=bool), None,
+        return CRPFState(new_x, costs, new_s2, steps, _kernel_belief(mean, cov), np.zeros(B, dtype=bool), None,
                          state.selections + B, state.blind_moves)
     if moving.any():
         xf = x @ state.F.T  # noise-free prediction f(x_{t-1})

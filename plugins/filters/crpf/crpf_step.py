@@ -99,9 +99,15 @@ def crpf_step(x, c, s2, t, F, z, key, u0, shape, lam, beta, delta, q=2.0, arc=Fa
 
 
 def _numba_kernel():
-    from .crpf_numba import kernel
+    global _NUMBA_KERNEL
+    if _NUMBA_KERNEL is None:  # imported (and its compiled code loaded) on first use only
+        from .crpf_numba import kernel
 
-    return kernel
+        _NUMBA_KERNEL = kernel
+    return _NUMBA_KERNEL
+
+
+_NUMBA_KERNEL = None
 
 
 def _taichi_kernel():

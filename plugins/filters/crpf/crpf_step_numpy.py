@@ -21,14 +21,20 @@ __all__ = ["crpf_step_numpy", "propagation_normals", "pmf_offset", "atan2_poly",
 TWO_PI = 2.0 * math.pi
 
 
+def _spread(a, shape: tuple) -> np.ndarray:
+    """``a`` broadcast to ``shape`` (itself where it has that shape already: a one-track step calls this twice)."""
+    a = np.asarray(a)
+    return a if a.shape == shape else np.broadcast_to(a, shape)
+
+
 def _check(x, c, s2, t, F, z, u0, shape):
     x = np.ascontiguousarray(x, dtype=np.float64)
     if x.ndim != 3:
         raise ValueError(f"crpf_step: particles must be (B, N, n), got shape {x.shape}")
     B, N, n = x.shape
     c = np.ascontiguousarray(c, dtype=np.float64)
-    s2 = np.ascontiguousarray(np.broadcast_to(s2, (B, N)), dtype=np.float64)
-    t = np.ascontiguousarray(np.broadcast_to(t, (B,)), dtype=np.float64)
+    s2 = np.ascontiguousarray(_spread(s2, (B, N)), dtype=np.float64)
+    t = np.ascontiguousarray(_spread(t, (B,)), dtype=np.float64)
     F = np.ascontiguousarray(F, dtype=np.float64)
     z = np.ascontiguousarray(z, dtype=np.float64)
     u0 = np.ascontiguousarray(np.reshape(u0, (B,)), dtype=np.float64)

@@ -379,3 +379,30 @@ def test_a_default_that_breaks_its_own_declaration_is_refused():
 
     with pytest.raises(InputError, match=r"toy \(declared defaults\): n: must be >= 1, got 0"):
         declared_factory((Param("n", 0, "count", "int", unit="dimensionless", minimum=1),), "toy")
+
+
+def test_a_non_finite_estimate_from_the_fused_kernel_is_refused_by_name(monkeypatch):
+    """The fused step's moments become the belief without a second pass of Gaussian's checks, but only after
+    every number is checked finite: a NaN the kernel wrote is refused naming the estimate, never passed on."""
+    import workbench_filters.crpf as crpf
+
+    real = crpf.crpf_step
+    calls = []
+
+    def poisoned(*args, **kwargs):
+        out = real(*args, **kwargs)
+        out[3][0, 2] = np.nan  # the mean's vx of item 0
+        calls.append(1)
+        return out
+
+    spec = make_crpf(particles=20)
+    model, motion = range_bearing(1.0, 0.1), random_walk_velocity(2, 1.0, 0.1)
+    prior = Gaussian.broadcast([100.0, 50.0, -1.0, 1.0], np.diag([1.0, 1.0, 0.1, 0.1]), 2)
+    rng = generator(0, "poisoned")
+    state = spec.init(prior, rng)
+    state = spec.update(state, Scan.single(np.array([[111.0, 0.46], [111.0, 0.46]])), model, rng)
+    state = spec.predict(state, motion, rng)
+    monkeypatch.setattr(crpf, "crpf_step", poisoned)
+    with pytest.raises(InputError, match=r"Gaussian.mean holds a non-finite value .* index \(0, 2\)"):
+        spec.update(state, Scan.single(np.array([[110.0, 0.47], [110.0, 0.47]])), model, rng)
+    assert calls  # the fused kernel ran
