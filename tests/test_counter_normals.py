@@ -56,24 +56,46 @@ def test_normals_follow_the_standard_normal_law():
 
 @functools.cache
 def _numba_fill():
-    """Every row through the Numba twin's ``row_normals``: compiled once for all the counts below."""
+    """Every row through the Numba twin's ``row_normals_as``, by the split loops (scalar hash words, then the
+    vectorised Box-Muller) or by the fused loop, rows ``first_row ..``: compiled once for all the tests below."""
     import numba
 
-    from workbench.kernels.counter_normals_numba import row_normals
+    from workbench.kernels.counter_normals_numba import row_normals_as
+    from workbench.kernels.vector_width import wide_vectors
 
     @numba.njit
-    def fill(key, out):
+    def fill(key, out, split, first_row):
+        wide_vectors()  # as row_normals compiles the split loops: vectorised
+        words = np.empty(out.shape[1] + 1, dtype=np.uint64)
         for b in range(out.shape[0]):
-            row_normals(key, b, out[b])
+            row_normals_as(key, first_row + b, out[b], words, split)
 
     return fill
 
 
 @pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
-@pytest.mark.parametrize("count", [1, 8, 1001])
-def test_numba_twin_gives_the_same_numbers(count):
+@pytest.mark.parametrize("split", [True, False])
+@pytest.mark.parametrize("count", [1, 2, 3, 8, 1001])
+def test_numba_twin_gives_the_same_numbers(count, split):
     key = draw_key(generator(0, "twin"))
     out = np.empty((7, count))
-    _numba_fill()(np.uint64(key), out)
+    _numba_fill()(np.uint64(key), out, split, 0)
     assert np.array_equal(out, counter_normals_numpy(key, 7, count))
-    assert np.array_equal(counter_normals(key, 7, count), out)  # the threaded fill_rows
+    assert np.array_equal(counter_normals(key, 7, count), out)  # the threaded fill_rows (the host's choice)
+
+
+@pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
+def test_numba_twin_counters_are_exact_beyond_two_to_the_53():
+    """Pair counters above 2^53 (a row far into the stream): the uint64 arithmetic of both loops, not a float."""
+    key, count = 12345, 6
+    b = 2 ** 53 // 3 + 7  # pairs 3 b .. 3 b + 2, counters 2 g + 1, 2 g + 2 above 2^54
+    g = np.arange(3 * b, 3 * b + 3, dtype=np.uint64)
+    a, c = _splitmix(key, 2 * g + 1), _splitmix(key, 2 * g + 2)
+    rad = np.sqrt(-2.0 * log_poly(_unit(a)))
+    cos, sin = sincos_poly((c >> np.uint64(62)).astype(np.int64), _unit(c << np.uint64(2)))
+    ref = np.stack([rad * cos, rad * sin], axis=1).ravel()
+    assert not np.array_equal(_splitmix(key, 2 * g + 1), _splitmix(key, (2 * g + 1).astype(float)))
+    for split in (True, False):
+        out = np.empty((1, count))
+        _numba_fill()(np.uint64(key), out, split, b)
+        assert np.array_equal(out[0], ref), split

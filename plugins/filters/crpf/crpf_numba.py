@@ -6,12 +6,13 @@ every process compiled the kernel anew: 7-12 s).  See :mod:`workbench_filters.cr
 
 Where a step's time goes (B = 250 runs of N = 500 particles, n = 4, one thread of a 2-core AMD EPYC Zen 1, AVX2 on
 128-bit units; ns per particle-step, from variants cut short after each phase): the four propagation normals
-38 (9.5 each, :mod:`workbench.kernels.counter_normals_numba`), the two costs 12 each (two thirds of it the
-select-only atan2), the propagation's gather from the parents 9, the selection 5, the first pass (``F x``,
-``sigma``, ``lam C``) 4, the two PMFs with their sums 3-4 each, the weighted mean and covariance 10; about
-800 ns per run besides (calls, views, loop set-up), 8 ns per particle-step at N = 100.  Every number is the
-previous kernel's bit for bit (117 ns per particle-step before; the normals then cost 13 ns each, computed
-inside ``one_run``).
+33 (8.3 each, :mod:`workbench.kernels.counter_normals_numba`: the hash words in a scalar loop, then the
+vectorised Box-Muller; 38, 9.5 each, in one fused loop, when the step took 100 ns, 95 since), the two costs 12
+each (two thirds of it the select-only atan2), the propagation's gather from the parents 9, the selection 5, the
+first pass (``F x``, ``sigma``, ``lam C``) 4, the two PMFs with their sums 3-4 each, the weighted mean and
+covariance 10; about 800 ns per run besides (calls, views, loop set-up), 8 ns per particle-step at N = 100.
+Every number is the previous kernel's bit for bit (117 ns per particle-step before; the normals then cost 13 ns
+each, computed inside ``one_run``).
 """
 
 import functools
@@ -309,7 +310,7 @@ def kernel_parallel(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_ne
     B, N, n = x.shape
     for b in numba.prange(B):
         eb = np.empty(N * n)
-        row_normals(key, b, eb)  # run b's propagation normals, computed here (see kernel_serial)
+        row_normals(key, b, eb, np.empty(N * n, dtype=np.uint64))  # run b's propagation normals (see kernel_serial)
         one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], eb, u0[b], shape, scal, x_new[b], c_new[b],
                 s2_new[b], mean[b], cov[b], scratch[b], np.empty((n + 6) * N), np.empty(2 * N + 1, dtype=np.int64))
 
@@ -318,12 +319,13 @@ def kernel_parallel(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_ne
 def kernel_serial(x, c, s2, t, F, z, key, u0, shape, scal, x_new, c_new, s2_new, mean, cov, scratch):
     B, N, n = x.shape
     eb = np.empty(N * n)
+    words = np.empty(N * n, dtype=np.uint64)  # the normals' hash words
     sc = np.empty((n + 6) * N)
     ic = np.empty(2 * N + 1, dtype=np.int64)
     for b in range(B):
         # the normals in the loop over runs, not in one_run: there LLVM kept their loop's constants in
         # registers it then spilled, and they cost 13 instead of 9 ns each (one AVX2 core)
-        row_normals(key, b, eb)
+        row_normals(key, b, eb, words)
         one_run(x[b], c[b], s2[b], t[b], F, z[b, 0], z[b, 1], eb, u0[b], shape, scal, x_new[b], c_new[b],
                 s2_new[b], mean[b], cov[b], scratch[b], sc, ic)
 
