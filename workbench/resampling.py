@@ -14,10 +14,10 @@ __all__ = ["normalise_log_weights", "effective_sample_size", "systematic_counts"
            "resample_where"]
 
 
-def _log_sum_exp_rows(log_w: np.ndarray, scale: float = 1.0) -> np.ndarray:
+def _log_sum_exp_rows(log_w: np.ndarray, scale: float = 1.0, top: np.ndarray | None = None) -> np.ndarray:
     """``log sum_i exp(scale log_w[b, i])`` for ``(B, N)`` -> ``(B,)`` (``scale > 0``): ``-inf`` for an all
-    ``-inf`` row, NaN/inf kept.  One temporary."""
-    top = scale * np.max(log_w, axis=1)
+    ``-inf`` row, NaN/inf kept.  One temporary.  ``top``: ``np.max(log_w, axis=1)`` where the caller has it."""
+    top = scale * (np.max(log_w, axis=1) if top is None else top)
     shift = np.where(np.isfinite(top), top, 0.0)
     # log sum_i exp(s l_i) = m + log sum_i exp(s l_i - m),  m = max_i s l_i  (log 0 = -inf, without a warning)
     tmp = np.multiply(log_w, scale) if scale != 1.0 else np.array(log_w, dtype=float)
@@ -26,14 +26,16 @@ def _log_sum_exp_rows(log_w: np.ndarray, scale: float = 1.0) -> np.ndarray:
     return shift + np.log(total, out=np.full_like(total, -np.inf), where=total != 0.0)
 
 
-def normalise_log_weights(log_w: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
+def normalise_log_weights(log_w: np.ndarray, fallback: np.ndarray | None = None,
+                          top: np.ndarray | None = None) -> np.ndarray:
     """Normalise ``log_w (B, N)`` so each row's weights sum to one, in the log domain.
 
     A row whose weights are all ``-inf`` (every likelihood underflowed, or an empty gate) keeps
-    ``fallback`` (by default uniform weights) instead of becoming NaN.
+    ``fallback`` (by default uniform weights) instead of becoming NaN.  ``top (B,)``: ``np.max(log_w, axis=1)``
+    where the caller has it (not recomputed).
     """
     log_w = np.asarray(log_w, dtype=float)
-    total = _log_sum_exp_rows(log_w)
+    total = _log_sum_exp_rows(log_w, top=top)
     dead = ~np.isfinite(total)
     # log w_i <- log w_i - log sum_j w_j
     out = log_w - np.where(dead, 0.0, total)[:, None]

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..linalg import symmetrise
 from ..models import MeasurementModel, MotionModel
-from ..types import Gaussian, InputError, Scan
+from ..types import Gaussian, InputError, Scan, _validated
 from .loop import Context, Track, default_association
 
 __all__ = ["SingleTarget", "Carry", "RoleState", "GatedState", "NearestNeighbourState", "Direct", "Gated",
@@ -245,15 +245,36 @@ def radius_gate(scan: Scan, centre: np.ndarray, radius: float, dims: int | None 
         raise InputError(f"gate centre must have shape {(scan.batch, dims)}, got {centre.shape}")
     if not radius > 0:
         raise InputError(f"gate radius must be > 0, got {radius}")
-    d2 = np.sum((scan.z[..., :dims] - centre[:, None, :]) ** 2, axis=-1)
+    if dims > scan.z.shape[-1]:
+        raise InputError(f"gate dims {dims} exceeds the scan's {scan.z.shape[-1]} measurement components")
+    if 0 < dims < 8:
+        # the squared distance as np.sum((z - c) ** 2, axis=-1) adds a short axis (in index order), one component
+        # at a time: the same numbers without the slow reduction over a length-3 axis
+        d2 = scan.z[..., 0] - centre[:, 0, None]
+        d2 *= d2
+        for k in range(1, dims):
+            dk = scan.z[..., k] - centre[:, k, None]
+            dk *= dk
+            d2 += dk
+    else:
+        d2 = np.sum((scan.z[..., :dims] - centre[:, None, :]) ** 2, axis=-1)
     keep = scan.valid & (d2 <= radius * radius)
     width = int(keep.sum(axis=1).max()) if keep.size else 0
     order = np.argsort(~keep, axis=1, kind="stable")[:, :width]
-    pick = lambda a: None if a is None else np.take_along_axis(a, order, axis=1)  # noqa: E731
-    cov = None if scan.cov is None else np.take_along_axis(scan.cov, order[..., None, None], axis=1)
-    gated = Scan(np.take_along_axis(scan.z, order[..., None], axis=1), np.take_along_axis(keep, order, axis=1),
-                 pick(scan.snr), pick(scan.doppler), pick(scan.origin), time=scan.time, cov=cov,
-                 clutter_density=pick(scan.clutter_density))
+    rows = np.arange(scan.batch)[:, None]
+    pick = lambda a: None if a is None else a[rows, order]  # noqa: E731  (rows moved, every trailing axis kept)
+    # the rows of a checked scan, so the Scan's checks are not run again; its normalisation is: padding rows
+    # zeroed (z), identity covariances
+    valid = keep[rows, order]
+    z = scan.z[rows, order]
+    if np.any(~valid & np.any(z != 0.0, axis=-1)):
+        z = np.where(valid[..., None], z, 0.0)
+    cov = pick(scan.cov)
+    if cov is not None:
+        cov = np.where(valid[..., None, None], cov, np.broadcast_to(np.eye(z.shape[-1]), cov.shape))
+    gated = _validated(Scan, z=z, valid=valid, snr=pick(scan.snr), doppler=pick(scan.doppler),
+                       origin=pick(scan.origin), time=float(scan.time), cov=cov,
+                       clutter_density=pick(scan.clutter_density))
     return gated, keep
 
 

@@ -44,8 +44,9 @@ Le Gland's regularised particle filter): each resampled particle is jittered by 
 weighted covariance before resampling, ``h = regularisation x h_opt`` (:func:`regularisation_bandwidth`), so that
 the copies of the few particles that keep up with a sharp manoeuvre become distinct particles.  The state,
 prediction and estimate are those of the bootstrap filter (:mod:`workbench.particle_core`).  Where the backend runs
-Numba, the two-mode prediction, the floor's ``logaddexp`` and the regularisation's jitter run compiled
-(:mod:`.tbd_pf_numba`), each held bit for bit to the NumPy lines it replaces, random draws included.
+Numba, the two-mode prediction, the floor's ``logaddexp``, the systematic resampling's draws and gathers
+(:func:`resample_rows`) and the regularisation's jitter run compiled (:mod:`.tbd_pf_numba`), each held bit for bit
+to the NumPy lines it replaces, random draws included.
 
 ``sigma_vr`` (default 15 m/s) is the width of the Doppler kernel.  The sensor's radial-velocity noise is 2 m/s;
 the wider kernel is a tempering device (``N(vr; 15^2) ∝ N(vr; 2^2)^(4/225)``) that keeps a cloud of a few hundred
@@ -77,7 +78,7 @@ likelihood is the mixture ``b + N(z; h(x_i), R)``; the EKF's update is the PDAF'
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 from scipy.stats import chi2
@@ -89,7 +90,7 @@ from workbench.kernels.backend import BACKENDS
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
-from workbench.particle_core import (ParticleState, _plan_arrays, combine_columns, compiled, component_major,
+from workbench.particle_core import (ParticleState, _nonzero_columns, _plan_arrays, combine_columns, compiled, component_major,
                                      diagnostics, estimate, init, log_likelihood_cov, need_rng, noise_columns, predict,
                                      propagate_f)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
@@ -124,46 +125,53 @@ def _centre(particles: np.ndarray, log_weights: np.ndarray) -> np.ndarray:
 
 
 def log_missed(model: MeasurementModel, particles: np.ndarray, log_weights: np.ndarray | None = None, *,
-               centre: np.ndarray | None = None) -> np.ndarray | None:
+               centre: np.ndarray | None = None, nominal: np.ndarray | None = None) -> np.ndarray | None:
     """``log(1 - P_D^T)``: the log probability that the sensor misses its design target, at the cloud's predicted
     position ``(B, 1)`` (``log_weights`` given) or at every particle ``(B, N)``; ``None`` when the model declares no
     design target (``detection.nominal_snr_db``, ``detection.log_detection``).  ``centre``: the cloud's weighted
-    mean position :func:`_centre` of ``particles`` and ``log_weights`` where the caller has it already."""
+    mean position :func:`_centre` of ``particles`` and ``log_weights`` where the caller has it already, and
+    ``nominal (B,)`` the nominal SNR there (``detection.nominal_snr_db(centre)``)."""
     detection = _detection(model)
     if detection.nominal_snr_db is None or detection.log_detection is None:
         return None
     if log_weights is None:
-        where = particles[..., :3]
+        snr = detection.nominal_snr_db(particles[..., :3])
+    elif nominal is not None:
+        snr = nominal[:, None]
     else:
-        where = (_centre(particles, log_weights) if centre is None else centre)[:, None, :]
-    log_pd = np.minimum(detection.log_detection(detection.nominal_snr_db(where)), 0.0)
+        snr = detection.nominal_snr_db((_centre(particles, log_weights) if centre is None else centre)[:, None, :])
+    log_pd = np.minimum(detection.log_detection(snr), 0.0)
     # log(1 - P_D) = log(-expm1(log P_D))
     with np.errstate(divide="ignore"):
         return np.log(-np.expm1(log_pd))
 
 
-def log_amplitude_ratio(model: MeasurementModel, snr_db: np.ndarray, position: np.ndarray) -> np.ndarray:
+def log_amplitude_ratio(model: MeasurementModel, snr_db: np.ndarray, position: np.ndarray, *,
+                        nominal: np.ndarray | None = None) -> np.ndarray:
     """``log l = log f_T(snr | SNR(position)) - log f_C(snr)``: how much more likely a detection of measured SNR
     ``snr_db`` is the design target's (nominal SNR at ``position``) than clutter's, from the model's declared laws;
-    0 where the model lacks one of them.  Shapes: ``snr_db (B,)``, ``position (B, 3)`` -> ``(B,)``."""
+    0 where the model lacks one of them.  ``nominal``: ``detection.nominal_snr_db(position)`` where the caller has
+    it.  Shapes: ``snr_db (B,)``, ``position (B, 3)`` -> ``(B,)``."""
     detection = _detection(model)
     snr_db = np.asarray(snr_db, dtype=float)
     if (detection.nominal_snr_db is None or detection.log_snr_density is None
             or detection.clutter_log_snr_density is None):
         return np.zeros(snr_db.shape)
-    nominal = detection.nominal_snr_db(position)
+    if nominal is None:
+        nominal = detection.nominal_snr_db(position)
     with np.errstate(invalid="ignore"):
         out = detection.log_snr_density(snr_db, nominal) - detection.clutter_log_snr_density(snr_db)
-    return np.nan_to_num(out, nan=0.0, posinf=np.inf, neginf=-np.inf)
+    out = np.asarray(out, dtype=float)
+    return np.where(np.isnan(out), 0.0, out)  # NaN (two undeclared laws' -inf - -inf) -> 0, infinities kept
 
 
 def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model: MeasurementModel,
               log_pd: np.ndarray, *, floor: str, floor_density: float = 0.0, floor_scale: float = 1.0,
               sigma_vr: float = 15.0, missed: np.ndarray | None = None,
-              centre: np.ndarray | None = None) -> np.ndarray:
+              centre: np.ndarray | None = None, nominal: np.ndarray | None = None) -> np.ndarray:
     """``log eps`` of the floor ``floor`` (see the module docstring), ``(B, 1)`` or ``(B, N)``; ``-inf`` for an
     item without a valid detection.  ``centre``: :func:`_centre` of ``particles`` and ``log_weights`` where the
-    caller has it already.
+    caller has it already, ``nominal (B,)`` the design target's nominal SNR there (``detection.nominal_snr_db``).
 
     Shapes
     ------
@@ -191,7 +199,8 @@ def log_floor(particles: np.ndarray, log_weights: np.ndarray, scan: Scan, model:
     # the cloud's predicted position: the weighted mean of the predicted particles
     if centre is None:
         centre = _centre(particles, log_weights)
-    log_l = log_amplitude_ratio(model, np.where(scan.valid[rows, star], snr[rows, star], 0.0), centre)
+    log_l = log_amplitude_ratio(model, np.where(scan.valid[rows, star], snr[rows, star], 0.0), centre,
+                                nominal=nominal)
     with np.errstate(divide="ignore"):
         # log eps = log kappa + log lambda + log max_m P_D(snr_m) - log max(1, l) [+ log(1 - P_D^T(s_i))]
         out = np.log(floor_scale) + np.log(density)[:, None] + top - np.maximum(log_l, 0.0)[:, None]
@@ -202,42 +211,48 @@ def log_likelihood(particles: np.ndarray, scan: Scan, model: MeasurementModel, s
                    floor_density: float = 0.0, backend: str = "auto", *, floor: str = "flat",
                    floor_scale: float = 1.0, log_weights: np.ndarray | None = None,
                    missed: np.ndarray | None = None, precision: str = "float64",
-                   centre: np.ndarray | None = None) -> np.ndarray:
+                   centre: np.ndarray | None = None, present: np.ndarray | None = None,
+                   nominal: np.ndarray | None = None) -> np.ndarray:
     """``log(eps_i + sum_m w_{m,i})`` for particles ``(B, N, 6)`` and a gated scan -> ``(B, N)``.
 
     ``-inf`` for items without a valid detection.  ``log_weights (B, N)`` are the predicted cloud's (uniform when
     not given), ``missed`` is :func:`log_missed` (the amplitude floor's ``1 - P_D^T`` factor), ``centre`` the
-    cloud's weighted mean position (:func:`_centre`) where the caller has it.  Where ``backend`` runs Numba the
+    cloud's weighted mean position (:func:`_centre`) where the caller has it, ``present (B,)`` is
+    ``scan.valid.any(axis=1)`` and ``nominal (B,)`` the design target's nominal SNR at ``centre``
+    (``detection.nominal_snr_db(centre)``) where the caller has them.  Where ``backend`` runs Numba the
     last step (``logaddexp`` of the floor and the sum) is compiled (:func:`.tbd_pf_numba.log_add_floor`, the same
     numbers as the NumPy lines it replaces).
     """
     if scan.snr is None:
         raise InputError("tbd-pf needs the measured SNR of every detection (scan.snr, dB)")
-    if not (np.all(np.isfinite(scan.z[scan.valid])) and np.all(np.isfinite(scan.snr[scan.valid]))):
+    valid = scan.valid
+    snr_db = np.where(valid, scan.snr, 0.0)
+    if not (np.isfinite(scan.z[valid]).all() and np.isfinite(snr_db).all()):
         raise InputError("tbd-pf: a valid detection holds a non-finite value (NaN or inf) in z or snr")
     detection = _detection(model)
     z = scan.z
     points = model.h(particles)  # [p_i, vr(s_i)]
-    snr_db = np.where(scan.valid, scan.snr, 0.0)
     log_pd = np.full(snr_db.shape, -np.inf)
-    log_pd[scan.valid] = detection.log_pd(snr_db[scan.valid])
+    log_pd[valid] = detection.log_pd(snr_db[valid])
     sigma_p = detection.position_sigma(snr_db, np.linalg.norm(z[..., :3], axis=-1))
     # log sum_m P_D(snr_m) N(p_m; p_i, sigma_p,m^2 I_3) N(vr_m; vr_i, sigma_vr^2)     (13), (14)
-    log_sum = tbd_log_weight_sums(points, z, scan.valid, np.where(scan.valid, log_pd, 0.0), sigma_p, sigma_vr,
+    log_sum = tbd_log_weight_sums(points, z, valid, np.where(valid, log_pd, 0.0), sigma_p, sigma_vr,
                                   backend=backend, precision=precision)
     if floor == "none":
         return log_sum
     if log_weights is None:
         log_weights = np.full(particles.shape[:2], -np.log(particles.shape[1]))
     log_eps = log_floor(particles, log_weights, scan, model, log_pd, floor=floor, floor_density=floor_density,
-                        floor_scale=floor_scale, sigma_vr=sigma_vr, missed=missed, centre=centre)
+                        floor_scale=floor_scale, sigma_vr=sigma_vr, missed=missed, centre=centre, nominal=nominal)
+    if present is None:
+        present = valid.any(axis=1)
     if compiled(backend):
         from . import tbd_pf_numba
 
         # the lines below in one compiled pass
-        return tbd_pf_numba.log_add_floor(np.asarray(log_eps, dtype=float), log_sum, scan.valid.any(axis=1),
+        return tbd_pf_numba.log_add_floor(np.asarray(log_eps, dtype=float), log_sum, present,
                                           np.empty(log_sum.shape))
-    present = scan.valid.any(axis=1)[:, None]
+    present = present[:, None]
     # log(eps + sum_m w_{m,i})  (a NaN particle, e.g. from a NaN prior, stays NaN: it reaches the estimate)
     with np.errstate(invalid="ignore"):
         return np.where(present, np.logaddexp(log_eps, log_sum), -np.inf)
@@ -299,19 +314,30 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     x = state.cloud.particles
     B, N, n = x.shape
     mode = np.ascontiguousarray(_modes(state), dtype=float).reshape(B * N)
-    g = noise_columns(motion)
     base, A = (x, motion.F) if motion.linear else (propagate_f(x, motion, "the two-mode particle prediction"),
                                                    np.eye(n))
-    matrix = np.ascontiguousarray(np.hstack([A, g]), dtype=float)
+    A = np.ascontiguousarray(A, dtype=float)
+    G = np.ascontiguousarray(motion.Q_sqrt, dtype=float)
     rows = base.transpose(2, 0, 1)  # (n, B, N): no copy for a component-major array
     rows = np.ascontiguousarray(rows, dtype=float).reshape(n, B * N)
     out = np.empty((n, B, N))
     new_mode = np.empty((B, N))
-    tbd_pf_numba.jump_markov(out.reshape(n, B * N), rows, mode, new_mode.reshape(B * N), rng, g.shape[1],
+    tbd_pf_numba.jump_markov(out.reshape(n, B * N), rows, mode, new_mode.reshape(B * N), rng,
                              float(switch_on), float(switch_off), float(scale),
-                             *_plan_arrays(matrix.tobytes(), *matrix.shape))
+                             *_mode_plan(A.tobytes(), A.shape, G.tobytes(), G.shape))
     return ModeState(Particles.trusted(out.transpose(1, 2, 0), state.cloud.log_weights), state.resamples,
                      state.underflows, new_mode)
+
+
+@lru_cache(maxsize=64)
+def _mode_plan(a_bytes: bytes, a_shape: tuple, q_bytes: bytes, q_shape: tuple):
+    """``k`` and the product plan (:func:`workbench.particle_core._plan_arrays`) of ``[A | G]``, ``G`` the ``k``
+    non-zero columns of ``Q_sqrt`` (:func:`workbench.particle_core.noise_columns`), for matrices given as bytes:
+    computed once per motion model instead of at every prediction."""
+    A = np.frombuffer(a_bytes).reshape(a_shape)
+    g = _nonzero_columns(np.frombuffer(q_bytes).reshape(q_shape))
+    matrix = np.ascontiguousarray(np.hstack([A, g]), dtype=float)
+    return (g.shape[1], *_plan_arrays(matrix.tobytes(), *matrix.shape))
 
 
 def predict_jump_markov_numpy(state: ParticleState, motion: MotionModel, rng: np.random.Generator, *,
@@ -396,6 +422,49 @@ def weighted_covariance(x: np.ndarray, log_w: np.ndarray) -> np.ndarray:
     return symmetrise(np.swapaxes(d, 1, 2) @ (w * d))
 
 
+def resample_rows(mask: np.ndarray, particles: np.ndarray, log_w: np.ndarray, rng: np.random.Generator,
+                  *extra: np.ndarray, backend: str = "auto") -> tuple[np.ndarray, ...]:
+    """:func:`workbench.resampling.resample_where` (the same draw, particles, weights and carried arrays, bit for
+    bit, in the same memory layout); where ``backend`` runs Numba the steps after the weights' ``exp`` (cumulative
+    sum, edges, draws) and the gathers run compiled (:func:`.tbd_pf_numba.systematic_parents`,
+    :func:`.tbd_pf_numba.gather_rows`) instead of a dozen small NumPy calls and a gather per component.
+
+    Shapes: ``mask (B,)``; ``particles (B, N, n)``; ``log_w (B, N)``; ``extra`` arrays ``(B, N)``.
+    """
+    if not compiled(backend) or any(np.ndim(a) != 2 for a in extra) or not mask.any():
+        return resample_where(mask, particles, log_w, rng, *extra)
+    from . import tbd_pf_numba
+
+    B, N = log_w.shape
+    every = bool(mask.all())
+    rows = np.arange(B) if every else np.flatnonzero(mask)
+    u0 = rng.random((rows.size, 1))  # the draw of resample_where
+    # systematic_counts' first lines: w = exp(log_w - max), uniform where the max is not finite
+    sub = np.asarray(log_w if every else log_w[rows], dtype=float)
+    top = np.max(sub, axis=1, keepdims=True)
+    finite = np.isfinite(top[:, 0])
+    w = sub - np.where(finite[:, None], top, 0.0)
+    np.exp(w, out=w)
+    w[~finite] = 1.0
+    parents = np.empty((rows.size, N), dtype=np.int64)
+    if not tbd_pf_numba.systematic_parents(w, u0[:, 0], parents):
+        raise InputError("tbd-pf: a particle weight is not a number (NaN) where the cloud is resampled")
+    out = []
+    for arr in (particles, *extra):
+        new = np.empty_like(arr) if every else arr.copy(order="K")  # resample_where's layouts
+        if arr.ndim == 2:
+            tbd_pf_numba.gather_rows(arr[None], new[None], rows, parents)
+        else:
+            tbd_pf_numba.gather_rows(arr.transpose(2, 0, 1), new.transpose(2, 0, 1), rows, parents)
+        out.append(new)
+    if every:
+        log_w = np.full((B, N), -np.log(N))
+    else:
+        log_w = log_w.copy()
+        log_w[rows] = -np.log(N)
+    return (out[0], log_w, *out[1:])
+
+
 def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, threshold: float, dead: np.ndarray,
             rng: np.random.Generator, regularisation: float = 0.0, backend: str = "auto") -> ParticleState:
     """Resample where ``N_eff < threshold N`` (eq 16), carrying the particles' modes along; with
@@ -409,7 +478,7 @@ def _finish(state: ParticleState, log_w: np.ndarray, present: np.ndarray, thresh
         cov[resample] = weighted_covariance(cloud.particles[resample], log_w[resample])
     mode = getattr(state, "mode", None)
     extra = () if mode is None else (mode,)
-    x, log_w, *moved = resample_where(resample, cloud.particles, log_w, rng, *extra)
+    x, log_w, *moved = resample_rows(resample, cloud.particles, log_w, rng, *extra, backend=backend)
     if cov is not None:
         x = regularise(x, cov, resample, regularisation, rng, backend)
     cloud = Particles.trusted(x, log_w)
@@ -448,31 +517,39 @@ def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng:
     """One (power ``power`` of the) likelihood step of :func:`update`, then resampling and regularisation."""
     present = scan.valid.any(axis=1)
     cloud = state.cloud
-    missed = centre = None
+    missed = centre = nominal = None
     if floor == "amplitude":
         per_cloud = missed_detection == "cloud"
-        # the cloud's predicted position, read by the missed-detection factor and by the floor: computed once
+        # the cloud's predicted position and the design target's nominal SNR there, read by the missed-detection
+        # factor and by the floor: computed once
         if per_cloud or scan.clutter_density is not None:
             centre = _centre(cloud.particles, cloud.log_weights)
-        missed = log_missed(model, cloud.particles, cloud.log_weights if per_cloud else None, centre=centre)
+            detection = _detection(model)
+            if detection.nominal_snr_db is not None:
+                nominal = detection.nominal_snr_db(centre)
+        missed = log_missed(model, cloud.particles, cloud.log_weights if per_cloud else None, centre=centre,
+                            nominal=nominal)
+    every = bool(present.all())
     touched = present if missed is None or missed.shape[1] == 1 else np.ones_like(present)
-    if not touched.any():
+    if not (every or touched.any()):
         return state
     log_w = cloud.log_weights
-    if present.any():
+    if every or present.any():
         # log w_i <- log w_i + power log(eps_i + sum_m w_{m,i})
         log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend, floor=floor,
                                  floor_scale=floor_scale, log_weights=cloud.log_weights, missed=missed,
-                                 precision=precision, centre=centre)
+                                 precision=precision, centre=centre, present=present, nominal=nominal)
         log_w = log_w + (log_lik if power == 1.0 else power * log_lik)
-    if not present.all():
+    if not every:
         # an empty gate: log w_i <- log w_i + power log(1 - P_D^T(s_i)) (per particle), or unchanged
         empty = touched & ~present
         if empty.any():
             log_w = np.where(empty[:, None], cloud.log_weights + power * missed, log_w)
-    dead = touched & ~np.isfinite(np.max(log_w, axis=1))
-    log_w = normalise_log_weights(log_w, fallback=cloud.log_weights)
-    log_w = keep_where(touched, log_w, cloud.log_weights)
+    top = np.max(log_w, axis=1)  # read by the underflow count and by the normalisation
+    dead = touched & ~np.isfinite(top)
+    log_w = normalise_log_weights(log_w, fallback=cloud.log_weights, top=top)
+    if not (every or touched.all()):
+        log_w = keep_where(touched, log_w, cloud.log_weights)
     return _finish(state, log_w, touched, threshold, dead, rng, regularisation, backend)
 
 

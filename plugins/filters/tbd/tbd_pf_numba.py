@@ -19,6 +19,10 @@ Each function here is held, number for number, to the NumPy code it replaces in 
   :func:`workbench_filters.tbd.log_likelihood`, with NumPy's ``logaddexp`` written out (the same ``exp`` and
   ``log1p`` of the C library, the same branches), skipping the library calls where the smaller term cannot
   change the larger one's last bit (:data:`GAP`).
+- :func:`systematic_parents` and :func:`gather_rows` are :func:`workbench.resampling.resample_where` after the
+  weights' ``exp`` (which stays NumPy's): the cumulative sum, the edges and the ``repeat`` of
+  :func:`workbench.resampling.systematic_counts`, then the gather of every resampled item's particles and modes
+  (:func:`workbench_filters.tbd.resample_rows`).
 
 No fast-math anywhere (no fused multiply-adds, no reassociation): every result is its twin's bit for bit.
 ``error_model="numpy"``; module-level functions with ``cache=True`` so that Numba's on-disk cache holds across
@@ -48,7 +52,7 @@ def normals(rng, shape) -> np.ndarray:
     return out
 
 
-def jump_markov(out, x, mode, new_mode, rng, k, switch_on, switch_off, scale, src, coef, ptr):
+def jump_markov(out, x, mode, new_mode, rng, switch_on, switch_off, scale, k, src, coef, ptr):
     """Two-mode prediction of particles ``x`` into ``out``, modes ``mode`` into ``new_mode``.
 
     ``new_mode = 1 - mode`` where ``u < (switch_off if mode > 0 else switch_on)``, ``u = rng.random()`` per particle
@@ -150,4 +154,50 @@ def log_add_floor(log_eps, log_sum, present, out):
             continue
         for i in range(N):
             out[b, i] = _logaddexp(log_eps[b, i if wide else 0], log_sum[b, i])
+    return out
+
+
+@jit
+def systematic_parents(w, u0, parents):
+    """The draws of systematic resampling as parent indices, from weights already exponentiated:
+    ``parents[r, j] = i`` for ``edge_{i-1} <= j < edge_i``, ``edge_i = clip(ceil((c_i / c_{N-1}) N - u0_r), 0, N)``,
+    ``c`` the cumulative sum of ``w[r]`` in index order: the steps of
+    :func:`workbench.resampling.systematic_counts` after its ``exp`` (``np.cumsum``, then ``/=``, ``*=``, ``-=``,
+    ``ceil``, ``clip``, each rounded as there) and of its ``np.repeat``.  Returns False, leaving ``parents``
+    partly written, where an edge is not a number (a NaN weight): NumPy's ``repeat`` refuses that row.
+
+    Shapes: ``w (R, N)``, ``u0 (R,)``, ``parents (R, N)`` int64.
+    """
+    R, N = w.shape
+    cdf = np.empty(N)
+    count = float(N)
+    for r in range(R):
+        acc = 0.0
+        for i in range(N):
+            acc += w[r, i]
+            cdf[i] = acc
+        last = cdf[N - 1]
+        start = 0
+        for i in range(N):
+            edge = np.ceil((cdf[i] / last) * count - u0[r])
+            if edge != edge:
+                return False
+            stop = int(min(max(edge, 0.0), count))
+            for j in range(start, stop):
+                parents[r, j] = i
+            start = max(start, stop)
+    return True
+
+
+@jit
+def gather_rows(x, out, rows, parents):
+    """``out[c, rows[r], j] = x[c, rows[r], parents[r, j]]`` for every component ``c`` (the resampled items; the
+    others of ``out`` untouched).  Shapes: ``x, out (k, B, N)`` (component rows, any strides), ``rows (R,)``,
+    ``parents (R, N)``."""
+    k = x.shape[0]
+    for r in range(rows.shape[0]):
+        b = rows[r]
+        for c in range(k):
+            for j in range(parents.shape[1]):
+                out[c, b, j] = x[c, b, parents[r, j]]
     return out

@@ -145,9 +145,15 @@ def pack_measurements(z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray, sigm
     B, M = valid.shape
     counts = valid.sum(axis=1).astype(np.int32)
     width = int(counts.max()) if B and M else 0
-    order = np.argsort(~valid, axis=1, kind="stable")[:, :width]  # valid rows first, in their order
-    take = lambda a: np.take_along_axis(np.asarray(a, dtype=np.float64), order, axis=1)  # noqa: E731
-    zz = np.take_along_axis(np.asarray(z, dtype=np.float64), order[..., None], axis=1)
+    live = np.arange(width) < counts[:, None]  # (B, M'): the packed rows that hold a measurement
+    if np.array_equal(valid[:, :width], live):
+        # the valid rows are in front already (a gated scan): the packing is the first M' rows, no gather
+        take = lambda a: np.asarray(a, dtype=np.float64)[:, :width]  # noqa: E731
+        zz = np.asarray(z, dtype=np.float64)[:, :width]
+    else:
+        order = np.argsort(~valid, axis=1, kind="stable")[:, :width]  # valid rows first, in their order
+        take = lambda a: np.take_along_axis(np.asarray(a, dtype=np.float64), order, axis=1)  # noqa: E731
+        zz = np.take_along_axis(np.asarray(z, dtype=np.float64), order[..., None], axis=1)
     origin = np.zeros((B, 3)) if origin is None else np.asarray(origin, dtype=np.float64)
     q = np.swapaxes(zz[..., :3] - origin[:, None, :], 1, 2)  # (B, 3, M')
     vr = zz[..., 3]
@@ -168,8 +174,7 @@ def pack_measurements(z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray, sigm
         meas[:, 3] = (2.0 * beta * LOG2E) * vr
         meas[:, 4] = -LOG2E * a
         meas[:, 5] = LOG2E * (c - a * np.sum(q**2, axis=1) - beta * vr**2)
-    live = np.arange(width)[None, None, :] < counts[:, None, None]
-    meas = np.where(live, meas, 0.0)  # padding: harmless finite values, never read
+    meas = np.where(live[:, None, :], meas, 0.0)  # padding: harmless finite values, never read
     dt = np.float32 if precision == "float32" else np.float64
     return np.ascontiguousarray(meas, dtype=dt), counts
 
