@@ -18,8 +18,8 @@ needs_numba = pytest.mark.skipif(importlib.util.find_spec("numba") is None, reas
 
 
 def _generators(bits):
-    """Two generators in the same state: PCG64 (also one holding a waiting 32-bit half) or Philox (drawn through
-    Numba's Generator)."""
+    """Two generators in the same state: PCG64 (also one holding a waiting 32-bit half) or Philox (drawn by NumPy
+    before the particle kernels, which copy the normals)."""
     def make():
         if bits == "philox":
             return np.random.Generator(np.random.Philox(5))

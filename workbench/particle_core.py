@@ -464,7 +464,8 @@ def reweight(particles: np.ndarray, log_w: np.ndarray, previous: np.ndarray, pre
 
     need_rng(rng, "particle_core.reweight")
     B, N = np.shape(log_w)
-    present = np.asarray(present, dtype=bool)
+    # contiguous: a strided mask (a column of a scan's batch) would compile the kernels a second time
+    present = np.ascontiguousarray(present, dtype=bool)
     if top is None:
         top = np.max(log_w, axis=1)
     if not compiled(backend):

@@ -13,11 +13,12 @@ every particle of every item, ``L = B N``), log-weights as ``(B, N)``.  Module-l
 ``cache=True``, so that Numba's on-disk cache holds across processes.
 
 Random numbers.  :func:`propagate`, :func:`propagate_range_bearing` and :func:`fill_normals` draw their normals
-from the caller's ``numpy.random.Generator`` inside the loop, in the order ``rng.standard_normal((B, N, k))``
-would: on PCG64 (every ``wb.generator``) by :mod:`.pcg_numba`, the generator's state read once per call and
-stepped in registers, else through Numba's ``Generator`` (NumPy's algorithms on the same bit generator and state,
-called through a pointer, about three times the time per normal).  Either way the same numbers, and the generator
-is left where NumPy would leave it (tested).  A tile's normals are stored by noise column (``e (k, TILE)``), so that
+from the caller's ``numpy.random.Generator`` in the order ``rng.standard_normal((B, N, k))`` would: on PCG64
+(every ``wb.generator``) inside the loop by :mod:`.pcg_numba`, the generator's state read once per call and
+stepped in registers; for any other bit generator, and for fewer than :data:`.pcg_numba.PCG_MIN_DRAWS` normals,
+by NumPy itself before the kernel (``rng.standard_normal((L, k))``, which the kernel copies tile by tile), so that
+no kernel compiles Numba's ``Generator`` code.  Either way the same numbers, and the generator is left where NumPy
+would leave it (tested).  A tile's normals are stored by noise column (``e (k, TILE)``), so that
 each column the plan reads is contiguous.
 
 Floating point.  No fast-math where a result is held to its twin number for number: :func:`combine` and
@@ -40,7 +41,7 @@ from numba.extending import intrinsic
 
 from .atan_poly import ATAN_P, ATAN_Q, TAN_PI_8
 from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
-from .pcg_numba import _pcg_normal, draw_tile, pcg64_stream
+from .pcg_numba import _pcg_normal, pcg64_stream
 from .vector_width import wide_vectors
 
 jit = functools.partial(numba.njit, error_model="numpy", cache=True)
@@ -107,7 +108,7 @@ def _term(o, c, s, first):
             o[t] += c * s[t]
 
 
-@jit(inline="always")
+@jit
 def _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr):
     """:func:`combine` on the particles ``lo:hi``, the tile's noise stored by column: ``e[j, t]`` noise ``j`` of
     particle ``lo + t`` (:func:`.pcg_numba.draw_tile`'s layout; each column contiguous).  A tile of noise stored by
@@ -147,50 +148,80 @@ def combine(out, x, e, src, coef, ptr):
 
 def propagate(out, x, rng, k, src, coef, ptr):
     """:func:`combine` with ``e`` drawn here: ``e = rng.standard_normal((L, k))``, the same numbers in the same
-    order, one tile at a time (no ``(L, k)`` array); on PCG64 the state stepped in registers
-    (:func:`.pcg_numba.pcg64_stream`), else Numba's ``Generator``.
+    order; on PCG64 one tile at a time with the state stepped in registers (:func:`.pcg_numba.pcg64_stream`; no
+    ``(L, k)`` array), else drawn by NumPy first (:func:`_numpy_normals`).
 
     Shapes: ``out (r, L)``, ``x (n, L)``; ``k`` noise columns.
     """
     with pcg64_stream(rng, k * out.shape[1]) as pcg:
-        _propagate(out, x, rng, pcg, k, src, coef, ptr)
+        _propagate(out, x, pcg, _numpy_normals(rng, pcg, out.shape[1], k), k, src, coef, ptr)
     return out
 
 
+#: The kernels' ``pre`` where the normals are drawn in the kernel (PCG64) or there are none.
+_NO_NORMALS = np.zeros((0, 0))
+
+
+def _numpy_normals(rng, pcg, L, k):
+    """The normals of ``L`` particles with ``k`` noise columns as NumPy draws them, ``rng.standard_normal((L, k))``
+    (C order: particle by particle), where the kernel does not draw them itself (``pcg`` empty: not PCG64, or too
+    few draws); else (and for ``k = 0``) an empty array."""
+    if pcg.shape[0] == 4 or k == 0:
+        return _NO_NORMALS
+    return np.ascontiguousarray(rng.standard_normal((L, k)), dtype=np.float64)
+
+
 @jit
-def _propagate(out, x, rng, pcg, k, src, coef, ptr):
-    """:func:`propagate` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`)."""
+def _draw_tile(pcg, pre, e, lo, m, k):
+    """``e[:k, :m]``: the normals of the particles ``lo:lo + m`` stored by noise column (``e[j, t]`` the ``j``-th
+    of particle ``lo + t``): drawn from the PCG64 words ``pcg`` (advanced in place, :func:`.pcg_numba.draw_tile`'s
+    loop) where it holds four, else copied from NumPy's draws ``pre (L, k)``.  Compiled once for :func:`_propagate`
+    and :func:`propagate_range_bearing` (a call per tile, instead of a copy of the loop compiled into each)."""
+    if pcg.shape[0] == 4:
+        hi, lo_, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
+        for t in range(m):
+            for j in range(k):
+                e[j, t], hi, lo_ = _pcg_normal(hi, lo_, inc_hi, inc_lo)
+        pcg[0], pcg[1] = hi, lo_
+    else:
+        for t in range(m):
+            for j in range(k):
+                e[j, t] = pre[lo + t, j]
+
+
+@jit
+def _propagate(out, x, pcg, pre, k, src, coef, ptr):
+    """:func:`propagate` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`) or NumPy's normals
+    ``pre``."""
     L = out.shape[1]
     e = np.empty((max(k, 1), TILE))
     for lo in range(0, L, TILE):
         hi = min(lo + TILE, L)
-        draw_tile(rng, pcg, e, hi - lo, k)
+        _draw_tile(pcg, pre, e, lo, hi - lo, k)
         _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr)
     return out
 
 
 def fill_normals(rng, out):
     """``out[...] = rng.standard_normal(out.shape)``: the draw loop of :func:`propagate` alone (the numbers NumPy
-    would draw, in C order, by the same code: on PCG64 the state stepped in registers), for the benchmark's floor.
-    Shapes: ``out (L, k)``, C-contiguous."""
+    would draw, in C order, by the same code: on PCG64 the state stepped in registers, else NumPy's own call), for
+    the benchmark's floor.  Shapes: ``out (L, k)``, C-contiguous."""
     with pcg64_stream(rng, out.size) as pcg:
-        _fill_normals(rng, pcg, out)
+        if pcg.shape[0] == 4:
+            _fill_normals(pcg, out)
+        else:
+            out[...] = rng.standard_normal(out.shape)
     return out
 
 
 @jit
-def _fill_normals(rng, pcg, out):
-    """:func:`fill_normals` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`)."""
-    if pcg.shape[0] == 4:
-        hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
-        for t in range(out.shape[0]):
-            for j in range(out.shape[1]):
-                out[t, j], hi, lo = _pcg_normal(hi, lo, inc_hi, inc_lo)
-        pcg[0], pcg[1] = hi, lo
-    else:
-        for t in range(out.shape[0]):
-            for j in range(out.shape[1]):
-                out[t, j] = rng.standard_normal()
+def _fill_normals(pcg, out):
+    """:func:`fill_normals` with the PCG64 stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`, four)."""
+    hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
+    for t in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[t, j], hi, lo = _pcg_normal(hi, lo, inc_hi, inc_lo)
+    pcg[0], pcg[1] = hi, lo
     return out
 
 
@@ -282,7 +313,8 @@ def propagate_range_bearing(out, x, rng, k, src, coef, ptr, present, z, sensor, 
                             cov=None):
     """:func:`propagate` and, for the items with ``present``, :func:`range_bearing_log_weights` and the rows' max
     in one pass, one tile of particles at a time: a tile's particles are moved (the normals drawn from ``rng`` in
-    the order of ``rng.standard_normal((B, N, k))``, on PCG64 with the state in registers), then weighed while they
+    the order of ``rng.standard_normal((B, N, k))``, on PCG64 with the state in registers, else by NumPy first
+    as :func:`propagate` does), then weighed while they
     are in L1, instead of read back from memory by a second pass.  The arithmetic per particle is those two
     functions' (the same inline code), so the particles and log-weights are theirs bit for bit; ``top[b]`` is
     ``np.max(log_w[b])`` (NaN where a log-weight is NaN).  Items without ``present``: moved, ``log_w = prev``,
@@ -303,16 +335,16 @@ def propagate_range_bearing(out, x, rng, k, src, coef, ptr, present, z, sensor, 
         raise ValueError(f"propagate_range_bearing: the predicted estimate needs the planar state (n = 4) and "
                          f"mean (B, 4), cov (B, 4, 4); got n = {out.shape[0]}, {mean.shape}, {cov.shape}")
     with pcg64_stream(rng, k * out.shape[1]) as pcg:
-        _propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top,
-                                 mean, cov)
+        _propagate_range_bearing(out, x, pcg, _numpy_normals(rng, pcg, out.shape[1], k), k, src, coef, ptr, present,
+                                 z, sensor, linv, prev, log_w, top, mean, cov)
     return out
 
 
 @jit
-def _propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top, mean,
+def _propagate_range_bearing(out, x, pcg, pre, k, src, coef, ptr, present, z, sensor, linv, prev, log_w, top, mean,
                              cov):
-    """:func:`propagate_range_bearing` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`); the
-    estimate where ``mean`` has ``B`` rows."""
+    """:func:`propagate_range_bearing` with the stream's words ``pcg`` (:func:`.pcg_numba.pcg64_stream`) or NumPy's
+    normals ``pre``; the estimate where ``mean`` has ``B`` rows."""
     B, N = log_w.shape
     e = np.empty((max(k, 1), TILE))
     est = mean.shape[0] == B and N > 0
@@ -328,19 +360,20 @@ def _propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, present, z, se
         acc[:] = 0.0
         for lo in range(b * N, (b + 1) * N, TILE):
             hi = min(lo + TILE, (b + 1) * N)
-            draw_tile(rng, pcg, e, hi - lo, k)
+            _draw_tile(pcg, pre, e, lo, hi - lo, k)
             _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr)
             a, c = lo - b * N, hi - b * N
+            x0, x1, wt, ot = out[0, lo:hi], out[1, lo:hi], wb[a:c], ob[a:c]  # each view made once
             if weigh:
-                v = _weigh_tile(out[0, lo:hi], out[1, lo:hi], zr, zb, sensor, linv, wb[a:c], ob[a:c])
+                v = _weigh_tile(x0, x1, zr, zb, sensor, linv, wt, ot)
                 nan |= v != v
                 m = v if v > m else m
             else:
-                _copy(ob[a:c], wb[a:c])
+                _copy(ot, wt)
             if est and uniform:  # moments' equal-weight sums of this tile (pivot: the item's first particle)
                 if a == 0:
                     s[0], s[1], s[2], s[3] = out[0, lo], out[1, lo], out[2, lo], out[3, lo]
-                _equal_weight_tile_sums(out[0, lo:hi], out[1, lo:hi], out[2, lo:hi], out[3, lo:hi], s, acc)
+                _equal_weight_tile_sums(x0, x1, out[2, lo:hi], out[3, lo:hi], s, acc)
         if weigh:
             top[b] = np.nan if nan else m
         if est:
@@ -350,7 +383,8 @@ def _propagate_range_bearing(out, x, rng, pcg, k, src, coef, ptr, present, z, se
                 q = b * N
                 for r in range(4):
                     s[r] = out[r, q + pivot]
-                _moments_planar(out[0, q:q + N], out[1, q:q + N], out[2, q:q + N], out[3, q:q + N], wb, s, False,
+                # uniform (False here), not a literal False: a literal is another signature, a second compile
+                _moments_planar(out[0, q:q + N], out[1, q:q + N], out[2, q:q + N], out[3, q:q + N], wb, s, uniform,
                                 mean[b], cov[b])
     return out
 
@@ -434,7 +468,7 @@ def _exp_shifted(row, top, out):
         out[i] = exp(row[i] - top)
 
 
-@jit
+@jit(inline="always")  # one caller: no dispatcher of its own to compile
 def _take_first_parents(dst, src, parent):
     """``dst[c, j] = src[c, p_j]`` for every row ``c`` with ``p_j = max(parent[:j + 1])`` (the running max fills the
     slots :func:`systematic_gather` left unwritten), in one pass over the parents for the planar state."""
@@ -702,7 +736,6 @@ def _moments_planar(x0, x1, x2, x3, row, s, uniform, mean, cov):
     _finish_planar(sw, acc, s, mean, cov)
 
 
-@reduce_jit
 def moments(x, log_w, mean, cov, w):
     """Weighted mean and covariance of each item's particles: ``mean = sum_i w_i x_i``,
     ``cov = sum_i w_i (x_i - mean)(x_i - mean)^T`` with ``w = exp(log_w)`` (``Particles.to_gaussian``).
@@ -713,16 +746,31 @@ def moments(x, log_w, mean, cov, w):
 
     Shapes: ``x (n, B, N)``, ``log_w (B, N)``, ``mean (B, n)``, ``cov (B, n, n)``, ``w (N,)`` scratch.
     """
+    if x.shape[0] == 4:
+        _moments4(x, log_w, mean, cov)
+    else:
+        _moments_n(x, log_w, mean, cov, w)
+    return mean
+
+
+@reduce_jit
+def _moments4(x, log_w, mean, cov):
+    """:func:`moments` of the planar state: one pass per item (:func:`_moments_planar`)."""
+    B = x.shape[1]
+    s = np.empty(4)
+    for b in range(B):
+        row = log_w[b]
+        pivot, uniform = _pivot(row)
+        for c in range(4):
+            s[c] = x[c, b, pivot]
+        _moments_planar(x[0, b], x[1, b], x[2, b], x[3, b], row, s, uniform, mean[b], cov[b])
+
+
+@reduce_jit
+def _moments_n(x, log_w, mean, cov, w):
+    """:func:`moments` of any other dimension: the mean, then the covariance about it, tile by tile (its own
+    kernel, chosen in Python, so that the planar state's compiles none of it)."""
     n, B, N = x.shape
-    if n == 4:
-        s = np.empty(4)
-        for b in range(B):
-            row = log_w[b]
-            pivot, uniform = _pivot(row)
-            for c in range(4):
-                s[c] = x[c, b, pivot]
-            _moments_planar(x[0, b], x[1, b], x[2, b], x[3, b], row, s, uniform, mean[b], cov[b])
-        return mean
     d = np.empty((n, TILE))
     for b in range(B):
         row = log_w[b]
@@ -748,4 +796,3 @@ def moments(x, log_w, mean, cov, w):
         for c in range(n):
             for k in range(c + 1, n):
                 cov[b, k, c] = cov[b, c, k]
-    return mean
