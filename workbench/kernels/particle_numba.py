@@ -41,7 +41,7 @@ from numba.extending import intrinsic
 
 from .atan_poly import ATAN_P, ATAN_Q, TAN_PI_8
 from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
-from .pcg_numba import _pcg_normal, pcg64_stream
+from .pcg_numba import _pcg_normal, pcg64_stream, pcg_tile
 from .vector_width import wide_vectors
 
 jit = functools.partial(numba.njit, error_model="numpy", cache=True)
@@ -178,11 +178,7 @@ def _draw_tile(pcg, pre, e, lo, m, k):
     loop) where it holds four, else copied from NumPy's draws ``pre (L, k)``.  Compiled once for :func:`_propagate`
     and :func:`propagate_range_bearing` (a call per tile, instead of a copy of the loop compiled into each)."""
     if pcg.shape[0] == 4:
-        hi, lo_, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
-        for t in range(m):
-            for j in range(k):
-                e[j, t], hi, lo_ = _pcg_normal(hi, lo_, inc_hi, inc_lo)
-        pcg[0], pcg[1] = hi, lo_
+        pcg_tile(pcg, e, m, k)
     else:
         for t in range(m):
             for j in range(k):

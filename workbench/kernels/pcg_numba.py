@@ -122,17 +122,25 @@ def _pcg_normal_rest(idx, rabs, x, hi, lo, inc_hi, inc_lo):
 
 
 @numba.njit(inline="always", error_model="numpy")
+def pcg_tile(pcg, e, m, k):
+    """``e[:k, :m]``: the next ``m k`` normals of the PCG64 state ``pcg`` ``[state_hi, state_lo, inc_hi, inc_lo]``
+    (advanced in place), ``e[j, t]`` the ``j``-th of particle ``t``: the numbers of ``standard_normal((m, k))``,
+    transposed (stored by noise column, so that each is contiguous)."""
+    hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
+    for t in range(m):
+        for j in range(k):
+            e[j, t], hi, lo = _pcg_normal(hi, lo, inc_hi, inc_lo)
+    pcg[0], pcg[1] = hi, lo
+
+
+@numba.njit(inline="always", error_model="numpy")
 def draw_tile(rng, pcg, e, m, k):
     """``e[:k, :m]``: the next ``m k`` normals of the stream, ``e[j, t]`` the ``j``-th of particle ``t`` (the
     numbers of ``rng.standard_normal((m, k))``, transposed: stored by noise column, so that each is contiguous),
     from the PCG64 state ``pcg`` ``[state_hi, state_lo, inc_hi, inc_lo]`` (advanced in place) where it holds four
-    words, else from Numba's ``Generator`` ``rng``."""
+    words (:func:`pcg_tile`), else from Numba's ``Generator`` ``rng``."""
     if pcg.shape[0] == 4:
-        hi, lo, inc_hi, inc_lo = pcg[0], pcg[1], pcg[2], pcg[3]
-        for t in range(m):
-            for j in range(k):
-                e[j, t], hi, lo = _pcg_normal(hi, lo, inc_hi, inc_lo)
-        pcg[0], pcg[1] = hi, lo
+        pcg_tile(pcg, e, m, k)
     else:
         for t in range(m):
             for j in range(k):
