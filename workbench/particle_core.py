@@ -55,7 +55,7 @@ from .types import Gaussian, InputError, Particles
 
 __all__ = ["ParticleState", "component_major", "combine_columns", "init", "predict", "propagate_f", "noise_columns",
            "log_likelihood", "weighted_log_likelihood", "predict_log_weights", "log_likelihood_cov", "reweight",
-           "reweight_estimate", "estimate", "diagnostics", "compiled"]
+           "reweight_estimate", "estimate", "diagnostics", "compiled", "propagation_plan"]
 
 
 @dataclass(frozen=True)
@@ -199,6 +199,17 @@ def _propagation_cached(f_bytes: bytes, q_bytes: bytes, n: int, q_cols: int) -> 
 
 def _nonzero_columns(Q: np.ndarray) -> np.ndarray:
     return Q[:, np.flatnonzero(np.any(Q != 0.0, axis=0))]
+
+
+def propagation_plan(F: np.ndarray, Q_sqrt: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """``(k, src, coef, ptr)``: the number ``k`` of non-zero columns ``G`` of ``Q_sqrt`` and the plan of ``[F | G]``
+    that the compiled propagations take (:func:`workbench.kernels.particle_numba.combine`: per row its scaled terms,
+    then its unit ones, in :func:`combine_columns`' order), for a motion matrix ``F (n, n)`` and ``Q_sqrt (n, q)``
+    of a plugin's own (a mode's matrix, say).  Cached per distinct pair (by their bytes); the arrays are read-only."""
+    F = np.ascontiguousarray(F, dtype=float)
+    Q = np.ascontiguousarray(Q_sqrt, dtype=float)
+    matrix, k = _propagation_cached(F.tobytes(), Q.tobytes(), F.shape[0], Q.shape[1])
+    return (k, *_plan_arrays(matrix.tobytes(), *matrix.shape))
 
 
 def noise_columns(motion: MotionModel) -> np.ndarray:

@@ -78,7 +78,7 @@ likelihood is the mixture ``b + N(z; h(x_i), R)``; the EKF's update is the PDAF'
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import partial
 
 import numpy as np
 from scipy.stats import chi2
@@ -90,9 +90,9 @@ from workbench.kernels.backend import BACKENDS
 from workbench.linalg import psd_solve, safe_cholesky, symmetrise
 from workbench.models import MeasurementModel, MotionModel
 from workbench.params import Param
-from workbench.particle_core import (ParticleState, _nonzero_columns, _plan_arrays, combine_columns, compiled, component_major,
-                                     diagnostics, estimate, init, log_likelihood_cov, need_rng, noise_columns, predict,
-                                     propagate_f)
+from workbench.particle_core import (ParticleState, combine_columns, compiled, component_major, diagnostics, estimate,
+                                     init, log_likelihood_cov, need_rng, noise_columns, predict, propagate_f,
+                                     propagation_plan)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
 from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
 from workbench.specs import BenchmarkSpec, FilterSpec, join_batch, take_batch
@@ -324,20 +324,9 @@ def predict_jump_markov(state: ParticleState, motion: MotionModel, rng: np.rando
     new_mode = np.empty((B, N))
     tbd_pf_numba.jump_markov(out.reshape(n, B * N), rows, mode, new_mode.reshape(B * N), rng,
                              float(switch_on), float(switch_off), float(scale),
-                             *_mode_plan(A.tobytes(), A.shape, G.tobytes(), G.shape))
+                             *propagation_plan(A, G))
     return ModeState(Particles.trusted(out.transpose(1, 2, 0), state.cloud.log_weights), state.resamples,
                      state.underflows, new_mode)
-
-
-@lru_cache(maxsize=64)
-def _mode_plan(a_bytes: bytes, a_shape: tuple, q_bytes: bytes, q_shape: tuple):
-    """``k`` and the product plan (:func:`workbench.particle_core._plan_arrays`) of ``[A | G]``, ``G`` the ``k``
-    non-zero columns of ``Q_sqrt`` (:func:`workbench.particle_core.noise_columns`), for matrices given as bytes:
-    computed once per motion model instead of at every prediction."""
-    A = np.frombuffer(a_bytes).reshape(a_shape)
-    g = _nonzero_columns(np.frombuffer(q_bytes).reshape(q_shape))
-    matrix = np.ascontiguousarray(np.hstack([A, g]), dtype=float)
-    return (g.shape[1], *_plan_arrays(matrix.tobytes(), *matrix.shape))
 
 
 def predict_jump_markov_numpy(state: ParticleState, motion: MotionModel, rng: np.random.Generator, *,
