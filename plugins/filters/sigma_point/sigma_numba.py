@@ -29,6 +29,13 @@ Each loop is compiled twice, threaded and serial (``prange`` is ``range`` there)
 :data:`PARALLEL_MIN` items (for one track, waking the thread pool costs more than the work: milliseconds on a
 loaded machine) and wherever Numba has one thread (:func:`workbench.kernels.backend.threaded`: a report worker never
 compiles the threaded one).  Both give the same numbers (each item is computed alone).
+
+Compile time (a fresh process compiles what it runs; Numba's on-disk cache serves later ones): the pieces the three
+updates share (:func:`_measurement_mean`, :func:`_gain`, :func:`_updated_mean_into`, :func:`_downdated_cov_into`)
+and the Cholesky are compiled once per process and called, not inlined into each loop; a failed item adds one to a count (a reduction the threaded loop supports) instead
+of a flag array (``np.ones`` and ``.all()`` each compiled a generic implementation).  The predicts keep their short
+loops inline: called helpers there cost run time at large batches (per-item call overhead).  The same formulas in
+the same order, so the same bits.
 """
 
 import math
@@ -41,6 +48,9 @@ from workbench.kernels.backend import threaded as threaded_policy
 from workbench.kernels.kalman_numba import gain_into
 
 TWO_PI = 2.0 * math.pi
+#: A helper the kernels call (compiled once per process, not inlined into each kernel).  With its Python wrapper:
+#: without one it compiled about 1 s faster per process, but a call from Python crashed the interpreter.
+inner = numba.njit(error_model="numpy", cache=True)
 #: Batches of at least this many items run threaded.
 PARALLEL_MIN = 64
 
@@ -71,8 +81,8 @@ def wrap(a):
     return a - TWO_PI * math.ceil((a - math.pi) * (1.0 / TWO_PI))
 
 
-@numba.njit(inline="always", error_model="numpy")
-def measurement_mean(Y, b, wm, angular, count):
+@inner
+def _measurement_mean(Y, b, wm, angular, count):
     """``y^ = sum Wm Y`` over item ``b``'s first ``count`` sigma points; an angular component as
     ``y_0 + sum Wm wrap(y_s - y_0)``, wrapped."""
     m = Y.shape[2]
@@ -91,16 +101,16 @@ def measurement_mean(Y, b, wm, angular, count):
     return y_hat
 
 
-@numba.njit(inline="always", error_model="numpy")
-def gain(Pxy, L):
+@inner
+def _gain(Pxy, L):
     """``K = Pxy Pyy^-1`` with ``Pyy = L L^T`` (:func:`workbench.kernels.kalman_numba.gain_into`)."""
     K = np.empty(Pxy.shape)
     gain_into(Pxy, L, K)
     return K
 
 
-@numba.njit(inline="always", error_model="numpy")
-def updated_mean_into(x, b, K, z, y_hat, angular, mean):
+@inner
+def _updated_mean_into(x, b, K, z, y_hat, angular, mean):
     """``mean[b] = x[b] + K wrap(z[b] - y^)`` (angular components wrapped)."""
     n, m = K.shape
     for r in range(n):
@@ -111,8 +121,8 @@ def updated_mean_into(x, b, K, z, y_hat, angular, mean):
         mean[b, r] = v
 
 
-@numba.njit(inline="always", error_model="numpy")
-def downdated_cov_into(P, b, K, L, cov):
+@inner
+def _downdated_cov_into(P, b, K, L, cov):
     """``cov[b] = sym(P[b]) - (K L)(K L)^T``, written symmetric."""
     n, m = K.shape
     KL = np.zeros((n, m))
@@ -132,8 +142,8 @@ def downdated_cov_into(P, b, K, L, cov):
             cov[b, c, r] = w
 
 
-@numba.njit(error_model="numpy")
-def cholesky_into(A, L):
+@inner
+def _cholesky_into(A, L):
     """Lower factor of the symmetric ``A (n, n)`` into ``L``; ``False`` if a pivot is not positive."""
     n = A.shape[0]
     for j in range(n):
@@ -156,10 +166,10 @@ def cholesky_into(A, L):
 def _chol_sigma(mean, P, spread, X, S):
     """``S[b] = chol(P[b])``; ``X[b] = [x, x + c S_j, x - c S_j]``.  Returns whether every ``P[b]`` was PD."""
     B, n = mean.shape
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
-        if not cholesky_into(P[b], S[b]):
-            ok[b] = False
+        if not _cholesky_into(P[b], S[b]):
+            failed += 1
             continue
         for r in range(n):
             X[b, 0, r] = mean[b, r]
@@ -168,7 +178,7 @@ def _chol_sigma(mean, P, spread, X, S):
                 step = spread * S[b, r, j]  # column j of S
                 X[b, 1 + j, r] = mean[b, r] + step
                 X[b, 1 + n + j, r] = mean[b, r] - step
-    return ok.all()
+    return failed == 0
 
 
 def _predicted_moments(Xf, wm, wc, Q, mean, cov):
@@ -196,11 +206,11 @@ def _linear_predict(x, P, F, spread, wm, wc, Q, mean, cov):
     points between them.  Returns whether every ``P[b]`` was positive definite."""
     B, n = x.shape
     S = 2 * n + 1
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
         L = np.zeros((n, n))
-        if not cholesky_into(P[b], L):
-            ok[b] = False
+        if not _cholesky_into(P[b], L):
+            failed += 1
             continue
         X = np.empty((S, n))
         for r in range(n):
@@ -230,7 +240,7 @@ def _linear_predict(x, P, F, spread, wm, wc, Q, mean, cov):
                 v = acc + 0.5 * (Q[r, c] + Q[c, r])
                 cov[b, r, c] = v
                 cov[b, c, r] = v
-    return ok.all()
+    return failed == 0
 
 
 def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
@@ -238,7 +248,7 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
     was not positive definite (then nothing is to be used)."""
     B, S, n = X.shape
     m = Y.shape[2]
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
         if not present[b]:
             for r in range(n):
@@ -250,9 +260,9 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
         for k in range(m):
             finite = finite and math.isfinite(z[b, k])
         if not finite:  # the NumPy path names it
-            ok[b] = False
+            failed += 1
             continue
-        y_hat = measurement_mean(Y, b, wm, angular, S)
+        y_hat = _measurement_mean(Y, b, wm, angular, S)
         dY = np.empty((S, m))
         for s in range(S):
             for k in range(m):
@@ -275,16 +285,16 @@ def _unscented_update(x, P, X, Y, wm, wc, angular, R, z, present, mean, cov):
                 Pyy[k, l] = v
                 Pyy[l, k] = v
         L = np.zeros((m, m))
-        if not cholesky_into(Pyy, L):
-            ok[b] = False
+        if not _cholesky_into(Pyy, L):
+            failed += 1
             continue
         # K = Pxy Pyy^-1: L M = Pxy^T (forward), L^T K^T = M (back)
-        K = gain(Pxy, L)
+        K = _gain(Pxy, L)
         # x = x- + K wrap(z - y^)
-        updated_mean_into(x, b, K, z, y_hat, angular, mean)
+        _updated_mean_into(x, b, K, z, y_hat, angular, mean)
         # P = sym(P- - (K L)(K L)^T)
-        downdated_cov_into(P, b, K, L, cov)
-    return ok.all()
+        _downdated_cov_into(P, b, K, L, cov)
+    return failed == 0
 
 
 def _central_linear_predict(x, P, F, spread, wm, c1, c2, Q, mean, cov):
@@ -294,11 +304,11 @@ def _central_linear_predict(x, P, F, spread, wm, c1, c2, Q, mean, cov):
     definite."""
     B, n = x.shape
     S = 2 * n + 1
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
         L = np.zeros((n, n))
-        if not cholesky_into(P[b], L):
-            ok[b] = False
+        if not _cholesky_into(P[b], L):
+            failed += 1
             continue
         X = np.empty((S, n))
         for r in range(n):
@@ -340,7 +350,7 @@ def _central_linear_predict(x, P, F, spread, wm, c1, c2, Q, mean, cov):
                 v = 0.5 * (C[r, c] + C[c, r])
                 cov[b, r, c] = v
                 cov[b, c, r] = v
-    return ok.all()
+    return failed == 0
 
 
 def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, cov):
@@ -353,7 +363,7 @@ def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, c
     B, n = x.shape
     Sp = Y.shape[1]
     m = Y.shape[2]
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
         if not present[b]:
             for r in range(n):
@@ -365,13 +375,13 @@ def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, c
         for k in range(m):
             finite = finite and math.isfinite(z[b, k])
         if not finite:
-            ok[b] = False
+            failed += 1
             continue
         Sx = np.zeros((n, n))
-        if not cholesky_into(P[b], Sx):
-            ok[b] = False
+        if not _cholesky_into(P[b], Sx):
+            failed += 1
             continue
-        y_hat = measurement_mean(Y, b, wm, angular, Sp)
+        y_hat = _measurement_mean(Y, b, wm, angular, Sp)
         A = np.empty((n, m))
         D = np.empty((n, m))
         for i in range(n):
@@ -406,16 +416,16 @@ def _central_update(x, P, Y, spread, wm, c1, c2, angular, R, z, present, mean, c
                     acc += Sx[r, i] * A[i, k]
                 Pxy[r, k] = w1 * acc
         L = np.zeros((m, m))
-        if not cholesky_into(Pyy, L):
-            ok[b] = False
+        if not _cholesky_into(Pyy, L):
+            failed += 1
             continue
-        K = gain(Pxy, L)
-        updated_mean_into(x, b, K, z, y_hat, angular, mean)
-        downdated_cov_into(P, b, K, L, cov)
-    return ok.all()
+        K = _gain(Pxy, L)
+        _updated_mean_into(x, b, K, z, y_hat, angular, mean)
+        _downdated_cov_into(P, b, K, L, cov)
+    return failed == 0
 
 
-@numba.njit(error_model="numpy")
+@numba.njit(error_model="numpy", cache=True)
 def tria_into(M, S):
     """``S (n, n)`` = the lower factor of ``A A^T`` for ``M = A^T (k, n)``, ``k >= n``, by Householder QR of ``M``
     (overwritten): ``S = R^T`` with each column's sign made that of a non-negative diagonal
@@ -448,7 +458,7 @@ def tria_into(M, S):
             S[c, r] = sign * M[r, c] if c >= r else 0.0
 
 
-@numba.njit(error_model="numpy")
+@numba.njit(error_model="numpy", cache=True)
 def cholupdate_into(S, u, sign):
     """``S S^T + sign u u^T`` as a lower factor, in place: :func:`workbench.linalg.cholupdate`'s sweep, the same
     formulas in the same order; ``False`` (``S`` then garbage) where a pivot would not be positive."""
@@ -483,7 +493,7 @@ def _sqrt_linear_predict(x, S, F, spread, wm, wc, central, c1, c2, Qs, mean, S_n
     B, n = x.shape
     P = 2 * n + 1
     q = Qs.shape[1]
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
         X = np.empty((P, n))
         for r in range(n):
@@ -526,8 +536,8 @@ def _sqrt_linear_predict(x, S, F, spread, wm, wc, central, c1, c2, Qs, mean, S_n
             for r in range(n):
                 d0[r] = Xf[0, r] - mean[b, r]
             if not cholupdate_into(S_new[b], d0, wc[0]):
-                ok[b] = False
-    return ok.all()
+                failed += 1
+    return failed == 0
 
 
 def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, mean, S_new):
@@ -537,7 +547,7 @@ def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, m
     column.  ``False`` where a present ``z`` is not finite or an update or downdate would fail."""
     B, P, n = X.shape
     m = Y.shape[2]
-    ok = np.ones(B, dtype=np.bool_)
+    failed = 0
     for b in numba.prange(B):
         for r in range(n):
             mean[b, r] = x[b, r]
@@ -549,9 +559,9 @@ def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, m
         for k in range(m):
             finite = finite and math.isfinite(z[b, k])
         if not finite:  # the NumPy path names it
-            ok[b] = False
+            failed += 1
             continue
-        y_hat = measurement_mean(Y, b, wm, angular, P)
+        y_hat = _measurement_mean(Y, b, wm, angular, P)
         q = Rs.shape[1]
         M = np.empty((2 * n + q, m))
         Pxy = np.zeros((n, m))
@@ -596,17 +606,17 @@ def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, m
         tria_into(M, Sy)
         if not central and wc[0] != 0.0:
             if not cholupdate_into(Sy, dY[0], wc[0]):
-                ok[b] = False
+                failed += 1
                 continue
         bad = False
         for k in range(m):
             bad = bad or not Sy[k, k] > 0.0
         if bad:
-            ok[b] = False
+            failed += 1
             continue
         # K = Pxy (S_y S_y^T)^-1: S_y M = Pxy^T (forward), S_y^T K^T = M (back)
-        K = gain(Pxy, Sy)
-        updated_mean_into(x, b, K, z, y_hat, angular, mean)  # x = x- + K wrap(z - y^)
+        K = _gain(Pxy, Sy)
+        _updated_mean_into(x, b, K, z, y_hat, angular, mean)  # x = x- + K wrap(z - y^)
         u = np.empty(n)
         for j in range(m):  # S = cholupdate(S-, (K S_y)_j, -1), one column at a time
             for r in range(n):
@@ -615,9 +625,9 @@ def _sqrt_update(x, S, X, Y, wm, wc, central, c1, c2, angular, Rs, z, present, m
                     acc += K[r, k] * Sy[k, j]
                 u[r] = acc
             if not cholupdate_into(S_new[b], u, -1.0):
-                ok[b] = False
+                failed += 1
                 break
-    return ok.all()
+    return failed == 0
 
 
 chol_sigma = _dispatch(_chol_sigma, "chol_sigma")
