@@ -330,13 +330,22 @@ def test_papers_run_side_by_side_in_one_batch_per_seed_with_the_numbers_of_one_p
     assert all(not batch for batch in recording.order)
 
 
-def test_side_by_side_takes_the_untimed_tasks_of_each_batch_in_turn_then_the_longest():
+def test_side_by_side_takes_the_tasks_without_a_time_of_each_batch_in_turn_then_the_longest_then_timed_ones():
     a = [_task(k) for k in ("a1", "a2", "a3", "a4")]
     b = [_task(k) for k in ("b1", "b2")]
     c = [_task(k) for k in ("c1", "c2", "c3")]
     # a new folder: no times at all -> a1 b1 c1 a2 b2 c2 a3 c3 a4 (written out by hand)
     assert [t.key for t in side_by_side([(a, {}), (b, {}), (c, {})])] == [
         "a1", "b1", "c1", "a2", "b2", "c2", "a3", "c3", "a4"]
-    # timed tasks after every untimed one, the longest first; a tie keeps the batches' order
+    # tasks with a time after every one without, the longest first; a tie keeps the batches' order
     got = side_by_side([(a, {"a1": 3.0, "a3": 9.0}), (b, {"b1": 3.0, "b2": 1.0}), (c, {"c2": 20.0})])
     assert [t.key for t in got] == ["c1", "a2", "c3", "a4", "c2", "a3", "a1", "b1", "b2"]
+    # a task declared timed (wall-clock measurements) after every other one, however long, by the same rules
+    a[0], c[1] = Task("a1", {}, demo_plugin.always_fails, timed=True), Task("c2", {}, demo_plugin.always_fails,
+                                                                            timed=True)
+    got = side_by_side([(a, {"a1": 3.0, "a3": 9.0}), (b, {"b1": 3.0, "b2": 1.0}), (c, {"c2": 20.0})])
+    assert [t.key for t in got] == ["c1", "a2", "c3", "a4", "a3", "b1", "b2", "c2", "a1"]
+    assert [t.key for t in side_by_side([(a, {}), (b, {}), (c, {})])] == [
+        "b1", "c1", "a2", "b2", "a3", "c3", "a4", "a1", "c2"]
+    with pytest.raises(InputError, match="timed is True or False"):
+        Task("x", {}, demo_plugin.always_fails, timed=1)

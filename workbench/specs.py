@@ -754,6 +754,10 @@ class Task:
     values only, so it does not run such a task again: the re-judged criteria read the reported seed's result, and
     only their discarded ``across`` depends on it.  Declared by the recipe (its tests check that the primary
     verdicts read no such task).
+    ``timed``: True for a task whose results include wall-clock times (a timing comparison).  Workers that run
+    tasks side by side take it after every other task of its batch: during the confirmation seed the report's own
+    process draws the figures and tables at first, a third process on the cores, and a timing taken then reads that
+    load; at the end of a batch it runs beside one other task at most.  Declared by the recipe.
     """
 
     key: str
@@ -762,6 +766,7 @@ class Task:
     runs: int | None = None
     seeded: bool = True
     sensitivity: bool = False
+    timed: bool = False
 
     def __post_init__(self) -> None:
         if self.runs is not None and (isinstance(self.runs, bool) or not isinstance(self.runs, (int, np.integer))
@@ -771,6 +776,8 @@ class Task:
             raise InputError(f"task {self.key!r}: seeded is True or False, got {self.seeded!r}")
         if not isinstance(self.sensitivity, bool):
             raise InputError(f"task {self.key!r}: sensitivity is True or False, got {self.sensitivity!r}")
+        if not isinstance(self.timed, bool):
+            raise InputError(f"task {self.key!r}: timed is True or False, got {self.timed!r}")
 
 
 #: Results of a recipe's tasks: task key -> that task's arrays.

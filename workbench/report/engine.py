@@ -786,16 +786,17 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
 def _task_cost(task: Task, seconds: Mapping[str, float], i: int, batch: int = 0) -> tuple:
     """The sort key of ``task``, the ``i``-th of batch ``batch``: the tasks without a time first, the batches taken
     in turn (the first task of every batch, then the second of every batch...), then the longest first; ties keep
-    the declared order."""
+    the declared order; a ``timed`` task after every other one (the same rules among them)."""
     known = seconds.get(task.key)
-    return (0, i, batch) if known is None else (1, -float(known), batch, i)
+    return (int(task.timed), 0, i, batch) if known is None else (int(task.timed), 1, -float(known), batch, i)
 
 
 def side_by_side(batches: Sequence[tuple[Sequence[Task], Mapping[str, float]]]) -> list[Task]:
     """The tasks of several batches (each its tasks and ``seconds``, task key -> the seconds it took last time) in
     the order a pool of workers should take them: the tasks without a time first, a task of each batch in turn
     (each batch's in its declared order), so that workers starting side by side mostly run different batches'
-    tasks; then every timed task, the longest first (ties: the batches' order, then the declared order)."""
+    tasks; then every task with a time, the longest first (ties: the batches' order, then the declared order); the
+    tasks declared ``timed`` (wall-clock measurements, :class:`~workbench.specs.Task`) last, by the same rules."""
     keyed = [(_task_cost(task, seconds, i, b), task) for b, (tasks, seconds) in enumerate(batches)
              for i, task in enumerate(tasks)]
     return [task for _, task in sorted(keyed, key=lambda item: item[0])]

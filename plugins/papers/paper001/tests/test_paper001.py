@@ -511,6 +511,8 @@ def test_sensitivity_tasks_feed_only_the_across_verdicts(report):
     listed = recipe.tasks(RecipeOptions(size="test", values=values, seed=1, filters=recipe.default_filters))
     marked = {t.key for t in listed if t.sensitivity}
     assert marked == {scenario._unknown_key(scenario.CLUTTER_PER_PING, v, 0) for v in (15.625, 62.5)}
+    # the one task of wall-clock times is declared so (side-by-side workers take it last in its batch)
+    assert [t.key for t in listed if t.timed] == ["timing"]
     base = recipe.criteria(results)
     changed = dict(results)
     for key in marked:  # every false track doubled, plus one at every ping after removal

@@ -579,6 +579,8 @@ def test_sensitivity_tasks_feed_only_the_across_of_the_criteria(tiny, monkeypatc
     tasks, results = tiny
     marked = {t.key for t in tasks if t.sensitivity}
     assert marked and marked == {t.key for t in tasks if t.key.startswith("delta/")}
+    # the one task of wall-clock times is declared so (side-by-side workers take it last in its batch)
+    assert [t.key for t in tasks if t.timed] == ["timing"]
     assert all(t.params["configure"]["delta"] != scenario.DELTA.primary for t in tasks if t.sensitivity)
     rng = np.random.default_rng(5)
     changed = dict(results)
