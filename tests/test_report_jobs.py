@@ -347,5 +347,34 @@ def test_side_by_side_takes_the_tasks_without_a_time_of_each_batch_in_turn_then_
     assert [t.key for t in got] == ["c1", "a2", "c3", "a4", "a3", "b1", "b2", "c2", "a1"]
     assert [t.key for t in side_by_side([(a, {}), (b, {}), (c, {})])] == [
         "b1", "c1", "a2", "b2", "a3", "c3", "a4", "a1", "c2"]
+    # or before every other one (the reported seed, where the report's own process only waits)
+    got = side_by_side([(a, {"a1": 3.0, "a3": 9.0}), (b, {"b1": 3.0, "b2": 1.0}), (c, {"c2": 20.0})], timed_last=False)
+    assert [t.key for t in got] == ["c2", "a1", "c1", "a2", "c3", "a4", "a3", "b1", "b2"]
     with pytest.raises(InputError, match="timed is True or False"):
         Task("x", {}, demo_plugin.always_fails, timed=1)
+
+
+class TimedTwin:
+    """The demo recipe as paper ``timed-twin``, its ``mse-sir`` task declared timed (wall-clock measurements)."""
+
+    @hookimpl
+    def workbench_report_recipes(self):
+        def tasks(options):
+            return [replace(t, timed=True) if t.key == "mse-sir" else t for t in demo_plugin._tasks(options)]
+
+        return [replace(demo_plugin.RECIPE, paper="timed-twin", tasks=tasks)]
+
+
+def test_a_timed_task_goes_first_on_the_reported_seed_and_last_on_the_confirmation_seed(tmp_path):
+    """On the reported seed the report's own process only waits: the timed task goes first (no worker idle at the
+    end); on the confirmation seed it draws the figures beside the workers at first: the timed task goes last."""
+    from workbench.plugins import load_host
+
+    host = load_host(extra_plugins=[("demo", demo_plugin), ("timed-twin", TimedTwin())])
+    recording = _Recording(host)
+    report = run_report(host, tmp_path / "timed", papers=["timed-twin"], size="full", filters="+sir",
+                        progress=False, executor=recording)
+    assert len(recording.order) == 2
+    assert recording.order[0] == ["mse-sir", "mse-kf", "mse-ekf"]
+    assert "mse-sir" in recording.order[1] and recording.order[1][-1] == "mse-sir"
+    assert not report.papers[0].errors

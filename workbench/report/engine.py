@@ -745,7 +745,10 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
                    command=command, formats=formats, confirmation_seed=confirmation_seed) for r in recipes]
     label = (f"paper {recipes[0].paper} ({size})" if len(recipes) == 1
              else f"papers {', '.join(r.paper for r in recipes)} ({size})")
-    _execute([pr.main for pr in runs], host, cache, run, progress=progress, on_task=on_task, label=label)
+    # the reported seed: this process only waits, so a timed task goes first (no worker idle at the batch's end);
+    # the confirmation seed: it draws the figures beside the workers at first, so a timed task goes last
+    _execute([pr.main for pr in runs], host, cache, run, progress=progress, on_task=on_task, label=label,
+             timed_last=False)
     for pr in runs:
         _judge(pr)
     again = [b for pr in runs if (b := _confirmation_batch(pr)) is not None]
@@ -783,21 +786,27 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
     return [_finish(pr, out) for pr in runs]
 
 
-def _task_cost(task: Task, seconds: Mapping[str, float], i: int, batch: int = 0) -> tuple:
+def _task_cost(task: Task, seconds: Mapping[str, float], i: int, batch: int = 0, timed_last: bool = True) -> tuple:
     """The sort key of ``task``, the ``i``-th of batch ``batch``: the tasks without a time first, the batches taken
     in turn (the first task of every batch, then the second of every batch...), then the longest first; ties keep
-    the declared order; a ``timed`` task after every other one (the same rules among them)."""
+    the declared order; a ``timed`` task after every other one (``timed_last``) or before (the same rules among
+    them)."""
     known = seconds.get(task.key)
-    return (int(task.timed), 0, i, batch) if known is None else (int(task.timed), 1, -float(known), batch, i)
+    group = (1 if timed_last else 0) if task.timed else (0 if timed_last else 1)
+    return (group, 0, i, batch) if known is None else (group, 1, -float(known), batch, i)
 
 
-def side_by_side(batches: Sequence[tuple[Sequence[Task], Mapping[str, float]]]) -> list[Task]:
+def side_by_side(batches: Sequence[tuple[Sequence[Task], Mapping[str, float]]],
+                 timed_last: bool = True) -> list[Task]:
     """The tasks of several batches (each its tasks and ``seconds``, task key -> the seconds it took last time) in
     the order a pool of workers should take them: the tasks without a time first, a task of each batch in turn
     (each batch's in its declared order), so that workers starting side by side mostly run different batches'
     tasks; then every task with a time, the longest first (ties: the batches' order, then the declared order); the
-    tasks declared ``timed`` (wall-clock measurements, :class:`~workbench.specs.Task`) last, by the same rules."""
-    keyed = [(_task_cost(task, seconds, i, b), task) for b, (tasks, seconds) in enumerate(batches)
+    tasks declared ``timed`` (wall-clock measurements, :class:`~workbench.specs.Task`) apart, by the same rules:
+    after every other task (``timed_last``: while the report's own process works beside the workers at first, as it
+    does during the confirmation seed) or before them (the reported seed: the report's process waits, and a timed
+    task at the start leaves no worker idle at the batch's end)."""
+    keyed = [(_task_cost(task, seconds, i, b, timed_last), task) for b, (tasks, seconds) in enumerate(batches)
              for i, task in enumerate(tasks)]
     return [task for _, task in sorted(keyed, key=lambda item: item[0])]
 
@@ -830,14 +839,15 @@ def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float
 
 
 def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run, *, progress: bool, on_task,
-             label: str) -> None:
+             label: str, timed_last: bool = True) -> None:
     """Run the tasks of ``batches`` (every batch of one seed and arch): each finished one cached at once, a cached
     one reused; each batch's results (in its declared order) in ``batch.results``, its tasks' timing in its
     ``outcome.tasks`` and failures in its ``outcome.errors``.  An executor that runs tasks side by side gets the
     tasks of every batch in one call, the longest first (by each batch's ``previous``: the seconds each took in the
     last report into this folder), so that its workers finish together; the tasks without a time (a new folder) go
     first, a task of each batch in turn, so that workers starting side by side mostly run different papers' tasks
-    (which compile different kernels) instead of two neighbours of one paper (which compile the same ones twice)."""
+    (which compile different kernels) instead of two neighbours of one paper (which compile the same ones twice);
+    the tasks declared ``timed`` after the others (``timed_last``) or before them (:func:`side_by_side`)."""
     if not batches:
         return
     if len({(b.seed, b.arch) for b in batches}) != 1:
@@ -870,7 +880,7 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
     if isinstance(run, InProcess):  # one after another: the order changes nothing
         order = [task for tasks in pending for task in tasks]
     else:  # side by side: longest first, the batches of tasks without a time in turn
-        order = side_by_side([(tasks, batch.previous) for tasks, batch in zip(pending, batches)])
+        order = side_by_side([(tasks, batch.previous) for tasks, batch in zip(pending, batches)], timed_last)
     for task, arrays, seconds, error in run.execute(order, seed, arch, on_task):
         batch, digest = owner[id(task)]
         recipe, outcome = batch.recipe, batch.outcome
