@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["normalise_log_weights", "effective_sample_size", "systematic_counts", "systematic_resample",
-           "resample_where"]
+           "resample_where", "systematic_weights"]
 
 
 def _log_sum_exp_rows(log_w: np.ndarray, scale: float = 1.0, top: np.ndarray | None = None) -> np.ndarray:
@@ -72,11 +72,7 @@ def systematic_counts(log_w: np.ndarray, u0: np.ndarray, count: int | None = Non
     log_w = np.asarray(log_w, dtype=float)
     B, N = log_w.shape
     count = N if count is None else int(count)
-    top = np.max(log_w, axis=1, keepdims=True)
-    finite = np.isfinite(top[:, 0])
-    w = log_w - np.where(finite[:, None], top, 0.0)
-    np.exp(w, out=w)
-    w[~finite] = 1.0
+    w = systematic_weights(log_w)
     cdf = np.cumsum(w, axis=1)
     # c_i = sum_{k <= i} w_k / sum_k w_k  (the last entry is exactly 1)
     cdf /= cdf[:, -1:]
@@ -89,6 +85,19 @@ def systematic_counts(log_w: np.ndarray, u0: np.ndarray, count: int | None = Non
     w[:, 0] = cdf[:, 0]
     np.subtract(cdf[:, 1:], cdf[:, :-1], out=w[:, 1:])
     return w.astype(np.int64)
+
+
+def systematic_weights(log_w: np.ndarray) -> np.ndarray:
+    """The unnormalised weights :func:`systematic_counts` draws from: ``w = exp(log_w - max)`` per row, and 1 for
+    every entry of a row whose largest log-weight is not finite (all ``-inf``, or a NaN).  ``(B, N)`` -> a new
+    ``(B, N)`` float array."""
+    log_w = np.asarray(log_w, dtype=float)
+    top = np.max(log_w, axis=1, keepdims=True)
+    finite = np.isfinite(top[:, 0])
+    w = log_w - np.where(finite[:, None], top, 0.0)
+    np.exp(w, out=w)
+    w[~finite] = 1.0
+    return w
 
 
 def systematic_resample(log_w: np.ndarray, rng: np.random.Generator, count: int | None = None) -> np.ndarray:

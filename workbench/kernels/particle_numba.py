@@ -111,7 +111,7 @@ def _term(o, c, s, first):
 @jit
 def _combine_tile_cols(out, x, e, lo, hi, src, coef, ptr):
     """:func:`combine` on the particles ``lo:hi``, the tile's noise stored by column: ``e[j, t]`` noise ``j`` of
-    particle ``lo + t`` (:func:`.pcg_numba.draw_tile`'s layout; each column contiguous).  A tile of noise stored by
+    particle ``lo + t`` (:func:`.pcg_numba.pcg_tile`'s layout; each column contiguous).  A tile of noise stored by
     row (``e[t, j]``) is passed transposed (a view): the same products and sums in the same order."""
     n = x.shape[0]
     m = hi - lo
@@ -174,8 +174,7 @@ def _numpy_normals(rng, pcg, L, k):
 @jit
 def _draw_tile(pcg, pre, e, lo, m, k):
     """``e[:k, :m]``: the normals of the particles ``lo:lo + m`` stored by noise column (``e[j, t]`` the ``j``-th
-    of particle ``lo + t``): drawn from the PCG64 words ``pcg`` (advanced in place, :func:`.pcg_numba.draw_tile`'s
-    loop) where it holds four, else copied from NumPy's draws ``pre (L, k)``.  Compiled once for :func:`_propagate`
+    of particle ``lo + t``): drawn from the PCG64 words ``pcg`` (advanced in place, :func:`.pcg_numba.pcg_tile`) where it holds four, else copied from NumPy's draws ``pre (L, k)``.  Compiled once for :func:`_propagate`
     and :func:`propagate_range_bearing` (a call per tile, instead of a copy of the loop compiled into each)."""
     if pcg.shape[0] == 4:
         pcg_tile(pcg, e, m, k)

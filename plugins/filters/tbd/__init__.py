@@ -94,7 +94,7 @@ from workbench.particle_core import (ParticleState, combine_columns, compiled, c
                                      init, log_likelihood_cov, need_rng, noise_columns, predict, propagate_f,
                                      propagation_plan)
 from workbench.particle_core import log_likelihood as sir_log_likelihood
-from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where
+from workbench.resampling import effective_sample_size, normalise_log_weights, resample_where, systematic_weights
 from workbench.specs import BenchmarkSpec, FilterSpec, join_batch, take_batch
 from workbench.types import Gaussian, InputError, Particles, Scan
 
@@ -428,13 +428,7 @@ def resample_rows(mask: np.ndarray, particles: np.ndarray, log_w: np.ndarray, rn
     every = bool(mask.all())
     rows = np.arange(B) if every else np.flatnonzero(mask)
     u0 = rng.random((rows.size, 1))  # the draw of resample_where
-    # systematic_counts' first lines: w = exp(log_w - max), uniform where the max is not finite
-    sub = np.asarray(log_w if every else log_w[rows], dtype=float)
-    top = np.max(sub, axis=1, keepdims=True)
-    finite = np.isfinite(top[:, 0])
-    w = sub - np.where(finite[:, None], top, 0.0)
-    np.exp(w, out=w)
-    w[~finite] = 1.0
+    w = systematic_weights(log_w if every else log_w[rows])  # the weights systematic_counts draws from
     parents = np.empty((rows.size, N), dtype=np.int64)
     if not tbd_pf_numba.systematic_parents(w, u0[:, 0], parents):
         raise InputError("tbd-pf: a particle weight is not a number (NaN) where the cloud is resampled")
@@ -520,10 +514,10 @@ def _update_once(state: ParticleState, scan: Scan, model: MeasurementModel, rng:
                             nominal=nominal)
     every = bool(present.all())
     touched = present if missed is None or missed.shape[1] == 1 else np.ones_like(present)
-    if not (every or touched.any()):
+    if not touched.any():
         return state
     log_w = cloud.log_weights
-    if every or present.any():
+    if present.any():
         # log w_i <- log w_i + power log(eps_i + sum_m w_{m,i})
         log_lik = log_likelihood(cloud.particles, scan, model, sigma_vr, floor_density, backend, floor=floor,
                                  floor_scale=floor_scale, log_weights=cloud.log_weights, missed=missed,
