@@ -378,3 +378,30 @@ def test_a_timed_task_goes_first_on_the_reported_seed_and_last_on_the_confirmati
     assert recording.order[0] == ["mse-sir", "mse-kf", "mse-ekf"]
     assert "mse-sir" in recording.order[1] and recording.order[1][-1] == "mse-sir"
     assert not report.papers[0].errors
+
+
+def test_a_held_timed_task_waits_while_untimed_ones_remain_and_goes_first_once_released(installed_host):
+    """One worker takes the tasks one at a time, so the order they come back in is the order they ran in.  The
+    timed task is first in the caller's order: held, the worker takes the untimed ones; released when the first
+    result comes back (the report's process has drawn its figures), it runs next but one (the free worker's next
+    task is chosen before the finished one is handed back); never released, it runs once no untimed task is left;
+    without a hold, or released from the start, in the caller's order."""
+    import threading
+
+    def order(hold, release_after=None):
+        tasks = [replace(_task("timing"), timed=True)] + [_task(k) for k in ("a", "b", "c")]
+        got = []
+        with LocalProcesses(installed_host, 1) as pool:
+            for task, _, _, error in pool.execute(tasks, 0, "cpu", hold=hold):
+                assert error is not None and "always fails" in error[0]
+                got.append(task.key)
+                if release_after == task.key:
+                    hold.set()
+        return got
+
+    assert order(threading.Event(), release_after="a") == ["a", "b", "timing", "c"]
+    assert order(threading.Event()) == ["a", "b", "c", "timing"]
+    assert order(None) == ["timing", "a", "b", "c"]
+    released = threading.Event()
+    released.set()
+    assert order(released) == ["timing", "a", "b", "c"]

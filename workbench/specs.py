@@ -755,9 +755,9 @@ class Task:
     only their discarded ``across`` depends on it.  Declared by the recipe (its tests check that the primary
     verdicts read no such task).
     ``timed``: True for a task whose results include wall-clock times (a timing comparison).  Workers that run
-    tasks side by side take it apart from the other tasks of its batch: on the confirmation seed after all of them
-    (the report's own process draws the figures and tables at first, a third process on the cores, and a timing
-    taken then reads that load), on the reported seed before them (the report's process only waits there, and a
+    tasks side by side take it apart from the other tasks of its batch: on the confirmation seed once the report's
+    own process has drawn the figures and tables (a third process on the cores, whose load a timing taken then
+    would read), or after every other task where the executor cannot hold it back, on the reported seed before them (the report's process only waits there, and a
     timed task at the start leaves no worker idle at the batch's end).  Declared by the recipe.
     """
 

@@ -746,7 +746,8 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
     label = (f"paper {recipes[0].paper} ({size})" if len(recipes) == 1
              else f"papers {', '.join(r.paper for r in recipes)} ({size})")
     # the reported seed: this process only waits, so a timed task goes first (no worker idle at the batch's end);
-    # the confirmation seed: it draws the figures beside the workers at first, so a timed task goes last
+    # the confirmation seed: it draws the figures beside the workers at first, so a timed task goes last, or (an
+    # executor that holds timed tasks) on the next free worker once the figures are drawn
     _execute([pr.main for pr in runs], host, cache, run, progress=progress, on_task=on_task, label=label,
              timed_last=False)
     for pr in runs:
@@ -754,8 +755,12 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
     again = [b for pr in runs if (b := _confirmation_batch(pr)) is not None]
     conf_label = f"{label[:-1]}, confirmation seed {again[0].seed})" if again else ""
 
+    import threading
+
+    drawn = threading.Event()  # set once this process has drawn the figures: the timed tasks may start then
+
     def confirm_all():
-        _execute(again, host, cache, run, progress=progress, on_task=on_task, label=conf_label)
+        _execute(again, host, cache, run, progress=progress, on_task=on_task, label=conf_label, hold=drawn)
 
     if again and not isinstance(run, InProcess):
         # the workers run the confirmation while this process draws the figures and tables
@@ -767,20 +772,20 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
             except BaseException as exc:  # noqa: BLE001 - raised again in the calling thread below
                 failure.append(exc)
 
-        import threading
-
         worker = threading.Thread(target=background, name="workbench-confirmation", daemon=True)
         worker.start()
         try:
             for pr in runs:
                 _draw(pr)
         finally:
+            drawn.set()
             worker.join()
         if failure:
             raise failure[0]
     else:
         for pr in runs:
             _draw(pr)
+        drawn.set()
         if again:
             confirm_all()
     return [_finish(pr, out) for pr in runs]
@@ -839,7 +844,7 @@ def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float
 
 
 def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run, *, progress: bool, on_task,
-             label: str, timed_last: bool = True) -> None:
+             label: str, timed_last: bool = True, hold=None) -> None:
     """Run the tasks of ``batches`` (every batch of one seed and arch): each finished one cached at once, a cached
     one reused; each batch's results (in its declared order) in ``batch.results``, its tasks' timing in its
     ``outcome.tasks`` and failures in its ``outcome.errors``.  An executor that runs tasks side by side gets the
@@ -847,7 +852,8 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
     last report into this folder), so that its workers finish together; the tasks without a time (a new folder) go
     first, a task of each batch in turn, so that workers starting side by side mostly run different papers' tasks
     (which compile different kernels) instead of two neighbours of one paper (which compile the same ones twice);
-    the tasks declared ``timed`` after the others (``timed_last``) or before them (:func:`side_by_side`)."""
+    the tasks declared ``timed`` after the others (``timed_last``) or before them (:func:`side_by_side`); an
+    executor that takes ``hold`` (``holds_timed``, :meth:`LocalProcesses.execute`) starts them once ``hold`` is set."""
     if not batches:
         return
     if len({(b.seed, b.arch) for b in batches}) != 1:
@@ -881,7 +887,8 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
         order = [task for tasks in pending for task in tasks]
     else:  # side by side: longest first, the batches of tasks without a time in turn
         order = side_by_side([(tasks, batch.previous) for tasks, batch in zip(pending, batches)], timed_last)
-    for task, arrays, seconds, error in run.execute(order, seed, arch, on_task):
+    held = {"hold": hold} if hold is not None and getattr(run, "holds_timed", False) else {}
+    for task, arrays, seconds, error in run.execute(order, seed, arch, on_task, **held):
         batch, digest = owner[id(task)]
         recipe, outcome = batch.recipe, batch.outcome
         if error is None:
@@ -1183,7 +1190,15 @@ class LocalProcesses:
     def __exit__(self, *exc):
         self.close()
 
-    def execute(self, tasks, seed, arch, on_task=None):
+    #: :meth:`execute` takes ``hold`` (the report's confirmation seed holds its timed tasks while it draws).
+    holds_timed = True
+
+    def execute(self, tasks, seed, arch, on_task=None, hold=None):
+        """Run ``tasks`` on the workers, which take them in this order, and yield ``(task, arrays, seconds, error)``
+        as each finishes.  ``hold`` (a :class:`threading.Event`, optional): a task declared ``timed`` is not started
+        while ``hold`` is unset and an untimed task waits; once it is set, the timed tasks go first (the report's
+        confirmation seed: its timing waits until the report's own process has drawn the figures, then starts on
+        the next free worker instead of after every other task, which left the other worker idle at the end)."""
         from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
@@ -1193,27 +1208,35 @@ class LocalProcesses:
         # a task whose function cannot be sent to a worker (a closure or a lambda of a recipe written elsewhere) runs
         # here, in this process, while the workers run the others: the same numbers, never a failure for it
         here = [t for t in tasks if not _picklable(t.run)]
-        tasks = [t for t in tasks if _picklable(t.run)]
-        pool = self._start() if tasks else None
+        waiting = [t for t in tasks if _picklable(t.run)]
+        pool = self._start() if waiting else None
         futures = {}
-        try:
+
+        def submit_next() -> None:
+            task = waiting.pop(_next_index(waiting, hold))
+            if on_task is not None:
+                on_task(task.key)
             # the workers start as the tasks are submitted (spawn: one per submission while none is idle), so the
-            # one-thread environment is theirs from their first line; they take the tasks in this order
+            # one-thread environment is theirs from their first line
             with _environment(ONE_THREAD_ENV):
-                for task in tasks:
-                    if on_task is not None:
-                        on_task(task.key)
-                    futures[pool.submit(_process_task, task.run, dict(task.params), seed, arch, self.block,
-                                        self.retries)] = task
+                fut = pool.submit(_process_task, task.run, dict(task.params), seed, arch, self.block, self.retries)
+            futures[fut] = pending[fut] = task
+
+        pending = {}
+        try:
+            # as many tasks in flight as there are workers: each next one is chosen when a worker is free
+            while waiting and len(pending) < self.jobs:
+                submit_next()
             if here:
                 local = InProcess(self.host, self.retries)
                 yield from local.execute(here, seed, arch, on_task)
                 self.used.update(local.used)
-            pending = dict(futures)
             while pending:
                 done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
-                for fut in [f for f in pending if f in done]:  # in the caller's order within a batch
+                for fut in [f for f in pending if f in done]:  # in the order they were submitted
                     task = pending.pop(fut)
+                    if waiting and not isinstance(fut.exception(), BrokenProcessPool):
+                        submit_next()
                     try:
                         status, value, seconds, extra, peak = fut.result()
                         self.worker_peak_kib = max(self.worker_peak_kib, float(peak))
@@ -1233,10 +1256,24 @@ class LocalProcesses:
                         yield task, value, seconds, None
                     else:
                         yield task, None, seconds, (value, extra)
+            for task in waiting:  # left over where the pool broke: each fails by name, as the submitted ones did
+                yield task, None, 0.0, ("the worker processes died before it started (killed, or out of memory)", "")
         except BaseException:
             for fut in futures:
                 fut.cancel()
             raise
+
+
+def _next_index(waiting: Sequence[Task], hold) -> int:
+    """Which of ``waiting`` (in the caller's order) a free worker takes: the first, except that with a ``hold``
+    event a ``timed`` task waits while it is unset and an untimed task remains, and goes first once it is set."""
+    if hold is None:
+        return 0
+    released = hold.is_set() or all(t.timed for t in waiting)
+    for i, task in enumerate(waiting):
+        if task.timed == released:
+            return i
+    return 0
 
 
 def _remote_task(run, params, seed, arch, block):
