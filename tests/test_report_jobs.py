@@ -381,15 +381,16 @@ def test_a_timed_task_goes_first_on_the_reported_seed_and_last_on_the_confirmati
 
 
 def test_a_held_timed_task_waits_while_untimed_ones_remain_and_goes_first_once_released(installed_host):
-    """One worker takes the tasks one at a time, so the order they come back in is the order they ran in.  The
+    """One worker runs the tasks one at a time, so the order they come back in is the order they ran in; two are
+    in flight (one waits for the worker), and the next is chosen when one finishes, before it is handed back.  The
     timed task is first in the caller's order: held, the worker takes the untimed ones; released when the first
-    result comes back (the report's process has drawn its figures), it runs next but one (the free worker's next
-    task is chosen before the finished one is handed back); never released, it runs once no untimed task is left;
-    without a hold, or released from the start, in the caller's order."""
+    result comes back (the report's process has drawn its figures), it runs after the two already in flight;
+    never released, it runs once no untimed task is left; without a hold, or released from the start, in the
+    caller's order."""
     import threading
 
     def order(hold, release_after=None):
-        tasks = [replace(_task("timing"), timed=True)] + [_task(k) for k in ("a", "b", "c")]
+        tasks = [replace(_task("timing"), timed=True)] + [_task(k) for k in ("a", "b", "c", "d", "e")]
         got = []
         with LocalProcesses(installed_host, 1) as pool:
             for task, _, _, error in pool.execute(tasks, 0, "cpu", hold=hold):
@@ -399,9 +400,58 @@ def test_a_held_timed_task_waits_while_untimed_ones_remain_and_goes_first_once_r
                     hold.set()
         return got
 
-    assert order(threading.Event(), release_after="a") == ["a", "b", "timing", "c"]
-    assert order(threading.Event()) == ["a", "b", "c", "timing"]
-    assert order(None) == ["timing", "a", "b", "c"]
+    assert order(threading.Event(), release_after="a") == ["a", "b", "c", "timing", "d", "e"]
+    assert order(threading.Event()) == ["a", "b", "c", "d", "e", "timing"]
+    assert order(None) == ["timing", "a", "b", "c", "d", "e"]
     released = threading.Event()
     released.set()
-    assert order(released) == ["timing", "a", "b", "c"]
+    assert order(released) == ["timing", "a", "b", "c", "d", "e"]
+
+
+class _Scripted:
+    """An executor that hands the tasks back in a scripted order (their arrays made up, nothing run)."""
+
+    def __init__(self, script):
+        self.script, self.used = script, {}
+
+    def execute(self, tasks, seed, arch, on_task=None):
+        by_key = {t.key: t for t in tasks}
+        for key in self.script:
+            yield by_key[key], {"x": np.zeros(1)}, 0.0, None
+
+
+def test_a_batch_is_handed_on_once_its_tasks_are_back_and_never_while_a_timed_task_is_out(tmp_path, demo_host):
+    """``_execute``'s ``on_done``: the report judges a paper there while the workers run the other papers' tasks,
+    but not while a timed task may still be measuring (judging loads the cores it measures)."""
+    from workbench.report.cache import TaskCache
+    from workbench.report.engine import PaperOutcome, _Batch, _execute
+
+    def batches(q_timed):
+        out = []
+        for paper, keys in (("p", ("p1", "p2")), ("q", ("q1", "q2"))):
+            tasks = [replace(_task(k), timed=q_timed and k == "q1") for k in keys]
+            outcome = PaperOutcome(paper, paper, "quick", (), "", {})
+            out.append(_Batch(replace(demo_plugin.RECIPE, paper=paper), tasks, 0, "quick", "cpu", "v", outcome, {}))
+        return out
+
+    def handed(script, q_timed):
+        seen, log = [], []
+        run = _Scripted(script)
+        original = run.execute
+
+        def execute(tasks, seed, arch, on_task=None):
+            for item in original(tasks, seed, arch, on_task):
+                seen.append(item[0].key)
+                yield item
+
+        run.execute = execute
+        _execute(batches(q_timed), demo_host, TaskCache(tmp_path / "".join(script)), run, progress=False, on_task=None,
+                 label="t", on_done=lambda b: log.append((b.recipe.paper, len(seen), sorted(b.results))))
+        return log
+
+    # p's two tasks back first: p handed on at once (q's tasks not yet back), each with its results
+    assert handed(["p1", "p2", "q1", "q2"], False) == [("p", 2, ["p1", "p2"]), ("q", 4, ["q1", "q2"])]
+    # q1 timed and out until the end: p waits for it, then both, in the order they completed
+    assert handed(["p1", "q2", "p2", "q1"], True) == [("p", 4, ["p1", "p2"]), ("q", 4, ["q1", "q2"])]
+    # the timed task back first: nothing waits
+    assert handed(["q1", "p1", "p2", "q2"], True) == [("p", 3, ["p1", "p2"]), ("q", 4, ["q1", "q2"])]

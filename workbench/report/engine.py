@@ -581,6 +581,7 @@ class _PaperRun:
     read: set = field(default_factory=set)
     confirmation: _Batch | None = None
     reused: list = field(default_factory=list)  # (task, why) the confirmation takes from the reported seed
+    rejudged: tuple | None = None  # the criteria on the confirmation seed: ("ok", criteria) or ("error", why)
 
 
 def _begin(recipe: RecipeSpec, host: PluginHost, out: Path, *, size: str, seed: int, filters: str | None, arch: str,
@@ -702,14 +703,12 @@ def _finish(pr: _PaperRun, out: Path) -> PaperOutcome:
             outcome.warnings.append(f"paper {pr.recipe.paper}: no confirmation: {why}")
             outcome.criteria = confirm(outcome.criteria, None, seed, why)
         else:
-            try:
-                again = list(pr.recipe.criteria({**pr.main.results, **batch.results}))
-            except Exception as exc:  # noqa: BLE001 - the reported verdicts stand; the confirmation says why not
-                why = f"the criteria raised on the confirmation seed {seed}: {type(exc).__name__}: {exc}"
-                outcome.warnings.append(f"paper {pr.recipe.paper}: no confirmation: {why}")
-                outcome.criteria = confirm(outcome.criteria, None, seed, why)
+            status, value = pr.rejudged or _rejudge(pr)
+            if status == "error":  # the reported verdicts stand; the confirmation says why not
+                outcome.warnings.append(f"paper {pr.recipe.paper}: no confirmation: {value}")
+                outcome.criteria = confirm(outcome.criteria, None, seed, value)
             else:
-                outcome.criteria = confirm(outcome.criteria, again, seed)
+                outcome.criteria = confirm(outcome.criteria, value, seed)
     if pr.options.size != FIRM_SIZE:
         outcome.criteria = [c.as_indicative() for c in outcome.criteria]
     outcome.confirmation_seed = seed
@@ -717,6 +716,16 @@ def _finish(pr: _PaperRun, out: Path) -> PaperOutcome:
     outcome.finished = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     save_outcome(outcome, out)
     return outcome
+
+
+def _rejudge(pr: _PaperRun) -> tuple:
+    """The criteria on the confirmation seed (its batch complete): ``("ok", criteria)``, or ``("error", why)`` where
+    they raise."""
+    try:
+        return "ok", list(pr.recipe.criteria({**pr.main.results, **pr.confirmation.results}))
+    except Exception as exc:  # noqa: BLE001 - reported by _finish
+        return "error", (f"the criteria raised on the confirmation seed {pr.confirmation_seed}: "
+                         f"{type(exc).__name__}: {exc}")
 
 
 def _draw(pr: _PaperRun) -> None:
@@ -747,12 +756,19 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
              else f"papers {', '.join(r.paper for r in recipes)} ({size})")
     # the reported seed: this process only waits, so a timed task goes first (no worker idle at the batch's end);
     # the confirmation seed: it draws the figures beside the workers at first, so a timed task goes last, or (an
-    # executor that holds timed tasks) on the next free worker once the figures are drawn
+    # executor that holds timed tasks) on the next free worker once the figures are drawn; each paper is judged as
+    # soon as its tasks are back, while the workers run the other papers' tasks (_execute's on_done)
+    paper_of = {id(pr.main): pr for pr in runs}
     _execute([pr.main for pr in runs], host, cache, run, progress=progress, on_task=on_task, label=label,
-             timed_last=False)
-    for pr in runs:
-        _judge(pr)
+             timed_last=False, on_done=lambda batch: _judge(paper_of[id(batch)]))
     again = [b for pr in runs if (b := _confirmation_batch(pr)) is not None]
+    confirming = {id(pr.confirmation): pr for pr in runs if pr.confirmation is not None}
+
+    def rejudge(batch: _Batch) -> None:  # a paper's confirmation judged as soon as its tasks are back
+        pr = confirming[id(batch)]
+        if all(t.key in batch.results for t in batch.tasks):
+            pr.rejudged = _rejudge(pr)
+
     conf_label = f"{label[:-1]}, confirmation seed {again[0].seed})" if again else ""
 
     import threading
@@ -760,7 +776,8 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
     drawn = threading.Event()  # set once this process has drawn the figures: the timed tasks may start then
 
     def confirm_all():
-        _execute(again, host, cache, run, progress=progress, on_task=on_task, label=conf_label, hold=drawn)
+        _execute(again, host, cache, run, progress=progress, on_task=on_task, label=conf_label, hold=drawn,
+                 on_done=rejudge)
 
     if again and not isinstance(run, InProcess):
         # the workers run the confirmation while this process draws the figures and tables
@@ -844,7 +861,8 @@ def previous_seconds(out: Path, paper: str, prefix: str = "") -> dict[str, float
 
 
 def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run, *, progress: bool, on_task,
-             label: str, timed_last: bool = True, hold=None) -> None:
+             label: str, timed_last: bool = True, hold=None,
+             on_done: Callable[[_Batch], None] | None = None) -> None:
     """Run the tasks of ``batches`` (every batch of one seed and arch): each finished one cached at once, a cached
     one reused; each batch's results (in its declared order) in ``batch.results``, its tasks' timing in its
     ``outcome.tasks`` and failures in its ``outcome.errors``.  An executor that runs tasks side by side gets the
@@ -853,7 +871,10 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
     first, a task of each batch in turn, so that workers starting side by side mostly run different papers' tasks
     (which compile different kernels) instead of two neighbours of one paper (which compile the same ones twice);
     the tasks declared ``timed`` after the others (``timed_last``) or before them (:func:`side_by_side`); an
-    executor that takes ``hold`` (``holds_timed``, :meth:`LocalProcesses.execute`) starts them once ``hold`` is set."""
+    executor that takes ``hold`` (``holds_timed``, :meth:`LocalProcesses.execute`) starts them once ``hold`` is set.
+    ``on_done(batch)`` is called (in this thread) for each batch once its tasks have all come back and no ``timed``
+    task of the run is left (work done here meanwhile would load the cores a timing measures): the report judges a
+    paper there while the workers run the other papers' tasks."""
     if not batches:
         return
     if len({(b.seed, b.arch) for b in batches}) != 1:
@@ -888,6 +909,17 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
     else:  # side by side: longest first, the batches of tasks without a time in turn
         order = side_by_side([(tasks, batch.previous) for tasks, batch in zip(pending, batches)], timed_last)
     held = {"hold": hold} if hold is not None and getattr(run, "holds_timed", False) else {}
+    left = {id(b): len(tasks) for b, tasks in zip(batches, pending)}
+    ready = [b for b in batches if not left[id(b)]]  # complete, not yet handed to on_done
+    timed_left = sum(1 for t in order if t.timed)
+
+    def hand_on() -> None:
+        while on_done is not None and ready and not timed_left:
+            batch = ready.pop(0)
+            _declared_order(batch)
+            on_done(batch)
+
+    hand_on()
     for task, arrays, seconds, error in run.execute(order, seed, arch, on_task, **held):
         batch, digest = owner[id(task)]
         recipe, outcome = batch.recipe, batch.outcome
@@ -906,9 +938,21 @@ def _execute(batches: Sequence[_Batch], host: PluginHost, cache: TaskCache, run,
             outcome.tasks.append({"key": task.key, "seconds": seconds, "cached": False, "error": msg,
                                   "runs": task.runs, "traceback": error[1]})
         bar.update(1)
+        left[id(batch)] -= 1
+        timed_left -= bool(task.timed)
+        if not left[id(batch)]:
+            ready.append(batch)
+        hand_on()
     bar.close()
-    for batch in batches:  # in the declared order, however the tasks came back (from the cache, or from workers)
-        batch.results = {t.key: batch.results[t.key] for t in batch.tasks if t.key in batch.results}
+    for batch in batches:
+        _declared_order(batch)
+    timed_left = 0
+    hand_on()
+
+
+def _declared_order(batch: _Batch) -> None:
+    """``batch.results`` in the declared order, however the tasks came back (from the cache, or from workers)."""
+    batch.results = {t.key: batch.results[t.key] for t in batch.tasks if t.key in batch.results}
 
 
 def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutcome, paper_dir: Path,
@@ -1224,8 +1268,9 @@ class LocalProcesses:
 
         pending = {}
         try:
-            # as many tasks in flight as there are workers: each next one is chosen when a worker is free
-            while waiting and len(pending) < self.jobs:
+            # one task more in flight than there are workers (a free worker takes it at once, even while the caller
+            # works on a finished task's result); each next one is chosen when a task finishes
+            while waiting and len(pending) <= self.jobs:
                 submit_next()
             if here:
                 local = InProcess(self.host, self.retries)
