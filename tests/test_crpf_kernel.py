@@ -235,6 +235,7 @@ def test_one_numba_thread_runs_the_serial_compilation_at_any_batch(monkeypatch):
         raise AssertionError("the threaded compilation ran on one thread")
 
     monkeypatch.setattr(crpf_numba, "kernel_parallel", refuse)
+    monkeypatch.setattr(crpf_numba, "kernel_parallel4", refuse)
     numba.set_num_threads(1)
     try:
         serial = crpf_step(*args, backend="numba")
@@ -245,3 +246,31 @@ def test_one_numba_thread_runs_the_serial_compilation_at_any_batch(monkeypatch):
     if saved > 1:  # more than one thread: a batch this size takes the threaded compilation
         with pytest.raises(AssertionError, match="threaded compilation ran"):
             crpf_step(*args, backend="numba")
+
+
+@pytest.mark.skipif(not numba_available(), reason="Numba is not installed")
+@pytest.mark.parametrize("n", [4, 6])
+@pytest.mark.parametrize("B", [5, 20], ids=["serial", "threaded-where-it-runs"])
+def test_numba_kernel_is_picked_by_the_state_size(monkeypatch, n, B):
+    # the 4-D kernels (their loops over components written out) for n == 4, the general ones otherwise, each a
+    # compilation of its own: the other pair is never called (a refusing stand-in), and the numbers are the twin's
+    from workbench_filters.crpf import crpf_numba
+
+    def refuse(*a):
+        raise AssertionError("the kernel of the other state size ran")
+
+    for name in (("kernel_serial", "kernel_parallel") if n == 4 else ("kernel_serial4", "kernel_parallel4")):
+        monkeypatch.setattr(crpf_numba, name, refuse)
+    rng = np.random.default_rng(11)
+    Fn = np.eye(n)
+    Fn[:n // 2, n // 2:] = np.eye(n // 2)  # constant velocity in n / 2 dimensions, position x, y first
+    x = np.r_[[100.0, 50.0], np.zeros(n - 2)] + rng.normal(size=(B, 30, n)) * np.r_[[10.0, 10.0], np.ones(n - 2)]
+    c = rng.exponential(2.0, (B, 30))
+    z = np.stack([np.full(B, 110.0), np.full(B, 0.4)], axis=1)
+    args = (x, c, rng.exponential(0.1, (B, 30)), np.full(B, 3.0), Fn, z, 77, rng.random(B), np.linspace(0.5, 1.5, n),
+            0.9, 2.0, 0.3, 2.0, True, (5.0, -3.0), True, True)
+    ref = crpf_step_numpy(*args)
+    got = crpf_step(*args, backend="numba")
+    for a, b in zip(ref, got):
+        assert a.shape == b.shape
+        np.testing.assert_allclose(b, a, rtol=1e-11, atol=1e-11)

@@ -1,6 +1,7 @@
 """Counter-based standard normals: the normals of row ``b`` of stream ``key`` are a pure function of ``(key, b)``.
 
-The formulas and the NumPy twin are in :mod:`.counter_normals_numpy`; the compiled twin is
+The formulas (a float32 Box-Muller of one SplitMix64 word per pair) and the NumPy twin are in
+:mod:`.counter_normals_numpy`; the compiled twin is
 :mod:`.counter_normals_numba` (the same numbers bit for bit).  :func:`counter_normals` takes the compiled one
 where the backend policy (:func:`.backend.runs_numba`) picks Numba on the CPU (the normals are always made on the
 host, whatever arch a kernel that uses them runs on), and notes which ran in :data:`RECORD`.
@@ -23,9 +24,11 @@ def counter_normals(key: int, rows: int, count: int, backend: str = "auto") -> n
     """``count`` standard normals for each of ``rows`` rows of stream ``key``: ``(rows, count)``.
 
     Computed on the host by the Numba twin where the backend policy picks Numba on the CPU for ``backend``
-    (``"auto"``: Numba installed and ``WORKBENCH_BACKEND`` not set to another backend; about 2 ns a number, on every
-    core), else by :func:`counter_normals_numpy` (about 120 ns; ``"numpy"`` and ``"taichi"``, which has no version
-    here, run it); the two give the same numbers bit for bit (tested).
+    (``"auto"``: Numba installed and ``WORKBENCH_BACKEND`` not set to another backend; about 3.6 ns a number on one
+    thread of a Zen-1 EPYC core, rows on every core), else by :func:`counter_normals_numpy` (about 60 ns there;
+    ``"numpy"`` and ``"taichi"``, which has no version here, run it); the two give the same numbers bit for bit
+    (tested).  The numbers are float32 values (a float32 Box-Muller, the generator of
+    :mod:`.counter_normals_numpy`'s docstring), stored as float64: ``(rows, count)`` float64.
     """
     if not runs_numba(backend, "cpu"):
         RECORD.note("numpy")

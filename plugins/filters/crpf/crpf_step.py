@@ -16,9 +16,10 @@ propagation variance ``sigma^2`` and this step's index ``t >= 1``::
     pi'^(j)   ~  (C'^(j) - min C' + delta_C)^-beta,  mean = sum pi' x',  cov = sum pi' (x' - mean)(.)^T
 
 The randomness comes from the caller: ``u0 (B,)`` uniforms in [0, 1) and a stream ``key`` of counter-based
-normals (:mod:`workbench.kernels.counter_normals`), ``e[b] = counter_normals(key, B, N n)[b]`` reshaped to
-``(N, n)``; the Numba kernel computes them in place, vectorised, the other backends take them from the
-NumPy twin.  So all backends give the same particles up to float round-off.  A row whose risks
+normals (:mod:`workbench.kernels.counter_normals`: a float32 Box-Muller, its values stored as float64),
+``e[b] = counter_normals(key, B, N n)[b]`` reshaped to ``(N, n)``; the Numba kernel computes them in place,
+vectorised, the other backends take them from the NumPy twin (the same bits).  So all backends give the same
+particles up to float round-off.  A row whose risks
 contain NaN, or are all infinite, is selected uniformly (as :func:`workbench.resampling.systematic_counts`
 does); an infinite risk gets weight zero.
 
