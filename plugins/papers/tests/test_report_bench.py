@@ -33,10 +33,14 @@ def test_a_failing_report_fails_the_group(monkeypatch):
 def test_the_full_size_declares_the_main_job_s_wall_target_and_judges_it(monkeypatch):
     monkeypatch.setattr(report_bench, "_MAIN", "import time; time.sleep(0.2); print('paper 900: fake, 0.1 s')")
     quick = report_bench.bench(quick=True)
-    assert "target_report_wall_s" not in quick  # a smoke run has no wall target
+    assert "target_report_wall_s" not in quick and "target_report_wall_limit_s" not in quick  # a smoke run: none
     monkeypatch.setattr(report_bench, "WALL_TARGET_S", 0.1)  # a child that sleeps 0.2 s misses a 0.1 s target
+    monkeypatch.setattr(report_bench, "WALL_LIMIT_S", 3600.0)  # and meets a one-hour limit
     full = report_bench.bench(quick=False)
     assert full["target_report_wall_s"] == "<= 0.1" and full["measured_report_wall_s"] >= 0.2
     assert full["met_report_wall_s"] is False
+    assert full["target_report_wall_limit_s"] == "<= 3600" and full["met_report_wall_limit_s"] is True
     monkeypatch.setattr(report_bench, "WALL_TARGET_S", 3600.0)
-    assert report_bench.bench(quick=False)["met_report_wall_s"] is True
+    monkeypatch.setattr(report_bench, "WALL_LIMIT_S", 0.1)
+    full = report_bench.bench(quick=False)
+    assert full["met_report_wall_s"] is True and full["met_report_wall_limit_s"] is False
