@@ -94,3 +94,33 @@ def test_every_batch_size_takes_the_compiled_loops_where_numba_is():
         kalman_core.linear_predict(_random_gaussian(rng, B, 4), motion)
         after = kalman_core.backend_counts()
         assert after.get("numba", 0) == before.get("numba", 0) + 1, B
+
+
+def test_a_read_only_jacobian_takes_the_same_compiled_update_as_a_writable_one(monkeypatch):
+    """A model's cached H is often read-only; Numba types a read-only array apart, so handing it on as it is compiled
+    the update a second time in every process that met both (about 3 s each).  The kernel gets a writable H either
+    way, and the numbers are those of the writable one."""
+    from workbench.kernels import kalman_numba
+
+    rng = np.random.default_rng(11)
+    B = 7
+    g = _random_gaussian(rng, B, 4)
+    model = linear_measurement(np.eye(2, 4), 9.0 * np.eye(2))
+    scan = Scan(rng.normal(size=(B, 1, 2)) * 50 + 100, np.ones((B, 1), dtype=bool))
+    seen = []
+    original = kalman_numba.update_items
+
+    def recording(x, P, z, hx, angular, H, *rest):
+        seen.append(H.flags.writeable)
+        return original(x, P, z, hx, angular, H, *rest)
+
+    monkeypatch.setattr(kalman_numba, "update_items", recording)
+    H = np.ascontiguousarray(np.broadcast_to(np.eye(2, 4), (B, 2, 4)))
+    frozen = H.copy()
+    frozen.flags.writeable = False
+    writable_out = kalman_core.kalman_update(g, scan, model, H, "test")
+    frozen_out = kalman_core.kalman_update(g, scan, model, frozen, "test")
+    assert kalman_core.last_backend() == "numba"
+    assert seen == [True, True]
+    np.testing.assert_array_equal(frozen_out.mean, writable_out.mean)
+    np.testing.assert_array_equal(frozen_out.cov, writable_out.cov)

@@ -288,6 +288,8 @@ def kalman_update(state: Gaussian, scan: Scan, model: MeasurementModel, H: np.nd
         Rb = np.ascontiguousarray(R if R.ndim == 3 else R[None] if B == 1 else np.broadcast_to(R, (B, *R.shape)),
                                   dtype=float)
         Hc = np.ascontiguousarray(H)
+        if not Hc.flags.writeable:  # a model's cached read-only H: one compiled signature (a second costs ~3 s)
+            Hc = Hc.copy()
         if z.shape == (B, m) and Hc.shape == (B, m, n) and Rb.shape == (B, m, m):  # the loops index by these
             mean, cov = np.empty(state.mean.shape), np.empty(state.cov.shape)
             if fast.update_items(state.mean, state.cov, np.ascontiguousarray(z, dtype=float), hx, angular, Hc, Rb,
