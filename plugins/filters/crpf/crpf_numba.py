@@ -167,6 +167,15 @@ def run_scalars(scal, t, n):
 
 
 @jit(inline="always")
+def scratch_rows(sc, ic, N):
+    """The per-particle rows both step kernels keep in their scratch ``sc`` (floats) and ``ic`` (ints): positions
+    ``px``, ``py``; ``base`` (lam C_i, then lam C_parent(j)); ``lamc``; ``sd`` (sigma_i); ``cum`` (the PMF's running
+    sum, then the selection edges); ``parent``; ``edges``.  (``F x`` follows them in ``sc`` from row 6 on.)"""
+    return (sc[0:N], sc[N:2 * N], sc[2 * N:3 * N], sc[3 * N:4 * N], sc[4 * N:5 * N], sc[5 * N:6 * N], ic[0:N],
+            ic[N:2 * N + 1])
+
+
+@jit(inline="always")
 def risk_and_select(w, lamc, px, py, zr, zt, sx, sy, q, arc, beta, delta, relative, cum, u0, parent, edges):
     """R = lam C + dC(F x | z) (positions ``px``, ``py`` of ``F x``), its PMF into ``w`` and the parents."""
     costs_into(w, lamc, px, py, zr, zt, sx, sy, q, arc)
@@ -187,15 +196,8 @@ def one_run4(xb, cb, s2b, t, F, zr, zt, eb, u0, shape, scal, xn, cn, s2n, mean, 
     wide_vectors()  # the cost, PMF and moment loops: the CPU's full vector width
     N = xb.shape[0]
     lam, beta, delta, q, arc, sx, sy, relative, a, bn = run_scalars(scal, t, 4)
-    px = sc[0:N]
-    py = sc[N:2 * N]
-    base = sc[2 * N:3 * N]  # lam C_i, then lam C_parent(j)
-    lamc = sc[3 * N:4 * N]
-    sd = sc[4 * N:5 * N]  # sigma_i
-    cum = sc[5 * N:6 * N]  # the PMF's running sum, then the selection edges
+    px, py, base, lamc, sd, cum, parent, edges = scratch_rows(sc, ic, N)
     fx = sc[6 * N:10 * N].reshape((N, 4))  # F x_i
-    parent = ic[0:N]
-    edges = ic[N:2 * N + 1]
     # R = lam C + dC(F x | z): the noise-free positions gathered first, so the cost loop vectorises
     f00, f01, f02, f03 = F[0, 0], F[0, 1], F[0, 2], F[0, 3]
     f10, f11, f12, f13 = F[1, 0], F[1, 1], F[1, 2], F[1, 3]
@@ -286,15 +288,8 @@ def one_run(xb, cb, s2b, t, F, zr, zt, eb, u0, shape, scal, xn, cn, s2n, mean, c
     wide_vectors()  # the cost and PMF loops: the CPU's full vector width
     N, n = xb.shape
     lam, beta, delta, q, arc, sx, sy, relative, a, bn = run_scalars(scal, t, n)
-    px = sc[0:N]
-    py = sc[N:2 * N]
-    base = sc[2 * N:3 * N]  # lam C_i, then lam C_parent(j)
-    lamc = sc[3 * N:4 * N]
-    sd = sc[4 * N:5 * N]  # sigma_i
-    cum = sc[5 * N:6 * N]  # the PMF's running sum, then the selection edges
+    px, py, base, lamc, sd, cum, parent, edges = scratch_rows(sc, ic, N)
     fx = sc[6 * N:(6 + n) * N].reshape((N, n))  # F x_i
-    parent = ic[0:N]
-    edges = ic[N:2 * N + 1]
     # R = lam C + dC(F x | z): the noise-free positions gathered first, so the cost loop vectorises
     for i in range(N):
         for r in range(n):
