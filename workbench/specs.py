@@ -757,8 +757,9 @@ class Task:
     ``timed``: True for a task whose results include wall-clock times (a timing comparison).  Workers that run
     tasks side by side take it apart from the other tasks of its batch: on the confirmation seed once the report's
     own process has drawn the figures and tables (a third process on the cores, whose load a timing taken then
-    would read), or after every other task where the executor cannot hold it back, on the reported seed before them (the report's process only waits there, and a
-    timed task at the start leaves no worker idle at the batch's end).  Declared by the recipe.
+    would read), or after every other task where the executor cannot hold it back; on the reported seed before
+    them (the report's process only waits there, and a timed task at the start leaves no worker idle at the
+    batch's end).  Declared by the recipe.
     """
 
     key: str

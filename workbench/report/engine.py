@@ -60,6 +60,7 @@ import json
 import os
 import socket
 import sys
+import threading
 import time
 import traceback
 from contextlib import contextmanager, suppress
@@ -771,8 +772,6 @@ def _run_papers(recipes: Sequence[RecipeSpec], host: PluginHost, out: Path, *, s
 
     conf_label = f"{label[:-1]}, confirmation seed {again[0].seed})" if again else ""
 
-    import threading
-
     drawn = threading.Event()  # set once this process has drawn the figures: the timed tasks may start then
 
     def confirm_all():
@@ -1254,7 +1253,7 @@ class LocalProcesses:
         here = [t for t in tasks if not _picklable(t.run)]
         waiting = [t for t in tasks if _picklable(t.run)]
         pool = self._start() if waiting else None
-        futures = {}
+        futures, pending = {}, {}  # every task submitted (to cancel), and those not yet handed back
 
         def submit_next() -> None:
             task = waiting.pop(_next_index(waiting, hold))
@@ -1266,7 +1265,6 @@ class LocalProcesses:
                 fut = pool.submit(_process_task, task.run, dict(task.params), seed, arch, self.block, self.retries)
             futures[fut] = pending[fut] = task
 
-        pending = {}
         try:
             # one task more in flight than there are workers (a free worker takes it at once, even while the caller
             # works on a finished task's result); each next one is chosen when a task finishes

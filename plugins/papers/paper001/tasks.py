@@ -318,5 +318,5 @@ def tasks(options: RecipeOptions) -> list[Task]:
     out.append(Task("file", {**common, "source": "file", "file": str(SURROGATE_FILE),
                              "digest": _file_digest(SURROGATE_FILE), "min_speed": MIN_SPEED}, _surrogate_task))
     out.append(Task("timing", {"hough": HOUGH, "tracker": TRACKER, "repeats": 5}, _timing_task,
-                    timed=True))  # wall-clock times: the workers take it after the batch's other tasks
+                    timed=True))  # wall-clock times: taken apart from the batch's other tasks (Task.timed)
     return out

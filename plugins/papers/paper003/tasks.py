@@ -338,5 +338,5 @@ def tasks(options: RecipeOptions) -> list[Task]:
     # every filter's timing in one task, interleaved run by run (compared in one run, :func:`run_timing`)
     out.append(Task(TIMING_TASK, {"filters": list(options.filters), "timing_runs": v["timing_runs"],
                                   "steps": v["steps"], "timing_repeats": v["timing_repeats"]}, run_timing,
-                    timed=True))  # wall-clock times: the workers take it after the batch's other tasks
+                    timed=True))  # wall-clock times: taken apart from the batch's other tasks (Task.timed)
     return out
