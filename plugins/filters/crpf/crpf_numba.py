@@ -31,7 +31,7 @@ import numpy as np
 
 from workbench.kernels.backend import threaded
 from workbench.kernels.counter_normals_numba import row_normals
-from workbench.kernels.particle_numba import atan2  # the select-only atan2 (Cephes' rational approximation) both kernels use
+from workbench.kernels.particle_numba import atan2  # the select-only polynomial atan2 both kernels use
 from workbench.kernels.vector_width import wide_vectors
 
 from .crpf_step_numpy import TWO_PI
