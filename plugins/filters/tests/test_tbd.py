@@ -211,7 +211,10 @@ def test_weights_stay_linear_in_particles_plus_detections_in_memory():
                        axis=2)
     scan = Scan(z, np.ones((1, 400), bool), snr=rng.uniform(5, 12, (1, 400)), clutter_density=np.full((1, 400), 3e-13))
     model = _model()
-    log_likelihood(x[:, :50], scan, model, 15.0, floor="amplitude")  # compile first
+    # the measured call once before the trace: whatever it compiles or loads (a fresh Numba cache, a kernel picked
+    # by the size) is not the weights' memory
+    log_likelihood(x, scan, model, 15.0, floor="amplitude", floor_scale=16.0,
+                   log_weights=np.full((1, 20_000), -np.log(20_000)))
     tracemalloc.start()
     log_likelihood(x, scan, model, 15.0, floor="amplitude", floor_scale=16.0,
                    log_weights=np.full((1, 20_000), -np.log(20_000)))
