@@ -39,7 +39,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from .atan_poly import ATAN_C, TAN_PI_8
+from .atan_poly import TAN_PI_8, atan_reduced
 from .particle_numpy import EXP_COEFFS, EXP_UNDERFLOW, INV_LN2, LN2_HI, LN2_LO
 from .pcg_numba import _pcg_normal, pcg64_stream, pcg_tile
 from .vector_width import wide_vectors
@@ -49,7 +49,6 @@ jit = functools.partial(numba.njit, error_model="numpy", cache=True)
 #: polynomial's multiply-adds (half the instructions of :func:`exp`).
 reduce_jit = functools.partial(numba.njit, error_model="numpy", cache=True, fastmath={"reassoc", "contract"})
 
-c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10 = ATAN_C
 tan_pi_8, pi, two_pi, inv_two_pi = TAN_PI_8, math.pi, 2.0 * math.pi, 1.0 / (2.0 * math.pi)
 e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11, e12, e13 = EXP_COEFFS
 inv_ln2, ln2_hi, ln2_lo, underflow = INV_LN2, LN2_HI, LN2_LO, EXP_UNDERFLOW
@@ -219,11 +218,14 @@ def _fill_normals(pcg, out):
     return out
 
 
+_atan_reduced = jit(inline="always")(atan_reduced)  # the twin's own expression, compiled
+
+
 @jit(inline="always")
 def atan2(y, x):
-    """``atan2(y, x)`` by range reduction (one division) and a degree-10 polynomial by Estrin's scheme (about an
-    ulp), with selects only (a library ``atan2`` per particle does not vectorise; this does): the NumPy twin
-    :func:`.atan_poly.atan2_poly`, the same operations in the same order."""
+    """``atan2(y, x)`` by range reduction (one division) and :func:`.atan_poly.atan_reduced` (a degree-10 polynomial
+    by Estrin's scheme; within 2 ulp), with selects only (a library ``atan2`` per particle does not vectorise; this
+    does): the NumPy twin :func:`.atan_poly.atan2_poly`, the same operations in the same order."""
     ax = abs(x)
     ay = abs(y)
     swap = ay > ax
@@ -233,14 +235,7 @@ def atan2(y, x):
     num = mn - mx if big else mn
     den = mn + mx if big else mx
     t = num / (den if den > 0.0 else 1.0)
-    z = t * t
-    z2 = z * z
-    z4 = z2 * z2
-    z8 = z4 * z4
-    p = (((c0 + c1 * z) + (c2 + c3 * z) * z2) + ((c4 + c5 * z) + (c6 + c7 * z) * z2) * z4
-         + ((c8 + c9 * z) + c10 * z2) * z8)
-    r = t + t * z * p
-    r = r + (0.25 * pi if big else 0.0)
+    r = _atan_reduced(t) + (0.25 * pi if big else 0.0)
     r = 0.5 * pi - r if swap else r
     r = pi - r if math.copysign(1.0, x) < 0.0 else r  # the sign bit: atan2(+-0, -0) = +-pi
     return math.copysign(r, y)
