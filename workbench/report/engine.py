@@ -954,9 +954,89 @@ def _declared_order(batch: _Batch) -> None:
     batch.results = {t.key: batch.results[t.key] for t in batch.tasks if t.key in batch.results}
 
 
+#: The report's figures are drawn (and laid out) at the PNG's resolution; the SVG embeds its rasterized artists
+#: (:data:`SVG_RASTER_MIN_MARKS`) at the same resolution.
+FIGURE_DPI = 110
+
+#: An artist that puts more marks than this into an SVG (a scatter's points, a line's markers, a mesh's cells: one SVG
+#: element each) is drawn there as a bitmap at :data:`FIGURE_DPI`; axes, text, legends and sparse artists stay vector.
+#: Why 1,000: a cloud of 1,000 points of 1-4 pt in a 6.4-inch figure is a texture, not marks read one by one, while
+#: each mark costs the SVG a ``<use>`` element (about 100 bytes; writing a 5,000-point 3D scatter took 0.8 s and
+#: 1 MiB, rasterized 0.16 s and 56 KiB).  Everything below it in the report's figures (markers of a few hundred
+#: points, a colorbar's 256 cells) keeps its vectors.
+SVG_RASTER_MIN_MARKS = 1_000
+
+#: A line without markers is one SVG path however long: it is rasterized only past this many vertices, some 30 times
+#: the PNG's width in pixels (a 6.4-inch figure at :data:`FIGURE_DPI` is 704 pixels wide), far below what it can show.
+SVG_RASTER_MIN_VERTICES = 20_000
+
+
+def _lay_out_once(fig) -> None:
+    """Run ``fig``'s layout engine once, at the figure's dpi, then take the engine off: the axes keep the positions
+    it computed, and neither save (PNG, SVG) lays the figure out again.
+
+    ``savefig`` with an engine set first draws the whole figure without output to lay it out, then draws it again
+    for real; with none set it draws once (``FigureCanvasBase.print_figure``).  The engine is run here as
+    ``Figure.draw`` runs it (only with axes; a ``ValueError`` ignored), with a renderer at the figure's dpi, the
+    PNG's, as ``savefig`` would: so the positions are those ``savefig(dpi=FIGURE_DPI)`` computes.
+    """
+    import matplotlib as mpl
+
+    layout = fig.get_layout_engine()
+    if layout is None:
+        return
+    if fig.axes:
+        with suppress(ValueError):
+            layout.execute(fig)
+    # None removes the engine (``"none"`` would leave a place holder, and savefig lays out again for any engine);
+    # the rc settings that would turn None into an engine are held off for the call
+    with mpl.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        fig.set_layout_engine(None)
+
+
+def _marks(artist) -> tuple[int, int]:
+    """How many separate marks ``artist`` writes into an SVG, and the vertices of its paths (0 where not counted)."""
+    from matplotlib.collections import Collection
+
+    if isinstance(artist, Collection):
+        offsets = artist.get_offsets()
+        paths = artist.get_paths()
+        return max(0 if offsets is None else len(offsets), len(paths)), sum(len(p.vertices) for p in paths)
+    points = int(np.size(artist.get_xdata()))  # a Line2D (Line3D included)
+    has_markers = artist.get_marker() not in (None, "None", "none", "", " ")
+    return (points if has_markers else 1), points
+
+
+def _rasterize_dense(fig) -> list:
+    """Mark the artists of ``fig`` that are too dense to be worth vectors (:data:`SVG_RASTER_MIN_MARKS`,
+    :data:`SVG_RASTER_MIN_VERTICES`) as rasterized; returns them.
+
+    Vector outputs (SVG) then embed a bitmap of just those artists; PNG output is unchanged (matplotlib ignores the
+    setting for pixel output).  Images are left alone: an SVG already embeds them as bitmaps.
+    """
+    import warnings
+
+    from matplotlib.collections import Collection
+    from matplotlib.lines import Line2D
+
+    dense = [a for a in fig.findobj(lambda a: isinstance(a, (Collection, Line2D)))
+             if a.get_visible() and not a.get_rasterized()
+             and ((m := _marks(a))[0] > SVG_RASTER_MIN_MARKS or m[1] > SVG_RASTER_MIN_VERTICES)]
+    with warnings.catch_warnings():
+        # mplot3d's Path3DCollection.draw lacks matplotlib's rasterization marker, so set_rasterized warns it is
+        # ignored, but it calls PathCollection.draw, which honours it (tests/test_figure_saving.py checks the image)
+        warnings.filterwarnings("ignore", message="Rasterization of .* will be ignored")
+        for artist in dense:
+            artist.set_rasterized(True)
+    return dense
+
+
 def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutcome, paper_dir: Path,
                        formats: Sequence[str]) -> None:
-    """The recipe's figures (data, PNG and SVG) and tables from ``results``, into ``paper_dir`` and ``outcome``."""
+    """The recipe's figures (data, PNG and SVG) and tables from ``results``, into ``paper_dir`` and ``outcome``.
+
+    Each figure is laid out once (:func:`_lay_out_once`) for both saves, and its dense artists are rasterized in
+    the SVG (:func:`_rasterize_dense`)."""
     from matplotlib.figure import Figure
 
     for spec in recipe.figures:
@@ -967,13 +1047,15 @@ def _draw_and_tabulate(recipe: RecipeSpec, results: Mapping, outcome: PaperOutco
             parts["data"], t0 = time.perf_counter() - t0, time.perf_counter()
             figure_data_csv(data, paper_dir / f"{spec.id}.csv")
             parts["csv"], t0 = time.perf_counter() - t0, time.perf_counter()
-            fig = Figure(figsize=spec.size, layout="constrained")
+            fig = Figure(figsize=spec.size, dpi=FIGURE_DPI, layout="constrained")
             spec.draw(data, fig)
-            fig.savefig(paper_dir / f"{spec.id}.png", dpi=110)
+            _lay_out_once(fig)
+            fig.savefig(paper_dir / f"{spec.id}.png", dpi=FIGURE_DPI)
             parts["draw and png"], t0 = time.perf_counter() - t0, time.perf_counter()
             svg = paper_dir / f"{spec.id}.svg"
             if "svg" in formats:
-                fig.savefig(svg)
+                _rasterize_dense(fig)
+                fig.savefig(svg, dpi=FIGURE_DPI)
                 parts["svg"] = time.perf_counter() - t0
             else:
                 svg.unlink(missing_ok=True)  # never link an SVG of an earlier report beside this PNG
