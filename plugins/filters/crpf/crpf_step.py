@@ -40,10 +40,11 @@ Taichi reads the annotations as objects.)
 
 import numpy as np
 
+from workbench.kernels.atan_poly import atan2_poly  # the kernels' atan2's NumPy twin, exported for its tests
 from workbench.kernels.backend import current_arch, numba_available, resolve as resolve_backend
 from workbench.kernels.runtime import ensure_taichi
 
-from .crpf_step_numpy import _check, atan2_poly, crpf_step_numpy, pmf_offset, propagation_normals
+from .crpf_step_numpy import _check, crpf_step_numpy, pmf_offset, propagation_normals
 
 __all__ = ["crpf_step", "crpf_step_numpy", "numba_available", "pmf_offset", "propagation_normals", "resolve_backend",
            "atan2_poly"]

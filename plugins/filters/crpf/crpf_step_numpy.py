@@ -9,14 +9,12 @@ import math
 
 import numpy as np
 
-from workbench.kernels.atan_poly import ATAN_C, TAN_PI_8, atan2_poly  # noqa: F401 (re-exported)
 from workbench.kernels.counter_normals import counter_normals, counter_normals_numpy
 from workbench.linalg import wrap_angle
 from workbench.models import range_bearing
 from workbench.resampling import normalise_log_weights, systematic_counts
 
-__all__ = ["crpf_step_numpy", "propagation_normals", "pmf_offset", "atan2_poly", "ATAN_C", "TAN_PI_8",
-           "TWO_PI"]
+__all__ = ["crpf_step_numpy", "propagation_normals", "pmf_offset", "TWO_PI"]
 
 TWO_PI = 2.0 * math.pi
 
