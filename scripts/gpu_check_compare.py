@@ -4,6 +4,7 @@ an arch, and gather the steps' records into ``gpu-check.json``.
 
     python scripts/gpu_check_compare.py compare A B --rtol 1e-6 --json compare.json
     python scripts/gpu_check_compare.py crpf-step --arch cuda --json crpf-cuda.json
+    python scripts/gpu_check_compare.py method-c --arch cuda --json method-c-cuda.json
     python scripts/gpu_check_compare.py summary --out DIR --work WORK --arch cuda --size quick --rtol 1e-6
 
 ``compare`` runs ``scripts/compare_reports.py`` on the two folders and writes its lines with a verdict: ``agree``
@@ -71,6 +72,47 @@ def crpf_step(arch: str, repeat: int) -> dict:
     return out
 
 
+#: The method-C kernel's sizes timed on each arch: N = 10^5 and 10^6 particles by M = 10^3 and 10^4 measurements.
+METHOD_C_SIZES = ((100_000, 1_000), (100_000, 10_000), (1_000_000, 1_000), (1_000_000, 10_000))
+
+
+def method_c(arch: str, repeat: int, sizes=METHOD_C_SIZES) -> dict:
+    """The method-C weight kernel's throughput (particle-measurement pairs per second) with the kernels on ``arch``,
+    in float64 and float32, at each of ``sizes``: the best of ``repeat`` calls after one warm-up call (compilation),
+    each call the public ``tbd_log_weight_sums`` (its packing and, on a GPU, the transfers included).  Each size's
+    float32 and float64 results are checked against each other (``max_abs_difference``, log-weight sums)."""
+    import time
+
+    import numpy as np
+    from workbench.kernels.backend import resolve, using
+    from workbench_filters.tbd.reference import kernel_inputs
+    from workbench_filters.tbd.tbd_weights import tbd_log_weight_sums
+
+    rows = []
+    with using(arch):
+        backend = resolve("auto", arch)
+        for n, m in sizes:
+            inputs = kernel_inputs(n, m)
+            row = {"N": n, "M": m}
+            results = {}
+            for precision in ("float64", "float32"):
+                best = float("inf")
+                for i in range(repeat + 1):
+                    start = time.perf_counter()
+                    results[precision] = tbd_log_weight_sums(*inputs, backend=backend, precision=precision)
+                    if i:  # the first call compiles
+                        best = min(best, time.perf_counter() - start)
+                row[f"{precision}_seconds"] = best
+                row[f"{precision}_pairs_per_s"] = n * m / best
+            row["float32_over_float64"] = row["float32_pairs_per_s"] / row["float64_pairs_per_s"]
+            row["max_abs_difference"] = float(np.max(np.abs(results["float32"] - results["float64"])))
+            rows.append(row)
+            print(f"N {n:>9,d} M {m:>6,d}  float64 {row['float64_pairs_per_s']:.3e} pairs/s  "
+                  f"float32 {row['float32_pairs_per_s']:.3e} pairs/s  f32/f64 {row['float32_over_float64']:.2f}  "
+                  f"max |f32 - f64| {row['max_abs_difference']:.2e}", flush=True)
+    return {"arch": arch, "backend": backend, "repeat": repeat, "cpu_count": os.cpu_count(), "rows": rows}
+
+
 def _read_json(path: Path):
     try:
         return json.loads(path.read_text())
@@ -93,6 +135,18 @@ def _pytest_result(log: Path) -> str | None:
 def _device() -> dict:
     out = {"host": platform.node(), "machine": platform.machine(), "cpu_count": os.cpu_count(),
            "python": platform.python_version()}
+    from importlib import metadata
+
+    versions = {}
+    for name in ("numpy", "numba", "llvmlite", "taichi", "scipy", "matplotlib"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    out["packages"] = versions
+    with contextlib.suppress(OSError):  # the CPU model, where Linux says
+        out["cpu_model"] = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
+                                 if line.startswith("model name")), None)
     if shutil.which("nvidia-smi"):
         with contextlib.suppress(OSError, subprocess.SubprocessError):
             out["gpu"] = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version",
@@ -117,11 +171,21 @@ def summary(out_dir: Path, work: Path, arch: str, size: str, rtol: float) -> dic
     for path in sorted(work.glob("bench-*.json")):
         bench[path.stem[len("bench-"):]] = _read_json(path)
     crpf = {path.stem[len("crpf-"):]: _read_json(path) for path in sorted(work.glob("crpf-*.json"))}
+    kernel = {path.stem[len("method-c-"):]: _read_json(path) for path in sorted(work.glob("method-c-*.json"))}
+    reports = {}
+    for folder in sorted(work.glob("report-*")):
+        outcome = _read_json(folder / "paper000" / "outcome.json")
+        if isinstance(outcome, dict):
+            times = outcome.get("task_times") or {}
+            reports[folder.name[len("report-"):]] = {
+                "size": outcome.get("size"), "seconds": outcome.get("seconds"),
+                "computed_task_seconds": times.get("computed_seconds"), "counts": times.get("counts"),
+                "tasks": [{k: row.get(k) for k in ("task", "runs", "seconds")} for row in times.get("rows", [])]}
     comparison = _read_json(work / "compare.json") or {"rtol": rtol, "verdict": "not run"}
     failed = [s["name"] for s in steps if s["status"] != "ok" and s["status"] != "skipped"]
     return {"arch": arch, "size": size, "out": str(out_dir), "work": str(work), "device": _device(),
             "ok": not failed and comparison.get("verdict") == "agree", "failed_steps": failed, "steps": steps,
-            "compare": comparison, "bench": bench, "crpf_step": crpf}
+            "compare": comparison, "bench": bench, "crpf_step": crpf, "method_c": kernel, "reports": reports}
 
 
 def main(argv=None) -> int:
@@ -135,6 +199,10 @@ def main(argv=None) -> int:
     p = sub.add_parser("crpf-step", help="time the CRPF step on an arch")
     p.add_argument("--arch", required=True)
     p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--json", type=Path, required=True)
+    p = sub.add_parser("method-c", help="time the method-C weight kernel on an arch at N = 1e5, 1e6 x M = 1e3, 1e4")
+    p.add_argument("--arch", required=True)
+    p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--json", type=Path, required=True)
     p = sub.add_parser("summary", help="write gpu-check.json")
     p.add_argument("--out", type=Path, required=True)
@@ -154,6 +222,10 @@ def main(argv=None) -> int:
         args.json.write_text(json.dumps(result, indent=1, default=str))
         for key, value in result.items():
             print(f"{key:60s} {value}")
+        return 0
+    if args.command == "method-c":
+        result = method_c(args.arch, args.repeat)
+        args.json.write_text(json.dumps(result, indent=1))
         return 0
     result = summary(args.out, args.work, args.arch, args.size, args.rtol)
     (args.out / "gpu-check.json").write_text(json.dumps(result, indent=1, default=str))

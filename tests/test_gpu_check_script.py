@@ -41,13 +41,14 @@ def dry_run(*args, **kw) -> dict:
 def test_dry_run_on_cuda_names_each_arch_and_the_out_folder(tmp_path):
     out = tmp_path / "out"
     steps = dry_run("--arch", "cuda", "--out", str(out), "--work", str(tmp_path / "w"))
-    assert list(steps) == ["tests", "bench-cuda", "bench-cpu", "report-cuda", "report-cpu", "compare"]
+    assert list(steps) == ["tests", "kernels-cuda", "kernels-cpu", "report-cuda", "report-cpu", "compare"]
     for name, (command, log) in steps.items():
         assert log == f"{out}/{name}.log"
     assert "WORKBENCH_TEST_ARCH=cuda " in steps["tests"][0] and "taichi-cuda" in steps["tests"][0]
     for arch in ("cuda", "cpu"):
-        bench = steps[f"bench-{arch}"][0]
-        assert f"bench --quick --only tbd-weights --arch {arch} " in bench and f"crpf-step --arch {arch} " in bench
+        kernels = steps[f"kernels-{arch}"][0]
+        assert f"method-c --arch {arch} --json {tmp_path}/w/method-c-{arch}.json" in kernels
+        assert f"bench --quick --only tbd-weights --arch {arch} " in kernels and f"crpf-step --arch {arch} " in kernels
         report = steps[f"report-{arch}"][0]
         assert f"report --paper 000 --quick --arch {arch} --out {tmp_path}/w/report-{arch} " in report
     compare = shlex.split(steps["compare"][0])
@@ -59,11 +60,19 @@ def test_dry_run_on_cuda_names_each_arch_and_the_out_folder(tmp_path):
 
 def test_dry_run_on_the_cpu_stand_in_runs_the_cpu_twice_and_full_size_changes_the_sizes(tmp_path):
     steps = dry_run("--arch", "cpu", "--out", str(tmp_path), "--size", "full", "--rtol", "1e-5")
-    assert list(steps) == ["tests", "bench-cpu", "report-cpu", "report-cpu-again", "compare"]
+    assert list(steps) == ["tests", "kernels-cpu", "report-cpu", "report-cpu-again", "compare"]
     assert "WORKBENCH_TEST_ARCH=cpu " in steps["tests"][0]
-    assert "--quick" not in steps["bench-cpu"][0] and "--arch cpu" in steps["bench-cpu"][0]
+    assert "--quick" not in steps["kernels-cpu"][0] and "--arch cpu" in steps["kernels-cpu"][0]
     assert "--full --arch cpu" in steps["report-cpu"][0] and "--full --arch cpu" in steps["report-cpu-again"][0]
     assert "--rtol 1e-5" in steps["compare"][0]
+
+
+def test_report_size_sets_the_reports_alone(tmp_path):
+    steps = dry_run("--arch", "cuda", "--out", str(tmp_path), "--report-size", "full")
+    assert "bench --quick " in steps["kernels-cuda"][0] and "bench --quick " in steps["kernels-cpu"][0]
+    assert "--full --arch cuda" in steps["report-cuda"][0] and "--full --arch cpu" in steps["report-cpu"][0]
+    steps = dry_run("--arch", "cuda", "--out", str(tmp_path), "--size", "full", "--report-size", "quick")
+    assert "--quick" not in steps["kernels-cuda"][0] and "--quick --arch cuda" in steps["report-cuda"][0]
 
 
 def test_out_folder_defaults_to_OUT_then_to_gpu_check_out_and_wheels_add_the_install(tmp_path):
@@ -79,6 +88,7 @@ def test_out_folder_defaults_to_OUT_then_to_gpu_check_out_and_wheels_add_the_ins
 @pytest.mark.parametrize("args, message", [
     (["--arch", "tpu"], "--arch must be cuda, vulkan or cpu, not 'tpu'"),
     (["--size", "huge"], "--size must be quick or full"),
+    (["--report-size", "huge"], "--report-size must be quick or full, not 'huge'"),
     (["--deadline", "soon"], "--deadline must be a whole number"),
     (["--rtol", "tight"], "--rtol must be a number"),
     (["--frobnicate"], "unknown argument '--frobnicate'"),
@@ -151,6 +161,12 @@ def test_summary_gathers_the_steps_and_fails_on_a_failed_step(tmp_path):
     make_report(work / "report-cpu-again")
     compare(work / "report-cpu", work / "report-cpu-again", work)
     (work / "bench-cpu.json").write_text(json.dumps({"groups": {"tbd-weights": {"kernel_arch": "cpu"}}}))
+    (work / "method-c-cpu.json").write_text(json.dumps({"arch": "cpu", "rows": [{"N": 10, "M": 2}]}))
+    times = {"computed_seconds": 12.5, "counts": {"computed": 2, "cached": 0},
+             "rows": [{"task": "sweep", "runs": 20, "seconds": 10.0, "share_percent": 80.0, "status": "computed"},
+                      {"task": "timing", "runs": 1, "seconds": 2.5, "share_percent": 20.0, "status": "computed"}]}
+    (work / "report-cpu" / "paper000" / "outcome.json").write_text(
+        json.dumps({"size": "full", "seconds": 33.0, "task_times": times, "criteria": []}))
     (out / "tests.log").write_text("....\n18 passed, 36 deselected, 1 warning in 30.52s\n")
     rows = [("tests", "ok", 0, 30.5), ("bench-cpu", "ok", 0, 120.0), ("report-cpu", "ok", 0, 40.0),
             ("report-cpu-again", "ok", 0, 41.0), ("compare", "ok", 0, 1.0)]
@@ -168,6 +184,27 @@ def test_summary_gathers_the_steps_and_fails_on_a_failed_step(tmp_path):
     assert got["steps"][1] == {"name": "bench-cpu", "status": "ok", "exit": 0, "seconds": 120.0,
                                "log": "bench-cpu.log", "command": "cmd bench-cpu"}
     assert got["compare"]["verdict"] == "agree" and got["bench"]["cpu"]["groups"]["tbd-weights"]["kernel_arch"] == "cpu"
+    assert got["method_c"] == {"cpu": {"arch": "cpu", "rows": [{"N": 10, "M": 2}]}}
+    assert got["reports"] == {"cpu": {"size": "full", "seconds": 33.0, "computed_task_seconds": 12.5,
+                                      "counts": {"computed": 2, "cached": 0},
+                                      "tasks": [{"task": "sweep", "runs": 20, "seconds": 10.0},
+                                                {"task": "timing", "runs": 1, "seconds": 2.5}]}}
     rows[2] = ("report-cpu", "timed out", 124, 240.0)
     code, got = summary(rows)
     assert code == 1 and not got["ok"] and got["failed_steps"] == ["report-cpu"]
+
+
+def test_method_c_times_each_size_and_precision_and_compares_them(monkeypatch):
+    """The method-C timing on the CPU arch at small sizes: a row per size, rates from the calls' own times, the
+    float32 result within the float32 kernel's tolerance of the float64 one."""
+    monkeypatch.syspath_prepend(str(HELPER.parent))
+    import gpu_check_compare
+
+    got = gpu_check_compare.method_c("cpu", 1, sizes=((300, 7), (50, 40)))
+    assert got["arch"] == "cpu" and got["repeat"] == 1 and got["backend"] in ("numba", "taichi")
+    assert [(r["N"], r["M"]) for r in got["rows"]] == [(300, 7), (50, 40)]
+    for row in got["rows"]:
+        for precision in ("float64", "float32"):
+            assert row[f"{precision}_pairs_per_s"] == pytest.approx(row["N"] * row["M"] / row[f"{precision}_seconds"])
+        assert row["float32_over_float64"] == pytest.approx(row["float32_pairs_per_s"] / row["float64_pairs_per_s"])
+        assert 0 < row["max_abs_difference"] < 1e-3  # float32 arithmetic, not the same numbers, not far off
