@@ -11,7 +11,8 @@ times.
 Only the papers in both folders are compared: a paper that only one report has is listed as such, which is a
 difference of coverage, not of numbers (``--same-papers`` makes it one).
 
-Exit status 0 when everything compared agrees, 1 otherwise; one line per table and figure either way.
+Exit status 0 when everything compared agrees, 1 otherwise; one line per table and figure either way, and under a
+table that differs, its first differing cells (row, column, both values).
 
     python scripts/compare_reports.py before/ after/ [--rtol 1e-9]
 """
@@ -27,6 +28,8 @@ from pathlib import Path
 import numpy as np
 
 TIMING = re.compile(r"(second|time|\(s\)|\(ms\)|\bms\b|\bus\b|µs|speed|wall|cpu|per run|_s$|_s_)", re.IGNORECASE)
+#: The differing cells of a table that are listed (row, column, both values), the rest counted.
+MAX_CELLS = 6
 #: Cells that hold a criterion's verdict word rather than a number (the verdict format is the report's, not a result).
 VERDICT_WORDS = {"met", "not met", "NOT met", "inconclusive", "not attainable", "not judgeable", "indicative"}
 
@@ -69,7 +72,7 @@ def compare_tables(pa: dict, pb: dict, rtol: float, out: list[str]) -> bool:
             out.append(f"  table {t['id']}: different columns or row count")
             good = False
             continue
-        worst, ok = 0.0, True
+        worst, ok, cells = 0.0, True, []
         for ra, rb in zip(t["rows"], other["rows"]):
             for i in keep:
                 a, b = _cell(ra[i]), _cell(rb[i])
@@ -81,11 +84,15 @@ def compare_tables(pa: dict, pb: dict, rtol: float, out: list[str]) -> bool:
                     same, rel = True, 0.0  # a text quoting measured times
                 else:
                     same, rel = str(ra[i]) == str(rb[i]), 0.0
+                if not same:
+                    cells.append(f"    row {str(ra[0])[:60]!r}, column {t['columns'][i]!r}: {ra[i]} against {rb[i]}")
                 ok &= same
                 worst = max(worst, rel)
         skipped = len(t["columns"]) - len(keep)
         out.append(f"  table {t['id']}: {'identical' if worst == 0 and ok else ('agrees' if ok else 'DIFFERS')}"
                    f" (max relative difference {worst:.2g}{f', {skipped} timing column(s) skipped' if skipped else ''})")
+        out.extend(cells[:MAX_CELLS] + ([f"    ... and {len(cells) - MAX_CELLS} more cells"]
+                                        if len(cells) > MAX_CELLS else []))
         good &= ok
     ids = {t["id"] for t in pa["tables"]}
     for t in pb["tables"]:
@@ -93,6 +100,24 @@ def compare_tables(pa: dict, pb: dict, rtol: float, out: list[str]) -> bool:
             out.append(f"  table {t['id']}: missing in the first report")
             good = False
     return good
+
+
+def _largest_difference(name: str, a, b, labels) -> str | None:
+    """Where two numeric arrays of a figure differ most: the index, both values and, where the figure's
+    ``labels`` name the rows of its first axis, that row's label."""
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape or a.dtype.kind not in "fciub" or b.dtype.kind not in "fciub" or a.size == 0:
+        return None
+    with np.errstate(invalid="ignore"):
+        gap = np.where(np.isfinite(a) & np.isfinite(b), np.abs(a.astype(float) - b.astype(float)), 0.0)
+    if not np.any(gap):
+        return None
+    at = np.unravel_index(int(np.argmax(gap)), a.shape)
+    row = ""
+    if labels is not None and a.ndim >= 1 and np.ndim(labels) == 1 and len(labels) == a.shape[0]:
+        row = f" (row {str(labels[at[0]])[:60]!r})"
+    index = ", ".join(str(int(i)) for i in at)
+    return f"    {name}[{index}]{row}: {a[at]:.6g} against {b[at]:.6g}"
 
 
 def compare_figures(da: Path, db: Path, rtol: float, out: list[str]) -> bool:
@@ -105,7 +130,7 @@ def compare_figures(da: Path, db: Path, rtol: float, out: list[str]) -> bool:
             continue
         with np.load(fa, allow_pickle=False) as xa, np.load(fb, allow_pickle=False) as xb:
             names = [n for n in xa.files if not TIMING.search(n)]
-            worst, ok, bad = 0.0, set(xa.files) == set(xb.files), []
+            worst, ok, bad, where = 0.0, set(xa.files) == set(xb.files), [], []
             for n in names:
                 if n not in xb.files:
                     ok, bad = False, bad + [n]
@@ -113,10 +138,12 @@ def compare_figures(da: Path, db: Path, rtol: float, out: list[str]) -> bool:
                 same, rel = _close(xa[n], xb[n], rtol)
                 if not same:
                     bad.append(n)
+                    where.append(_largest_difference(n, xa[n], xb[n], xa["labels"] if "labels" in xa.files else None))
                 ok &= same
                 worst = max(worst, rel)
         status = "identical" if ok and worst == 0 else ("agrees" if ok else "DIFFERS in " + ", ".join(bad[:6]))
         out.append(f"  figure {fa.stem}: {status} (max relative difference {worst:.2g})")
+        out.extend(w for w in where[:MAX_CELLS] if w)
         good &= ok
     for fb in sorted(db.glob("*.npz")):
         if not (da / fb.name).exists():

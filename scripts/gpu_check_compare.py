@@ -80,7 +80,8 @@ def method_c(arch: str, repeat: int, sizes=METHOD_C_SIZES) -> dict:
     """The method-C weight kernel's throughput (particle-measurement pairs per second) with the kernels on ``arch``,
     in float64 and float32, at each of ``sizes``: the best of ``repeat`` calls after one warm-up call (compilation),
     each call the public ``tbd_log_weight_sums`` (its packing and, on a GPU, the transfers included).  Each size's
-    float32 and float64 results are checked against each other (``max_abs_difference``, log-weight sums)."""
+    float32 and float64 results are checked against each other (``max_abs_difference``, log-weight sums).  Where
+    Taichi runs the kernel, the call's parts too (:func:`_taichi_parts`)."""
     import time
 
     import numpy as np
@@ -104,6 +105,8 @@ def method_c(arch: str, repeat: int, sizes=METHOD_C_SIZES) -> dict:
                         best = min(best, time.perf_counter() - start)
                 row[f"{precision}_seconds"] = best
                 row[f"{precision}_pairs_per_s"] = n * m / best
+                if backend == "taichi":  # where the call's time goes: the packing, and the kernel alone
+                    row.update(_taichi_parts(inputs, precision, repeat))
             row["float32_over_float64"] = row["float32_pairs_per_s"] / row["float64_pairs_per_s"]
             row["max_abs_difference"] = float(np.max(np.abs(results["float32"] - results["float64"])))
             rows.append(row)
@@ -111,6 +114,52 @@ def method_c(arch: str, repeat: int, sizes=METHOD_C_SIZES) -> dict:
                   f"float32 {row['float32_pairs_per_s']:.3e} pairs/s  f32/f64 {row['float32_over_float64']:.2f}  "
                   f"max |f32 - f64| {row['max_abs_difference']:.2e}", flush=True)
     return {"arch": arch, "backend": backend, "repeat": repeat, "cpu_count": os.cpu_count(), "rows": rows}
+
+
+def _taichi_parts(inputs, precision: str, repeat: int) -> dict:
+    """The Taichi method-C call in parts (best of ``repeat`` after a warm-up each): the host-side packing of the
+    inputs, and the kernel alone on inputs already on the device (Taichi ndarrays, synchronised), as pairs/s."""
+    import time
+
+    import numpy as np
+    import taichi as ti
+    from workbench_filters.tbd.tbd_weights import LOG2E, pack_measurements, pack_points
+    from workbench_filters.tbd.tbd_weights_taichi import _taichi_kernel
+
+    points, z, valid, log_pd, sigma_p, sigma_vr = inputs
+
+    def pack():
+        pts, origin = pack_points(points, sigma_vr, precision)
+        return (pts, *pack_measurements(z, valid, log_pd, sigma_p, sigma_vr, precision, origin))
+
+    def best(fn):
+        fn()
+        times = []
+        for _ in range(repeat):
+            start = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - start)
+        return min(times)
+
+    pts, meas, counts = pack()
+    real = ti.f64 if precision == "float64" else ti.f32
+    on_device = []
+    for array, dtype in ((pts, real), (meas, real), (counts, ti.i32)):
+        nd = ti.ndarray(dtype, shape=array.shape)
+        nd.from_numpy(np.ascontiguousarray(array))
+        on_device.append(nd)
+    out = ti.ndarray(ti.f64, shape=(pts.shape[0], pts.shape[2]))
+    kernel = _taichi_kernel(precision)
+    beta2 = 0.5 / float(sigma_vr) ** 2 * LOG2E
+
+    def run():
+        kernel(*on_device, beta2, out)
+        ti.sync()
+
+    pairs = pts.shape[0] * pts.shape[2] * int(counts.max())
+    pack_s, kernel_s = best(pack), best(run)
+    return {f"{precision}_pack_seconds": pack_s, f"{precision}_kernel_seconds": kernel_s,
+            f"{precision}_kernel_pairs_per_s": pairs / kernel_s}
 
 
 def _read_json(path: Path):

@@ -65,3 +65,37 @@ def test_a_table_or_figure_only_one_report_has_in_a_shared_paper_is_named(tmp_pa
         assert f"table more: missing in the {where} report" in text
         assert f"figure more: missing in the {where} report" in text
         assert "table t1: identical" in text and "figure fig1: identical" in text
+
+
+def test_a_difference_is_located_the_table_cell_and_the_figure_row(tmp_path):
+    def folder(name, median, late):
+        (tmp_path / name / "paper000").mkdir(parents=True)
+        rows = [["A", "236.0", "0.4"], ["C, 2 m/s kernel", f"{median}", "1.8"]] + [[f"r{i}", "1", "0"] for i in range(8)]
+        (tmp_path / name / "summary.json").write_text(json.dumps({"papers": [{"paper": "000", "tables": [
+            {"id": "table3", "columns": ["method", "whole: median (m)", "run time (s)"], "rows": rows}]}]}))
+        e = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, late]])
+        np.savez(tmp_path / name / "paper000" / "fig13.npz", e_error=e, labels=np.array(["A", "C, 2 m/s kernel"]))
+        return tmp_path / name
+
+    a = folder("a", 136.9, 4197.91)
+    code, text = compare(a, folder("b", 136.6, 4201.74), "--rtol", "1e-6")
+    lines = text.splitlines()
+    assert code == 1
+    at = lines.index("  table table3: DIFFERS (max relative difference 0.0022, 1 timing column(s) skipped)")
+    assert lines[at + 1] == "    row 'C, 2 m/s kernel', column 'whole: median (m)': 136.9 against 136.6"
+    at = lines.index("  figure fig13: DIFFERS in e_error (max relative difference 0.00091)")
+    assert lines[at + 1] == "    e_error[1, 2] (row 'C, 2 m/s kernel'): 4197.91 against 4201.74"
+    # many differing cells: the first six listed, the rest counted
+    many = folder("c", 136.9, 4197.91)
+    summary = json.loads((many / "summary.json").read_text())
+    for row in summary["papers"][0]["tables"][0]["rows"]:
+        row[1] = "7" if row[0].startswith("r") else row[1]
+    (many / "summary.json").write_text(json.dumps(summary))
+    code, text = compare(a, many)
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("  table table3: DIFFERS"))
+    assert [line.split(",")[0] for line in lines[at + 1:at + 7]] == [f"    row 'r{i}'" for i in range(6)]
+    assert lines[at + 7] == "    ... and 2 more cells"
+    # agreeing reports list no cells
+    code, text = compare(a, folder("d", 136.9, 4197.91))
+    assert code == 0 and not any(line.startswith("    ") for line in text.splitlines())

@@ -194,14 +194,28 @@ def test_summary_gathers_the_steps_and_fails_on_a_failed_step(tmp_path):
     assert code == 1 and not got["ok"] and got["failed_steps"] == ["report-cpu"]
 
 
-def test_method_c_times_each_size_and_precision_and_compares_them(monkeypatch):
+@pytest.mark.parametrize("preferred", [None, "taichi"])
+def test_method_c_times_each_size_and_precision_and_compares_them(monkeypatch, preferred):
     """The method-C timing on the CPU arch at small sizes: a row per size, rates from the calls' own times, the
-    float32 result within the float32 kernel's tolerance of the float64 one."""
+    float32 result within the float32 kernel's tolerance of the float64 one; under Taichi (as on a GPU) the call's
+    parts too."""
+    import contextlib
+
+    from workbench.kernels.backend import preferring, runs_numba
+
     monkeypatch.syspath_prepend(str(HELPER.parent))
     import gpu_check_compare
 
-    got = gpu_check_compare.method_c("cpu", 1, sizes=((300, 7), (50, 40)))
-    assert got["arch"] == "cpu" and got["repeat"] == 1 and got["backend"] in ("numba", "taichi")
+    with preferring(preferred) if preferred else contextlib.nullcontext():
+        got = gpu_check_compare.method_c("cpu", 1, sizes=((300, 7), (50, 40)))
+        expected = "numba" if runs_numba() else "taichi"
+    assert got["arch"] == "cpu" and got["repeat"] == 1 and got["backend"] == expected
+    for row in got["rows"]:
+        parts = {"float64_pack_seconds", "float64_kernel_seconds", "float64_kernel_pairs_per_s"}
+        assert parts <= set(row) if expected == "taichi" else not parts & set(row)
+        if expected == "taichi":
+            assert row["float64_kernel_pairs_per_s"] == pytest.approx(row["N"] * row["M"]
+                                                                      / row["float64_kernel_seconds"])
     assert [(r["N"], r["M"]) for r in got["rows"]] == [(300, 7), (50, 40)]
     for row in got["rows"]:
         for precision in ("float64", "float32"):
