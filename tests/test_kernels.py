@@ -252,6 +252,44 @@ def test_float64_packing_expands_the_log_weight_exactly():
     np.testing.assert_allclose(got, expect, rtol=1e-12, atol=1e-9)
 
 
+@pytest.mark.skipif(not numba_available(), reason="the compiled packing is a Numba kernel")
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_compiled_packing_gives_the_numpy_rows_and_origin_bit_for_bit(precision):
+    """The kernels' packing of the particles (compiled, threaded from SERIAL_PACK particles on) against the NumPy
+    function it stands in for: every row and the origin identical, for one particle, odd sizes, both compilations,
+    far from the origin, and in every layout a filter hands over: C-ordered (the origin summed compiled), Fortran
+    order, a slice of wider states, and components outermost (a filter's (n, B, N) states seen as (B, N, n):
+    there NumPy's mean sums pairwise, and its own mean is taken)."""
+    from workbench_filters.tbd import tbd_weights as tw
+    from workbench_filters.tbd import tbd_weights_numba as nb
+
+    rng = np.random.default_rng(17)
+    for B, N in [(1, 1), (3, 7), (2, 600), (2, 1001), (5, 4099), (1, tw.SERIAL_PACK + 3)]:
+        points = rng.normal(size=(B, N, 4)) * [800.0, 800.0, 500.0, 30.0] + [1e6, -3e5, 2e3, -190.0]
+        wider = np.concatenate([points, rng.normal(size=(B, N, 2))], axis=-1)
+        layouts = {"C": points, "F": np.asfortranarray(points), "slice": wider[..., :4],
+                   "components outermost": np.ascontiguousarray(points.transpose(2, 0, 1)).transpose(1, 2, 0)}
+        for name, given in layouts.items():
+            expect, origin = pack_points(given, 15.0, precision)
+            got, got_origin = tw._pack_points(given, 15.0, precision)
+            assert got.dtype == expect.dtype and got.shape == expect.shape
+            assert np.array_equal(got, expect) and np.array_equal(got_origin, origin), (B, N, name)
+        # both compilations of the rows, whichever the size picked above, and the compiled origin
+        expect, origin = pack_points(points, 15.0, precision)
+        found = np.empty((B, 3))
+        nb.mean_position_compiled(points, found)
+        assert np.array_equal(found, origin)
+        for fn in ((nb.pack64_serial, nb.pack64_parallel) if precision == "float64"
+                   else (nb.pack32_serial, nb.pack32_parallel)):
+            out = np.empty_like(expect)
+            args = (points, -(0.5 / 15.0**2) * tw.LOG2E) if precision == "float64" else (points,)
+            fn(*args, out, origin)
+            assert np.array_equal(out, expect), (fn, B, N)
+    empty = np.zeros((2, 0, 4))
+    got, got_origin = tw._pack_points(empty, 15.0, precision)
+    assert got.shape == ((2, 6, 0) if precision == "float64" else (2, 4, 0)) and got_origin.shape == (2, 3)
+
+
 def test_backends_resolve_and_reject_unknown_names():
     assert resolve_backend("auto", "cpu") == ("numba" if numba_available() else "taichi")
     assert resolve_backend("auto", "cuda") == "taichi"

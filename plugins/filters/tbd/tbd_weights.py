@@ -41,8 +41,8 @@ from workbench.kernels.backend import BACKENDS, current_arch, numba_available, r
 from workbench.kernels.runtime import ensure_taichi
 
 from .reference import tbd_log_weight_sums_reference
-from .tbd_weights_numpy import (EXP_FLOOR, LOG2E, PRECISIONS, SERIAL_PAIRS, TILE, pack_measurements,  # noqa: F401
-                                pack_points, poly_exp, poly_exp2, tbd_log_weight_sums_float32)
+from .tbd_weights_numpy import (EXP_FLOOR, LOG2E, PRECISIONS, SERIAL_PAIRS, TILE, _origin,  # noqa: F401
+                                pack_measurements, pack_points, poly_exp, poly_exp2, tbd_log_weight_sums_float32)
 
 __all__ = [
     "BACKENDS",
@@ -69,6 +69,38 @@ FLOAT32_WEIGHT_RTOL = 1e-4
 def resolve_backend(backend: str = "auto", arch: str | None = None) -> str:
     """The backend ``"auto"`` stands for (:func:`workbench.kernels.backend.resolve`)."""
     return resolve(backend, arch)
+
+
+#: From this many particles (all runs together) the compiled packing runs threaded.
+SERIAL_PACK = 1 << 16
+
+
+def _pack_points(points: np.ndarray, sigma_vr: float, precision: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pack_points` for the compiled kernels: compiled where Numba is installed (the same rows and origin
+    bit for bit, :mod:`.tbd_weights_numba`'s ``mean_position``, ``pack64`` and ``pack32``; NumPy's passes over
+    strided views cost as much as the float64 kernel itself on a GPU at 10^6 particles), else the NumPy function.
+    The origin is summed compiled for C-ordered particles only, the layout whose order of summation NumPy's mean
+    follows particle by particle; another layout gets NumPy's own mean (it may sum pairwise there)."""
+    points = np.asarray(points, dtype=np.float64)
+    B, N = points.shape[0], points.shape[1]
+    if N == 0 or not numba_available():
+        return pack_points(points, sigma_vr, precision)
+    from . import tbd_weights_numba as nb
+
+    if points.flags.c_contiguous:
+        origin = np.empty((B, 3))
+        nb.mean_position_compiled(points, origin)
+    else:
+        origin = _origin(points)
+    big = threaded(B * N, SERIAL_PACK)
+    if precision == "float32":
+        out = np.empty((B, 4, N), dtype=np.float32)
+        (nb.pack32_parallel if big else nb.pack32_serial)(points, out, origin)
+    else:
+        out = np.empty((B, 6, N))
+        beta = 0.5 / float(sigma_vr) ** 2
+        (nb.pack64_parallel if big else nb.pack64_serial)(points, -beta * LOG2E, out, origin)
+    return out, origin
 
 
 def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, log_pd: np.ndarray,
@@ -98,7 +130,7 @@ def tbd_log_weight_sums(points: np.ndarray, z: np.ndarray, valid: np.ndarray, lo
             return tbd_log_weight_sums_float32(points, z, valid, log_pd, sigma_p, sigma_vr)
         return tbd_log_weight_sums_reference(points, z, valid, log_pd, sigma_p, sigma_vr)
     single = precision == "float32"
-    pts, origin = pack_points(points, sigma_vr, precision)
+    pts, origin = _pack_points(points, sigma_vr, precision)
     meas, counts = pack_measurements(z, valid, log_pd, sigma_p, sigma_vr, precision, origin)
     B, _, N = pts.shape
     out = np.zeros((B, N))

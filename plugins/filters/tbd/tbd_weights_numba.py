@@ -234,3 +234,66 @@ parallel = numba.njit(parallel=True, fastmath=flags, cache=True)(kernel)
 serial = numba.njit(parallel=False, fastmath=flags, cache=True)(_renamed(kernel, "kernel_serial"))
 parallel32 = numba.njit(parallel=True, fastmath=flags, cache=True)(kernel32)
 serial32 = numba.njit(parallel=False, fastmath=flags, cache=True)(_renamed(kernel32, "kernel32_serial"))
+
+
+# -- the particles' packing (:func:`.tbd_weights_numpy.pack_points`), compiled --------------------------------
+# IEEE arithmetic (no fast-math flags): the packed rows are those of the NumPy function bit for bit, given its origin.
+
+
+def mean_position(points, origin):
+    """``origin[b] = points[b, :, :3].mean(axis=0)`` summed in particle order, the order NumPy sums it in for a
+    C-ordered ``points (B, N, 4)`` (N >= 1): the reduced axis is not its innermost, so NumPy adds whole rows
+    element by element, particle after particle (another layout may make it sum pairwise: not for this)."""
+    B, N = points.shape[0], points.shape[1]
+    for b in range(B):
+        s0 = points[b, 0, 0]
+        s1 = points[b, 0, 1]
+        s2 = points[b, 0, 2]
+        for n in range(1, N):
+            s0 += points[b, n, 0]
+            s1 += points[b, n, 1]
+            s2 += points[b, n, 2]
+        origin[b, 0] = s0 / N
+        origin[b, 1] = s1 / N
+        origin[b, 2] = s2 / N
+
+
+def pack64(points, scale, out, origin):
+    """float64 rows ``[q_x, q_y, q_z, vr, |q|^2, K]`` of ``points (B, N, 4)`` into ``out (B, 6, N)``, centred on
+    ``origin (B, 3)``; ``K = scale vr^2``."""
+    B, N = points.shape[0], points.shape[1]
+    for b in range(B):
+        ox, oy, oz = origin[b, 0], origin[b, 1], origin[b, 2]
+        for n in numba.prange(N):
+            x = points[b, n, 0] - ox
+            y = points[b, n, 1] - oy
+            z = points[b, n, 2] - oz
+            v = points[b, n, 3]
+            out[b, 0, n] = x
+            out[b, 1, n] = y
+            out[b, 2, n] = z
+            out[b, 3, n] = v
+            xx = x * x
+            yy = y * y
+            zz = z * z
+            out[b, 4, n] = (xx + yy) + zz
+            out[b, 5, n] = scale * (v * v)
+
+
+def pack32(points, out, origin):
+    """float32 rows ``[q_x, q_y, q_z, vr]`` (differences in float64, then rounded) into ``out (B, 4, N)``."""
+    B, N = points.shape[0], points.shape[1]
+    for b in range(B):
+        ox, oy, oz = origin[b, 0], origin[b, 1], origin[b, 2]
+        for n in numba.prange(N):
+            out[b, 0, n] = np.float32(points[b, n, 0] - ox)
+            out[b, 1, n] = np.float32(points[b, n, 1] - oy)
+            out[b, 2, n] = np.float32(points[b, n, 2] - oz)
+            out[b, 3, n] = np.float32(points[b, n, 3])
+
+
+mean_position_compiled = numba.njit(cache=True)(mean_position)
+pack64_parallel = numba.njit(parallel=True, cache=True)(pack64)
+pack64_serial = numba.njit(parallel=False, cache=True)(_renamed(pack64, "pack64_serial"))
+pack32_parallel = numba.njit(parallel=True, cache=True)(pack32)
+pack32_serial = numba.njit(parallel=False, cache=True)(_renamed(pack32, "pack32_serial"))
