@@ -123,13 +123,13 @@ def _taichi_parts(inputs, precision: str, repeat: int) -> dict:
 
     import numpy as np
     import taichi as ti
-    from workbench_filters.tbd.tbd_weights import LOG2E, pack_measurements, pack_points
+    from workbench_filters.tbd.tbd_weights import LOG2E, _pack_points, pack_measurements
     from workbench_filters.tbd.tbd_weights_taichi import _taichi_kernel
 
     points, z, valid, log_pd, sigma_p, sigma_vr = inputs
 
     def pack():
-        pts, origin = pack_points(points, sigma_vr, precision)
+        pts, origin = _pack_points(points, sigma_vr, precision)  # as the call packs them
         return (pts, *pack_measurements(z, valid, log_pd, sigma_p, sigma_vr, precision, origin))
 
     def best(fn):
