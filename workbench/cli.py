@@ -140,7 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "(e.g. --trackers '+gm-phd(prune=1e-5)'); refused for a --paper that compares none")
     rep.add_argument("--seed", type=int, default=0, help="base seed of every random stream (default 0)")
     rep.add_argument("--arch", default="cpu", choices=list(kernel_policy.ARCHES),
-                     help="Taichi backend for kernels (default cpu; auto falls back to cpu)")
+                     help="Taichi backend for kernels (default cpu; auto falls back to cpu; a GPU arch speeds up "
+                          "large kernel calls, not the papers' report, whose calls are small)")
     rep.add_argument("--no-progress", action="store_true", help="no progress bars")
     rep.add_argument("--wait", type=_seconds, default=0.0, metavar="SECONDS",
                      help="if another report is writing into --out, wait up to this long for it (default: refuse at "
