@@ -35,6 +35,7 @@ BENCHMARKS = {
     Path("plugins/filters/benchmarks.py"): "the compiled-draws floor is timed where Numba is installed",
     Path("plugins/filters/tbd/bench.py"): "the peak rate of a Numba FMA loop (the limit); the weight kernel per backend",
     Path("plugins/filters/crpf/bench.py"): "times the CRPF step on one Numba thread (numba.set_num_threads)",
+    Path("scripts/gpu_check_compare.py"): "times the Taichi method-C kernel alone on arrays already on the device",
 }
 
 

@@ -37,7 +37,7 @@ import annotations`` here: Taichi reads the kernel annotations as objects.)
 
 import numpy as np
 
-from workbench.kernels.backend import BACKENDS, current_arch, numba_available, resolve, threaded
+from workbench.kernels.backend import BACKENDS, current_arch, numba_available, resolve, runs_numba, threaded
 from workbench.kernels.runtime import ensure_taichi
 
 from .reference import tbd_log_weight_sums_reference
@@ -76,14 +76,15 @@ SERIAL_PACK = 1 << 16
 
 
 def _pack_points(points: np.ndarray, sigma_vr: float, precision: str) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`pack_points` for the compiled kernels: compiled where Numba is installed (the same rows and origin
-    bit for bit, :mod:`.tbd_weights_numba`'s ``mean_position``, ``pack64`` and ``pack32``; NumPy's passes over
-    strided views cost as much as the float64 kernel itself on a GPU at 10^6 particles), else the NumPy function.
+    """:func:`pack_points` for the compiled kernels: compiled where the policy runs Numba on the host CPU (the same
+    rows and origin bit for bit, :mod:`.tbd_weights_numba`'s ``mean_position``, ``pack64`` and ``pack32``; NumPy's
+    passes over strided views cost as much as the float64 kernel itself on a GPU at 10^6 particles), else the NumPy
+    function.
     The origin is summed compiled for C-ordered particles only, the layout whose order of summation NumPy's mean
     follows particle by particle; another layout gets NumPy's own mean (it may sum pairwise there)."""
     points = np.asarray(points, dtype=np.float64)
     B, N = points.shape[0], points.shape[1]
-    if N == 0 or not numba_available():
+    if N == 0 or not runs_numba("auto", "cpu"):  # the packing runs on the host, whatever arch the kernel runs on
         return pack_points(points, sigma_vr, precision)
     from . import tbd_weights_numba as nb
 
