@@ -79,9 +79,8 @@ def _pack_points(points: np.ndarray, sigma_vr: float, precision: str) -> tuple[n
     """:func:`pack_points` for the compiled kernels: compiled where the policy runs Numba on the host CPU (the same
     rows and origin bit for bit, :mod:`.tbd_weights_numba`'s ``mean_position``, ``pack64`` and ``pack32``; NumPy's
     passes over strided views cost as much as the float64 kernel itself on a GPU at 10^6 particles), else the NumPy
-    function.
-    The origin is summed compiled for C-ordered particles only, the layout whose order of summation NumPy's mean
-    follows particle by particle; another layout gets NumPy's own mean (it may sum pairwise there)."""
+    function.  The origin is summed compiled for C-ordered particles only, the layout whose order of summation
+    NumPy's mean follows particle by particle; another layout gets NumPy's own mean (it may sum pairwise there)."""
     points = np.asarray(points, dtype=np.float64)
     B, N = points.shape[0], points.shape[1]
     if N == 0 or not runs_numba("auto", "cpu"):  # the packing runs on the host, whatever arch the kernel runs on
