@@ -119,10 +119,9 @@ def method_c(arch: str, repeat: int, sizes=METHOD_C_SIZES) -> dict:
 def _taichi_parts(inputs, precision: str, repeat: int) -> dict:
     """The Taichi method-C call in parts (best of ``repeat`` after a warm-up each): the host-side packing of the
     inputs, and the kernel alone on inputs already on the device (Taichi ndarrays, synchronised), as pairs/s."""
-    import time
-
     import numpy as np
     import taichi as ti
+    from workbench_filters.tbd.bench import _best_time  # a warm-up call, then the best of ``repeat``
     from workbench_filters.tbd.tbd_weights import LOG2E, _pack_points, pack_measurements
     from workbench_filters.tbd.tbd_weights_taichi import _taichi_kernel
 
@@ -131,15 +130,6 @@ def _taichi_parts(inputs, precision: str, repeat: int) -> dict:
     def pack():
         pts, origin = _pack_points(points, sigma_vr, precision)  # as the call packs them
         return (pts, *pack_measurements(z, valid, log_pd, sigma_p, sigma_vr, precision, origin))
-
-    def best(fn):
-        fn()
-        times = []
-        for _ in range(repeat):
-            start = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - start)
-        return min(times)
 
     pts, meas, counts = pack()
     real = ti.f64 if precision == "float64" else ti.f32
@@ -157,7 +147,7 @@ def _taichi_parts(inputs, precision: str, repeat: int) -> dict:
         ti.sync()
 
     pairs = pts.shape[0] * pts.shape[2] * int(counts.max())
-    pack_s, kernel_s = best(pack), best(run)
+    pack_s, kernel_s = _best_time(pack, repeat), _best_time(run, repeat)
     return {f"{precision}_pack_seconds": pack_s, f"{precision}_kernel_seconds": kernel_s,
             f"{precision}_kernel_pairs_per_s": pairs / kernel_s}
 
