@@ -179,6 +179,35 @@ def test_range_bearing_jacobian_matches_finite_differences():
         np.testing.assert_allclose(J[:, :, j], fd, atol=1e-6)
 
 
+@pytest.mark.parametrize("sensor", [(0.0, 0.0), (250.5, -1e3 / 3)])
+def test_range_bearing_one_track_path_gives_the_array_code_numbers_bit_for_bit(sensor):
+    """h and the Jacobian of one float64 state (B = 1: Python floats, the EKF's one-track update) against the same
+    rows computed in a batch (the array code): exactly equal, for ordinary states, a state on the sensor (the
+    1e-300 floor), tiny, huge, signed-zero, infinite and NaN offsets, and a 6-D state."""
+    rng = np.random.default_rng(7)
+    x = np.concatenate([rng.normal(0.0, 1e4, (300, 4)), rng.normal(0.0, 1e-3, (50, 4)),
+                        rng.normal(0.0, 1e150, (20, 4))])
+    special = np.array([[sensor[0], sensor[1], 1.0, 2.0], [sensor[0] + 1e-160, sensor[1], 0.0, 0.0],
+                        [-0.0, 0.0, 0.0, 0.0], [np.inf, 5.0, 0.0, 0.0], [np.nan, 5.0, 0.0, 0.0],
+                        [3.0, -np.inf, 0.0, 0.0], [1e300, 1e300, 0.0, 0.0]])
+    x = np.concatenate([x, special])
+    model = range_bearing(1.0, 0.1, sensor=sensor)
+    with np.errstate(all="ignore"):
+        batch_h, batch_j = model.h(x), range_bearing_jacobian(x, sensor)
+        for i in range(x.shape[0]):
+            one_h, one_j = model.h(x[i:i + 1]), range_bearing_jacobian(x[i:i + 1], sensor)
+            assert one_h.shape == (1, 2) and one_j.shape == (1, 2, 4)
+            np.testing.assert_array_equal(one_h.view(np.int64), batch_h[i:i + 1].view(np.int64))  # NaN bits too
+            np.testing.assert_array_equal(one_j.view(np.int64), batch_j[i:i + 1].view(np.int64))
+        x6 = np.concatenate([x[:40], rng.normal(size=(40, 2))], axis=1)
+        batch_j6 = range_bearing_jacobian(x6, sensor)
+        for i in range(40):
+            np.testing.assert_array_equal(range_bearing_jacobian(x6[i:i + 1], sensor), batch_j6[i:i + 1])
+    # float32 states take the array code (its float32 arithmetic), as before
+    x32 = x[:5].astype(np.float32)
+    np.testing.assert_array_equal(model.h(x32[:1]), model.h(x32)[:1])
+
+
 def test_angle_aware_mean_across_pi():
     model = range_bearing(1.0, 0.1)
     y = np.array([[[10.0, np.pi - 0.1], [12.0, -np.pi + 0.1]]])

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+import math
+
 import numpy as np
 
 from ..linalg import wrap_angle
@@ -204,8 +206,21 @@ def linear_measurement(H, R, name: str = "linear", frame: str = "", std=None) ->
 def range_bearing_jacobian(x: np.ndarray, sensor=(0.0, 0.0)) -> np.ndarray:
     """Jacobian of ``[sqrt(dx^2 + dy^2), atan2(dy, dx)]`` for states ``(B, n)`` with ``x, y`` first.
 
-    ``H = [[dx/r, dy/r, 0...], [-dy/r^2, dx/r^2, 0...]]``.
+    ``H = [[dx/r, dy/r, 0...], [-dy/r^2, dx/r^2, 0...]]``.  One float64 state (a single track's EKF update) is
+    worked out in Python floats: the same IEEE operations in the same order as the array code (subtract, multiply,
+    add, max, correctly rounded sqrt, divide), so the same numbers, at a fifth of the time of eight array calls.
     """
+    if x.ndim == 2 and x.shape[0] == 1 and x.shape[1] >= 2 and x.dtype == np.float64:
+        px, py = x[0, :2].tolist()
+        dx = px - float(sensor[0])
+        dy = py - float(sensor[1])
+        r2 = max(dx * dx + dy * dy, 1e-300)  # NaN stays NaN, as with np.maximum
+        r = math.sqrt(r2)
+        n = x.shape[1]
+        jac = np.zeros((1, 2, n))
+        flat = jac.reshape(-1)  # a view of the new array
+        flat[0], flat[1], flat[n], flat[n + 1] = dx / r, dy / r, -dy / r2, dx / r2
+        return jac
     dx = x[:, 0] - sensor[0]
     dy = x[:, 1] - sensor[1]
     r2 = np.maximum(dx * dx + dy * dy, 1e-300)
@@ -229,6 +244,15 @@ def range_bearing(sigma_r: float, sigma_theta: float, sensor=(0.0, 0.0)) -> Meas
     sx, sy = float(sensor[0]), float(sensor[1])
 
     def h(x: np.ndarray) -> np.ndarray:
+        if x.ndim == 2 and x.shape[0] == 1 and x.shape[1] >= 2 and x.dtype == np.float64:
+            # one track: Python floats for the range (the same IEEE operations as the array code), NumPy's own
+            # arctan2 for the bearing (the loop a length-1 array gets), the same numbers at half the time
+            px, py = x[0, :2].tolist()
+            dx, dy = px - sx, py - sy
+            out = np.empty((1, 2))
+            flat = out.reshape(-1)
+            flat[0], flat[1] = math.sqrt(dx * dx + dy * dy), np.arctan2(dy, dx)
+            return out
         dx = x[..., 0] - sx
         dy = x[..., 1] - sy
         # sqrt(dx^2 + dy^2) rather than np.hypot: no overflow at tracking ranges, and it is the hot path
