@@ -172,6 +172,62 @@ def test_the_machine_is_in_the_header_and_the_json(tmp_path, monkeypatch, capsys
         for when in ("before", "after"):
             assert len(load[when]) == 3 and all(isinstance(v, numbers.Real) and v >= 0 for v in load[when])
     header = out.splitlines()[:3]
-    assert header[0].startswith(f"machine: {m['cpu_model']}, {m['usable_cores']} usable of")
+    assert header[0].startswith(f"machine: {m['cpu_model']}")
+    assert f"{m['usable_cores']} usable of {m['logical_cores']} cores" in header[0]
+    assert m["cpu"] == bench.cpu_identity()
+    if m["cpu"]:  # Linux: the family and model and the widest vector extension, in the header
+        assert bench.cpu_identity_text(m) in header[0] and m["cpu"]["vector_isa"] in header[0]
     assert f"NumPy {np.__version__}" in header[0] and header[1].startswith("repeats: 2 run(s) per group")
     assert header[2].startswith("load average (1 min) before -> after each group's runs: fake ")
+
+
+_INTEL = """processor	: 0
+vendor_id	: GenuineIntel
+cpu family	: 6
+model		: 143
+model name	: Intel(R) Xeon(R) Platinum 8480+
+stepping	: 8
+flags		: fpu sse sse2 sse4_2 avx avx2 fma avx512f avx512dq
+
+processor	: 1
+vendor_id	: GenuineIntel
+cpu family	: 6
+model		: 1
+flags		: fpu sse
+"""
+
+_ZEN1 = """processor	: 0
+vendor_id	: AuthenticAMD
+cpu family	: 23
+model		: 1
+model name	: AMD EPYC
+stepping	: 2
+flags		: fpu sse sse2 ssse3 sse4_1 sse4_2 avx f16c avx2 fma bmi2
+"""
+
+_ARM = """processor	: 0
+BogoMIPS	: 243.75
+Features	: fp asimd evtstrm aes pmull sha1 sha2 crc32 atomics fphp asimdhp sve
+CPU implementer	: 0x41
+CPU architecture: 8
+CPU variant	: 0x1
+CPU part	: 0xd40
+"""
+
+
+@pytest.mark.parametrize("text, expected, shown", [
+    (_INTEL, {"vendor": "GenuineIntel", "family": "6", "model": "143", "stepping": "8", "vector_isa": "AVX-512"},
+     "GenuineIntel family 6 model 143 stepping 8, AVX-512"),
+    (_ZEN1, {"vendor": "AuthenticAMD", "family": "23", "model": "1", "stepping": "2", "vector_isa": "AVX2"},
+     "AuthenticAMD family 23 model 1 stepping 2, AVX2"),
+    (_ARM, {"vendor": "0x41", "family": "8", "model": "0xd40", "stepping": "0x1", "vector_isa": "SVE"},
+     "0x41 family 8 model 0xd40 stepping 0x1, SVE"),
+    ("processor\t: 0\nflags\t\t: fpu\n", {"vector_isa": "unknown"}, "unknown"),
+    ("", {}, ""),
+])
+def test_cpu_identity_tells_cpus_of_one_model_name_apart(text, expected, shown):
+    """The first processor's vendor, family, model, stepping and widest vector extension (the "model name" alone,
+    "AMD EPYC", covers a Zen 1 with AVX2 and a Zen 4 with AVX-512), and the header's text of them."""
+    ident = bench.cpu_identity(text)
+    assert ident == expected
+    assert bench.cpu_identity_text({"cpu": ident}) == shown

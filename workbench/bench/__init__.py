@@ -38,7 +38,7 @@ from ..types import InputError
 from .targets import NOT_UNDERSTOOD, collect_targets, format_targets, median_verdict, parse_goal
 
 __all__ = ["discover_groups", "run_group", "run_bench", "median_time", "flatten", "child_main", "own_peak_kib",
-           "combine_runs", "machine_info", "load_average", "default_repeats"]
+           "combine_runs", "machine_info", "cpu_identity", "load_average", "default_repeats"]
 
 _CHILD = """
 import sys
@@ -128,6 +128,55 @@ def _cpu_model() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
+#: The vector extensions named in ``/proc/cpuinfo``'s flags (x86) or features (Arm), widest first.
+_VECTOR_ISAS = (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sse4_2", "SSE4.2"), ("sve2", "SVE2"),
+                ("sve", "SVE"), ("asimd", "NEON"))
+
+
+def cpu_identity(text: str | None = None) -> dict:
+    """What tells two CPUs of one "model name" apart (a cloud VM's "AMD EPYC" is a Zen 1 or a Zen 4): the first
+    processor's ``vendor`` (``vendor_id``, or ``CPU implementer`` on Arm), ``family``, ``model`` and ``stepping``
+    as ``/proc/cpuinfo`` gives them (``CPU architecture``, ``CPU part``, ``CPU variant`` on Arm), and
+    ``vector_isa``, the widest vector extension among its flags (``"AVX-512"``, ``"AVX2"``, ...; ``"unknown"``).
+    ``text``: the file's contents (read from ``/proc/cpuinfo`` when ``None``); ``{}`` where there is none."""
+    if text is None:
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+                text = f.read()
+        except OSError:
+            return {}
+    fields: dict[str, str] = {}
+    for line in text.splitlines():
+        if not line.strip():
+            if fields:
+                break  # the first processor's block only
+            continue
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip().lower(), value.strip())
+    if not fields:
+        return {}
+    out = {}
+    for name, keys in (("vendor", ("vendor_id", "cpu implementer")), ("family", ("cpu family", "cpu architecture")),
+                       ("model", ("model", "cpu part")), ("stepping", ("stepping", "cpu variant"))):
+        for key in keys:
+            if fields.get(key):
+                out[name] = fields[key]
+                break
+    flags = set((fields.get("flags") or fields.get("features") or "").split())
+    out["vector_isa"] = next((label for flag, label in _VECTOR_ISAS if flag in flags), "unknown")
+    return out
+
+
+def cpu_identity_text(machine: dict) -> str:
+    """``"AuthenticAMD family 25 model 17 stepping 1, AVX-512"`` from :func:`machine_info`'s ``cpu``."""
+    ident = machine.get("cpu") or {}
+    parts = [ident.get("vendor", "")] + [f"{k} {ident[k]}" for k in ("family", "model", "stepping") if ident.get(k)]
+    text = " ".join(p for p in parts if p)
+    isa = ident.get("vector_isa")
+    return ", ".join(t for t in (text, isa) if t)
+
+
 def _version(module: str) -> str:
     from importlib import metadata
 
@@ -140,14 +189,15 @@ def _version(module: str) -> str:
 def machine_info() -> dict:
     """Where the figures were measured: ``cpu_model`` (``/proc/cpuinfo``'s "model name", else
     ``platform.processor()``), ``usable_cores`` (``os.sched_getaffinity`` where present, else ``os.cpu_count()``),
-    ``logical_cores``, ``platform``, and the ``python`` / ``numpy`` / ``numba`` versions ("not installed" where
-    absent).  The runner adds ``load_avg``: the load averages before and after each group's runs."""
+    ``logical_cores``, ``platform``, ``cpu`` (:func:`cpu_identity`: vendor, family, model, stepping and the widest
+    vector extension), and the ``python`` / ``numpy`` / ``numba`` versions ("not installed" where absent).  The
+    runner adds ``load_avg``: the load averages before and after each group's runs."""
     try:
         usable = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         usable = os.cpu_count() or 1
-    return {"cpu_model": _cpu_model(), "usable_cores": int(usable), "logical_cores": int(os.cpu_count() or usable),
-            "platform": platform.platform(), "python": platform.python_version(), "numpy": _version("numpy"),
+    return {"cpu_model": _cpu_model(), "cpu": cpu_identity(), "usable_cores": int(usable),
+            "logical_cores": int(os.cpu_count() or usable), "platform": platform.platform(), "python": platform.python_version(), "numpy": _version("numpy"),
             "numba": _version("numba")}
 
 
@@ -281,7 +331,9 @@ def _fmt(value) -> str:
 
 def machine_lines(machine: dict, repeats: int) -> list[str]:
     """The header of the table: the machine, the repeats, and the load before and after each group's runs."""
-    lines = [f"machine: {machine.get('cpu_model', 'unknown')}, {machine.get('usable_cores', '?')} usable of "
+    ident = cpu_identity_text(machine)
+    lines = [f"machine: {machine.get('cpu_model', 'unknown')}" + (f" ({ident})" if ident else "")
+             + f", {machine.get('usable_cores', '?')} usable of "
              f"{machine.get('logical_cores', '?')} cores; Python {machine.get('python', '?')}, NumPy "
              f"{machine.get('numpy', '?')}, Numba {machine.get('numba', '?')}",
              f"repeats: {repeats} run(s) per group, each in its own fresh process, one after another; figures are "
