@@ -79,7 +79,8 @@ def test_the_reference_builds_strictly_and_documents_every_public_name(site):
     # the modules docs/writing-a-plugin.md tells plugin authors to use
     ("plugins", "workbench.plugins"), ("filtering", "workbench.filtering"), ("kalman_core", "workbench.kalman_core"),
     ("particle_core", "workbench.particle_core"), ("resampling", "workbench.resampling"),
-    ("linalg", "workbench.linalg"), ("sensing", "workbench.sensing"), ("sensing", "workbench.sensing.radar"),
+    ("linalg", "workbench.linalg"), ("memory", "workbench.memory"), ("sensing", "workbench.sensing"),
+    ("sensing", "workbench.sensing.radar"),
     ("sensing", "workbench.sensing.bistatic"), ("report", "workbench.report.engine"),
     ("tracking", "workbench.tracking.gate"), ("tracking", "workbench.tracking.assign"),
     ("tracking", "workbench.tracking.initiation"), ("testing", "workbench.testing.kit"),

@@ -30,6 +30,7 @@ import traceback
 import warnings
 from pathlib import Path
 
+from .memory import keep_freed_memory
 from .plugins import BLOCK_ENV, PluginHost, UnknownComponent, load_host
 from .types import InputError
 
@@ -558,6 +559,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"workbench: error: {message}", file=sys.stderr)
         return EXIT[kind]
 
+    keep_freed_memory()  # this process's freed blocks reused, not faulted in again (workbench.memory)
     try:
         return COMMANDS[args.command](args)
     except (InputError, UnknownComponent) as exc:

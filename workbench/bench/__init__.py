@@ -63,8 +63,10 @@ def own_peak_kib() -> float:
 def child_main(group: str, quick: bool, block=(), arch: str = "cpu") -> None:
     """The body of a group's process: run it with the kernels on ``arch`` and print its figures as one JSON line."""
     from ..kernels.backend import using
+    from ..memory import keep_freed_memory
     from ..plugins import load_host
 
+    keep_freed_memory()  # as the command line's own processes run (workbench.memory)
     spec = load_host(block=list(block)).benchmark(group)
     with using(arch):
         out = dict(spec.run(quick))

@@ -73,6 +73,7 @@ import numpy as np
 
 from ..plugins import PluginHost, UnknownComponent
 from ..criteria import Criterion, DeclaredUnknown, confirm
+from ..memory import malloc_env
 from ..specs import RecipeOptions, RecipeSpec, Table, Task, TaskContext
 from ..types import InputError
 if TYPE_CHECKING:
@@ -1343,7 +1344,7 @@ class LocalProcesses:
                 on_task(task.key)
             # the workers start as the tasks are submitted (spawn: one per submission while none is idle), so the
             # one-thread environment is theirs from their first line
-            with _environment(ONE_THREAD_ENV):
+            with _environment({**ONE_THREAD_ENV, **malloc_env()}):
                 fut = pool.submit(_process_task, task.run, dict(task.params), seed, arch, self.block, self.retries)
             futures[fut] = pending[fut] = task
 
