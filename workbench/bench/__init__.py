@@ -199,8 +199,8 @@ def machine_info() -> dict:
     except (AttributeError, OSError):
         usable = os.cpu_count() or 1
     return {"cpu_model": _cpu_model(), "cpu": cpu_identity(), "usable_cores": int(usable),
-            "logical_cores": int(os.cpu_count() or usable), "platform": platform.platform(), "python": platform.python_version(), "numpy": _version("numpy"),
-            "numba": _version("numba")}
+            "logical_cores": int(os.cpu_count() or usable), "platform": platform.platform(),
+            "python": platform.python_version(), "numpy": _version("numpy"), "numba": _version("numba")}
 
 
 _ABSENT = object()

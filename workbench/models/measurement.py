@@ -6,10 +6,9 @@ components are angles), so filters never import sensor code.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
-
-import math
 
 import numpy as np
 
