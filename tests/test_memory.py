@@ -74,6 +74,6 @@ def test_a_users_own_malloc_setting_is_kept(monkeypatch):
 
 
 def test_nothing_is_changed_off_glibc(monkeypatch):
-    monkeypatch.setattr(memory.platform, "libc_ver", lambda *a, **k: ("", ""))
+    monkeypatch.setattr(memory.os, "confstr", lambda name: None)  # musl: no glibc version
     monkeypatch.setattr("ctypes.CDLL", lambda *a, **k: pytest.fail("a C library was loaded"))
     assert memory.keep_freed_memory() is False and memory.malloc_env() == {}

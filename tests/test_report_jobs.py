@@ -17,7 +17,6 @@ from fixtures import demo_plugin
 from workbench import hookimpl, memory
 from workbench.cli import EXIT, main
 from workbench.report.cache import load_arrays
-
 from workbench.report.engine import (InProcess, LocalProcesses, WorkerHostMismatch, longest_first, previous_seconds,
                                      run_recipe, run_report, side_by_side)
 from workbench.specs import Task
@@ -96,14 +95,15 @@ def test_a_failing_task_is_retried_in_its_worker_and_one_failing_always_is_named
 @pytest.mark.skipif(not memory._glibc(), reason="the thresholds are glibc's")
 def test_the_workers_start_with_the_malloc_thresholds_of_the_command_line(tmp_path, installed_host, two_workers):
     """The report's worker processes keep freed blocks for reuse (:mod:`workbench.memory`) from their first line."""
-    outcome = run_recipe(_recipe_with(Task("malloc", {}, demo_plugin.malloc_settings)), installed_host, tmp_path / "out",
-                         progress=False, executor=two_workers)
+    recipe = _recipe_with(Task("malloc", {}, demo_plugin.malloc_settings))
+    outcome = run_recipe(recipe, installed_host, tmp_path / "out", progress=False, executor=two_workers)
     assert {t["key"]: t["error"] for t in outcome.tasks} == {"mse-kf": "", "malloc": ""}
     got = load_arrays(next((tmp_path / "out" / "cache" / "paperdemo").glob("malloc-*.npz")))
     assert int(got["pid"]) != os.getpid()
     assert {name: str(int(got[name])) for name in memory.MALLOC_ENV} == memory.MALLOC_ENV
 
 
+@pytest.mark.slow
 def test_a_task_that_cannot_be_sent_to_a_worker_runs_in_this_process(tmp_path, installed_host, two_workers):
     """A recipe written elsewhere may give a closure as a task's function: it cannot be pickled to a worker, so it
     runs in the report's own process (with the same seed) while the workers run the others; never a failure."""

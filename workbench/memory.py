@@ -21,7 +21,6 @@ Elsewhere than glibc (musl, macOS, Windows) nothing is changed.
 from __future__ import annotations
 
 import os
-import platform
 
 __all__ = ["MMAP_THRESHOLD", "TRIM_THRESHOLD", "MALLOC_ENV", "keep_freed_memory", "malloc_env"]
 
@@ -40,7 +39,12 @@ _OLD_GLIBC_LIMIT = 32 * 1024 * 1024
 
 
 def _glibc() -> bool:
-    return platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
+    """Whether this process runs on glibc: the C library's own answer (``confstr``), not a scan of the executable
+    (``platform.libc_ver`` reads the interpreter's file, megabytes for a static build, at every call)."""
+    try:
+        return (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc")
+    except (AttributeError, ValueError, OSError):  # no confstr, or no such name (not glibc)
+        return False
 
 
 def keep_freed_memory() -> bool:

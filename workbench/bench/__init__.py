@@ -38,7 +38,8 @@ from ..types import InputError
 from .targets import NOT_UNDERSTOOD, collect_targets, format_targets, median_verdict, parse_goal
 
 __all__ = ["discover_groups", "run_group", "run_bench", "median_time", "flatten", "child_main", "own_peak_kib",
-           "combine_runs", "machine_info", "cpu_identity", "load_average", "default_repeats"]
+           "combine_runs", "machine_info", "cpu_identity", "cpu_identity_text", "load_average",
+           "default_repeats"]
 
 _CHILD = """
 import sys
