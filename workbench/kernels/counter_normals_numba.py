@@ -9,8 +9,7 @@ gives the same bits (held by the tests, which also check that the compiled Box-M
 arithmetic: every constant here is an ``np.float32`` or ``np.uint32`` global, since a Python float would
 promote the work to float64; no fastmath, so LLVM contracts nothing into an FMA).
 
-The hash of a pair and its Box-Muller are two loops (:data:`SPLIT_HASH`, on a CPU without a 64-bit vector
-multiply): a scalar loop writes the row's hash words (:func:`row_words`, one SplitMix64 word per pair), then the
+The hash of a pair and its Box-Muller are two loops: a scalar loop writes the row's hash words (:func:`row_words`, one SplitMix64 word per pair), then the
 vectorised loop turns them into normals (:func:`box_muller`; LLVM takes 4 float32 lanes there on Zen 1).  AVX2
 has no 64-bit lane multiply: LLVM would emulate each of the hash's multiplies with three 32x32 ``vpmuludq`` and
 shifts and adds, on the same pipes as the float work; scalar ``imul`` runs on the integer pipes.  On one core of
@@ -22,8 +21,12 @@ and cosine series in float64) measured beside it; the CRPF step (B = 250, N = 50
 arrays so that the float loop has only 32-bit lanes (3.58 against 3.62 ns).  Tried and slower with the float64
 generator: the hash words by a vectorised loop, blocks of pairs alternating a scalar and a vectorised loop, the
 log and the sine and cosine in loops of their own, 128-bit vectors, 4 pairs written out by hand for LLVM's SLP
-vectoriser.  Where AVX-512 DQ has the 64-bit lane multiply (``vpmullq``) the fused loop is kept (not measured
-there).  The counters are exact ``uint64`` arithmetic (a running sum of ``GAMMA`` from the row's first pair:
+vectoriser.  The split loops are used on every CPU, AVX-512 DQ included: there the 64-bit lane multiply
+(``vpmullq``) would let one fused loop vectorise, but LLVM keeps the fused loop scalar (with or without
+:func:`~.vector_width.wide_vectors`), and on one core of a 2-core AMD EPYC Zen 4 (AVX-512; rows of 2,000, best of
+7 runs of 2,000 rows) the fused loop took 7.4 ns a normal against 1.5 for the split ones; the CRPF step (B = 250,
+N = 500, n = 4, one thread) 55 against 31 ns a particle-step.  The fused loop stays for the tests
+(:func:`row_normals_as`), which hold the two to the same bits.  The counters are exact ``uint64`` arithmetic (a running sum of ``GAMMA`` from the row's first pair:
 ``key + (g + 1) GAMMA`` modulo 2^64).
 
 The helpers are ordinary Numba functions, inlined by LLVM, not by Numba (``inline="always"`` copies Numba's IR
@@ -50,8 +53,6 @@ import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
-from numba.core import config
-from numba.core.codegen import get_host_cpu_features
 from numba.extending import intrinsic
 
 from .vector_width import wide_vectors
@@ -113,17 +114,6 @@ def quotient(typingctx, a, b):
         return builder.fdiv(args[0], args[1])
 
     return types.float32(types.float32, types.float32), codegen
-
-
-def _has_vector_u64_multiply():
-    """Whether Numba compiles for a CPU with AVX-512 DQ (``vpmullq``, a 64-bit multiply per vector lane)."""
-    features = config.CPU_FEATURES if config.CPU_FEATURES is not None else get_host_cpu_features()
-    return "+avx512dq" in str(features).split(",")
-
-
-#: The hashes in a scalar loop of their own (:func:`row_words`), the floats in a vectorised one; else one fused
-#: vectorised loop.  Read when a function is compiled (Numba's cache is keyed on the CPU and its features).
-SPLIT_HASH = not _has_vector_u64_multiply()
 
 
 @intrinsic
@@ -246,27 +236,17 @@ def row_normals_as(key, b, out, words, split):
     odd_tail(key, first, out, full)
 
 
-# row_normals holds only the loops this CPU uses (the other would add to every caller's compile time)
-if SPLIT_HASH:
-    @jit
-    def row_normals(key, b, out, words):
-        """``out (count,)`` = row ``b``'s normals of stream ``key``; ``words``: uint64 scratch of ``count // 2``
-        words or more."""
-        # the caller's full vector width: at LLVM's default width for Zen 1 the split loop of Box-Muller stayed
-        # scalar in some callers; an element-wise loop, so no bit changes
-        wide_vectors()
-        full = out.shape[0] // 2
-        first = np.uint64(b) * np.uint64((out.shape[0] + 1) // 2)  # the row's first pair
-        split_loops(key, first, out, words, full)
-        odd_tail(key, first, out, full)
-else:
-    @jit
-    def row_normals(key, b, out, words):
-        """``out (count,)`` = row ``b``'s normals of stream ``key`` (``words`` unused on this CPU)."""
-        full = out.shape[0] // 2
-        first = np.uint64(b) * np.uint64((out.shape[0] + 1) // 2)  # the row's first pair
-        fused_loop(key, first, out, full)
-        odd_tail(key, first, out, full)
+@jit
+def row_normals(key, b, out, words):
+    """``out (count,)`` = row ``b``'s normals of stream ``key``; ``words``: uint64 scratch of ``count // 2`` words or
+    more (the split loops on every CPU: see the module docstring)."""
+    # the caller's full vector width: at LLVM's default width for Zen 1 the split loop of Box-Muller stayed scalar in
+    # some callers; an element-wise loop, so no bit changes
+    wide_vectors()
+    full = out.shape[0] // 2
+    first = np.uint64(b) * np.uint64((out.shape[0] + 1) // 2)  # the row's first pair
+    split_loops(key, first, out, words, full)
+    odd_tail(key, first, out, full)
 
 
 @numba.njit(parallel=True, error_model="numpy", cache=True)
