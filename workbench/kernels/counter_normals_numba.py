@@ -9,25 +9,25 @@ gives the same bits (held by the tests, which also check that the compiled Box-M
 arithmetic: every constant here is an ``np.float32`` or ``np.uint32`` global, since a Python float would
 promote the work to float64; no fastmath, so LLVM contracts nothing into an FMA).
 
-The hash of a pair and its Box-Muller are two loops: a scalar loop writes the row's hash words (:func:`row_words`, one SplitMix64 word per pair), then the
-vectorised loop turns them into normals (:func:`box_muller`; LLVM takes 4 float32 lanes there on Zen 1).  AVX2
-has no 64-bit lane multiply: LLVM would emulate each of the hash's multiplies with three 32x32 ``vpmuludq`` and
-shifts and adds, on the same pipes as the float work; scalar ``imul`` runs on the integer pipes.  On one core of
-a 2-core AMD EPYC Zen 1 (AVX2 on 128-bit units; rows of 2,000, one thread, best of 50-100 interleaved calls)
-:func:`fill_rows` takes 3.6 ns a normal (the scalar loop of words 0.7, the float32 Box-Muller 2.9), against
-7.0 ns for the float64 generator it replaced (two hash words per pair, an 11-term log series and 9/10-term sine
-and cosine series in float64) measured beside it; the CRPF step (B = 250, N = 500, n = 4, one thread) went from
-80.4-80.7 to 66.1-67.1 ns a particle-step.  Tried and no faster there: the words split into two ``uint32``
-arrays so that the float loop has only 32-bit lanes (3.58 against 3.62 ns).  Tried and slower with the float64
-generator: the hash words by a vectorised loop, blocks of pairs alternating a scalar and a vectorised loop, the
-log and the sine and cosine in loops of their own, 128-bit vectors, 4 pairs written out by hand for LLVM's SLP
-vectoriser.  The split loops are used on every CPU, AVX-512 DQ included: there the 64-bit lane multiply
-(``vpmullq``) would let one fused loop vectorise, but LLVM keeps the fused loop scalar (with or without
-:func:`~.vector_width.wide_vectors`), and on one core of a 2-core AMD EPYC Zen 4 (AVX-512; rows of 2,000, best of
-7 runs of 2,000 rows) the fused loop took 7.4 ns a normal against 1.5 for the split ones; the CRPF step (B = 250,
-N = 500, n = 4, one thread) 55 against 31 ns a particle-step.  The fused loop stays for the tests
-(:func:`row_normals_as`), which hold the two to the same bits.  The counters are exact ``uint64`` arithmetic (a running sum of ``GAMMA`` from the row's first pair:
-``key + (g + 1) GAMMA`` modulo 2^64).
+The hash of a pair and its Box-Muller are two loops: a scalar loop writes the row's hash words (:func:`row_words`,
+one SplitMix64 word per pair), then the vectorised loop turns them into normals (:func:`box_muller`; LLVM takes 4
+float32 lanes there on Zen 1).  AVX2 has no 64-bit lane multiply: LLVM would emulate each of the hash's multiplies
+with three 32x32 ``vpmuludq`` and shifts and adds, on the same pipes as the float work; scalar ``imul`` runs on the
+integer pipes.  On one core of a 2-core AMD EPYC Zen 1 (AVX2 on 128-bit units; rows of 2,000, one thread, best of
+50-100 interleaved calls) :func:`fill_rows` takes 3.6 ns a normal (the scalar loop of words 0.7, the float32
+Box-Muller 2.9), against 7.0 ns for the float64 generator it replaced (two hash words per pair, an 11-term log series
+and 9/10-term sine and cosine series in float64) measured beside it; the CRPF step (B = 250, N = 500, n = 4, one
+thread) went from 80.4-80.7 to 66.1-67.1 ns a particle-step.  Tried and no faster there: the words split into two
+``uint32`` arrays so that the float loop has only 32-bit lanes (3.58 against 3.62 ns).  Tried and slower with the
+float64 generator: the hash words by a vectorised loop, blocks of pairs alternating a scalar and a vectorised loop,
+the log and the sine and cosine in loops of their own, 128-bit vectors, 4 pairs written out by hand for LLVM's SLP
+vectoriser.  The split loops are used on every CPU, AVX-512 DQ included: there the 64-bit lane multiply (``vpmullq``)
+would let one fused loop vectorise, but LLVM keeps the fused loop scalar (with or without
+:func:`~.vector_width.wide_vectors`), and on one core of a 2-core AMD EPYC Zen 4 (AVX-512; rows of 2,000, best of 7
+runs of 2,000 rows) the fused loop took 7.4 ns a normal against 1.5 for the split ones; the CRPF step (B = 250, N =
+500, n = 4, one thread) 55 against 31 ns a particle-step.  The fused loop stays for the tests
+(:func:`row_normals_as`), which hold the two to the same bits.  The counters are exact ``uint64`` arithmetic (a
+running sum of ``GAMMA`` from the row's first pair: ``key + (g + 1) GAMMA`` modulo 2^64).
 
 The helpers are ordinary Numba functions, inlined by LLVM, not by Numba (``inline="always"`` copies Numba's IR
 into every caller: a wrapper of :func:`row_normals` compiled in 2.2 s of CPU that way, 1.5 s this way, with the
