@@ -77,3 +77,14 @@ def test_nothing_is_changed_off_glibc(monkeypatch):
     monkeypatch.setattr(memory.os, "confstr", lambda name: None)  # musl: no glibc version
     monkeypatch.setattr("ctypes.CDLL", lambda *a, **k: pytest.fail("a C library was loaded"))
     assert memory.keep_freed_memory() is False and memory.malloc_env() == {}
+
+
+@pytest.mark.parametrize("release, mmap", [("glibc 2.31", 32 << 20), ("glibc 2.34", 32 << 20),
+                                           ("glibc 2.35", 256 << 20), ("glibc 2.39.9000", 256 << 20)])
+def test_workers_get_the_mmap_threshold_their_glibc_accepts(monkeypatch, release, mmap):
+    """Before 2.35 glibc ignores an mmap threshold above 32 MiB, and the trim threshold would then fix it at 128 KiB:
+    the workers' environment gives 32 MiB there, as the running process falls back to."""
+    monkeypatch.setattr(memory.os, "confstr", lambda name: release)
+    for name in memory.MALLOC_ENV:
+        monkeypatch.delenv(name, raising=False)
+    assert memory.malloc_env() == {"MALLOC_MMAP_THRESHOLD_": str(mmap), "MALLOC_TRIM_THRESHOLD_": str(512 << 20)}

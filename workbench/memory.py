@@ -38,13 +38,35 @@ _M_MMAP_THRESHOLD = -3
 _OLD_GLIBC_LIMIT = 32 * 1024 * 1024
 
 
-def _glibc() -> bool:
-    """Whether this process runs on glibc: the C library's own answer (``confstr``), not a scan of the executable
-    (``platform.libc_ver`` reads the interpreter's file, megabytes for a static build, at every call)."""
+def _glibc_version() -> tuple[int, ...] | None:
+    """This process's glibc release, e.g. ``(2, 36)``, from the C library's own answer (``confstr``, not a scan of
+    the executable: ``platform.libc_ver`` reads the interpreter's file, megabytes for a static build, at every
+    call); ``None`` off glibc."""
     try:
-        return (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc")
+        text = os.confstr("CS_GNU_LIBC_VERSION") or ""
     except (AttributeError, ValueError, OSError):  # no confstr, or no such name (not glibc)
-        return False
+        return None
+    name, _, release = text.partition(" ")
+    if name != "glibc":
+        return None
+    parts = []
+    for part in release.split("."):
+        if not part.isdigit():
+            break
+        parts.append(int(part))
+    return tuple(parts)
+
+
+def _glibc() -> bool:
+    """Whether this process runs on glibc."""
+    return _glibc_version() is not None
+
+
+def _mmap_threshold() -> int:
+    """The mmap threshold this glibc accepts: :data:`MMAP_THRESHOLD`, or 32 MiB before 2.35, which ignores a larger
+    value (and a new process's ``MALLOC_TRIM_THRESHOLD_`` would then fix the threshold at its 128 KiB start)."""
+    version = _glibc_version()
+    return MMAP_THRESHOLD if version is not None and version >= (2, 35) else _OLD_GLIBC_LIMIT
 
 
 def keep_freed_memory() -> bool:
@@ -64,14 +86,15 @@ def keep_freed_memory() -> bool:
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
-    if not mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) and not mallopt(_M_MMAP_THRESHOLD, _OLD_GLIBC_LIMIT):
+    if not mallopt(_M_MMAP_THRESHOLD, _mmap_threshold()) and not mallopt(_M_MMAP_THRESHOLD, _OLD_GLIBC_LIMIT):
         return False
     return bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
 
 
 def malloc_env() -> dict[str, str]:
     """:data:`MALLOC_ENV` for a worker process about to start, less any name the user already set (theirs is
-    inherited as it is); empty off glibc."""
+    inherited as it is); empty off glibc.  Before glibc 2.35 the mmap threshold is the 32 MiB that release accepts,
+    as :func:`keep_freed_memory` sets it in the running process."""
     if not _glibc() or any(name in os.environ for name in MALLOC_ENV):
         return {}
-    return dict(MALLOC_ENV)
+    return {**MALLOC_ENV, "MALLOC_MMAP_THRESHOLD_": str(_mmap_threshold())}
